@@ -1,0 +1,156 @@
+"""Python API: what the command line and the tests call.
+
+    result = bagfault.api.run('scenario.yaml', ['my_bag'], 'out.mcap', seed=1)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from bagfault import __version__
+from bagfault.engine import EngineError
+from bagfault.engine.pipeline import Pipeline, RunStats
+from bagfault.engine.routing import build_routing
+from bagfault.engine.scheduler import Activation
+from bagfault.errors import BagfaultError
+from bagfault.io import OutputError
+from bagfault.io.mcap_sink import McapSink
+from bagfault.io.sources import InputSet, fingerprint
+from bagfault.scenario import load_scenario as load_scenario
+from bagfault.io.types import TypeCatalog
+from bagfault.scenario import Scenario
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+DEFAULT_SEED = 0
+
+
+@dataclass
+class RunResult:
+    """Everything a run produced besides the output file."""
+
+    scenario: Scenario
+    inputs: list[Path]
+    output: Path
+    seed: int
+    stats: RunStats
+    notes: list[str] = field(default_factory=list)
+
+
+def _scenario(scenario: Scenario | str | Path) -> Scenario:
+    return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+
+
+def _check_paths(inputs: Sequence[Path], output: Path) -> None:
+    out = output.resolve()
+    for path in inputs:
+        source = path.resolve()
+        if out == source:
+            raise OutputError(f'{output}: output path is the input {path}; choose another name')
+        if source.is_dir() and source in out.parents:
+            raise OutputError(f'{output}: output would be written inside the input bag {path}; choose another folder')
+
+
+def _activations(scenario: Scenario, texts: Sequence[str | Activation]) -> list[Activation]:
+    out = []
+    for text in texts:
+        try:
+            activation = text if isinstance(text, Activation) else Activation.parse(text)
+        except ValueError as exc:
+            raise EngineError(f'--activate {exc}') from None
+        if scenario.fault(activation.fault_id) is None:
+            known = ', '.join(f.id for f in scenario.faults) or 'none'
+            raise EngineError(f'--activate {activation.fault_id}: no such fault in {scenario.name} (faults: {known})')
+        out.append(activation)
+    return out
+
+
+def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activations: Sequence[Activation],
+               start_offset: float) -> dict[str, str]:
+    """The `bagfault` metadata record: enough to reproduce the run from its output."""
+    return {
+        'tool': 'bagfault',
+        'version': __version__,
+        'seed': str(seed),
+        'scenario': scenario.name,
+        'scenario_sha256': hashlib.sha256(scenario.text.encode()).hexdigest(),
+        'inputs': json.dumps(
+            [{'name': p.name, 'files': [f.__dict__ for f in fingerprint(p)]} for p in inputs], sort_keys=True
+        ),
+        'activate': json.dumps([a.__dict__ for a in activations], sort_keys=True),
+        'start_offset': repr(float(start_offset)),
+    }
+
+
+def run(
+    scenario: Scenario | str | Path,
+    inputs: Sequence[str | Path],
+    output: str | Path,
+    *,
+    seed: int | None = None,
+    activate: Sequence[str | Activation] = (),
+    start_offset: float = 0.0,
+    compression: str = 'zstd',
+    batch: bool = True,
+    progress: Callable[[int, int], None] | None = None,
+) -> RunResult:
+    """Inject the scenario's faults into the inputs and write the output MCAP."""
+    loaded = _scenario(scenario)
+    paths = [Path(p) for p in inputs]
+    out = Path(output)
+    if not paths:
+        raise EngineError('no input bag given')
+    _check_paths(paths, out)
+    activations = _activations(loaded, activate)
+    used_seed = seed if seed is not None else loaded.seed if loaded.seed is not None else DEFAULT_SEED
+
+    input_set = InputSet(paths)
+    if progress is not None and hasattr(progress, 'begin'):
+        progress.begin(input_set.start_time, input_set.end_time, input_set.message_count)
+    try:
+        catalog = TypeCatalog(input_set.channels, input_set.ros_distro)
+        sink = McapSink(out, compression=compression)
+        try:
+            sink.add_metadata('bagfault', provenance(loaded, paths, used_seed, activations, start_offset))
+            sink.add_attachment(loaded.name, 'application/yaml', loaded.text.encode())
+            routing = build_routing(input_set, loaded, catalog, sink, loaded.name)
+            pipeline = Pipeline(
+                input_set, loaded, sink, catalog, routing.routes, routing.copies,
+                seed=used_seed, activations=activations, start_offset=start_offset,
+                batch=batch, progress=progress,
+            )
+            stats = pipeline.run()
+            stats.replaced_topics = routing.replaced
+            sink.finish()
+        except BaseException:
+            sink.abort()
+            raise
+    finally:
+        input_set.close()
+    notes = list(loaded.warnings) + routing.notes
+    if stats.input_messages == 0:
+        notes.append('the input holds no messages; the output has channels only')
+    return RunResult(loaded, paths, out, used_seed, stats, notes)
+
+
+def validate(paths: Sequence[str | Path]) -> list[Scenario]:
+    """Load and validate scenario files; raise ScenarioError with every problem of all files."""
+    from bagfault.scenario import ScenarioError  # noqa: PLC0415
+
+    scenarios, problems = [], []
+    for path in paths:
+        try:
+            scenarios.append(load_scenario(path))
+        except ScenarioError as exc:
+            problems.extend(exc.problems)
+    if problems:
+        raise ScenarioError(problems)
+    return scenarios
+
+
+__all__ = ['BagfaultError', 'RunResult', 'run', 'validate']

@@ -1,0 +1,1 @@
+"""Assertions: expected outcomes checked on the engine's clock."""

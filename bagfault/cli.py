@@ -1,0 +1,127 @@
+"""Command line: argument parsing only; the work happens in bagfault.api."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import traceback
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from bagfault import __version__
+from bagfault.errors import BagfaultError
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.print_usage(sys.stderr)
+        print(f'bagfault: error: {message}', file=sys.stderr)
+        raise SystemExit(EXIT_ERROR)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog='bagfault', description='Record-and-replay fault injection for ROS 2.')
+    parser.add_argument('--version', action='version', version=f'bagfault {__version__}')
+    parser.add_argument('--debug', action='store_true', help='show tracebacks')
+    sub = parser.add_subparsers(dest='command', required=True, parser_class=_Parser)
+
+    run = sub.add_parser('run', help='inject faults into bags, write an output MCAP')
+    run.add_argument('scenario', type=Path)
+    run.add_argument('inputs', type=Path, nargs='+', metavar='INPUT')
+    run.add_argument('-o', '--output', type=Path, required=True)
+    run.add_argument('--seed', type=int, default=None)
+    run.add_argument('--activate', action='append', default=[], metavar='FAULT[@START[+DURATION]]',
+                     help='activate a fault offline (seconds from bag time zero); repeatable')
+    run.add_argument('--start', type=float, default=0.0, metavar='SECONDS',
+                     help='bag time zero is this many seconds after the first message')
+    run.add_argument('--compression', choices=['none', 'lz4', 'zstd'], default='zstd')
+
+    validate = sub.add_parser('validate', help='check scenario files, report every problem')
+    validate.add_argument('scenarios', type=Path, nargs='+', metavar='SCENARIO')
+
+    schema = sub.add_parser('schema', help='config keys of injector types')
+    schema.add_argument('type', nargs='?', metavar='INJECTOR_TYPE')
+    schema.add_argument('--json', action='store_true')
+
+    info = sub.add_parser('info', help='what a bag holds')
+    info.add_argument('inputs', type=Path, nargs='+', metavar='BAG')
+
+    return parser
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.progress import ProgressBar  # noqa: PLC0415
+    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+
+    scenario = api.load_scenario(args.scenario)
+    bar = ProgressBar()
+    try:
+        result = api.run(
+            scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
+            start_offset=args.start, compression=args.compression, progress=bar,
+        )
+    finally:
+        bar.close()
+    print_run_summary(result)
+    return EXIT_OK
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+
+    for scenario in api.validate(args.scenarios):
+        for warning in scenario.warnings:
+            print(f'{scenario.source}: warning: {warning}', file=sys.stderr)
+        print(f'{scenario.source}: ok ({len(scenario.injectors)} injectors, {len(scenario.faults)} faults, '
+              f'{len(scenario.assertions)} assertions)')
+    return EXIT_OK
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    from bagfault.report.schema import render_schema  # noqa: PLC0415
+
+    text = render_schema(args.type, as_json=args.json)
+    print(text)
+    return EXIT_OK
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from bagfault.report.info import render_info  # noqa: PLC0415
+
+    print(render_info(args.inputs))
+    return EXIT_OK
+
+
+COMMANDS = {
+    'run': _cmd_run,
+    'validate': _cmd_validate,
+    'schema': _cmd_schema,
+    'info': _cmd_info,
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `bagfault` command."""
+    args = _parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except BagfaultError as exc:
+        if args.debug:
+            traceback.print_exc()
+        for line in str(exc).splitlines() or [type(exc).__name__]:
+            print(f'bagfault: error: {line}', file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print('bagfault: interrupted; no output written', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())
+

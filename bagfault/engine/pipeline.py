@@ -1,0 +1,266 @@
+"""The offline pipeline: route, inject, merge by time, write.
+
+    source -> router -- untouched topic ----------------------------> merge -> sink
+                     -- injector topic -> injector (active faults) -> merge
+    scheduler (bag time) -> fault events ------------------------------> merge
+
+Messages of topics without an active fault are copied as raw bytes. The
+input is cut into segments at every fault change, so within a segment the
+set of active faults is fixed and an injector can treat the segment's
+messages as one batch.
+"""
+
+from __future__ import annotations
+
+import itertools
+from bisect import bisect_left
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+from bagfault.engine.merge import TimeOrderedMerge
+from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
+from bagfault.events import DEFINITIONS, FaultEvent, to_message
+from bagfault.injectors.base import ActiveFault, Injector, RawMessage
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+    from bagfault.io.channel import Channel
+    from bagfault.io.sources import InputSet
+    from bagfault.io.types import TypeCatalog
+    from bagfault.scenario.model import FaultSpec, InjectorSpec, Scenario
+
+BATCH = 4096
+EVENT_RANK, COPY_RANK = -1, 0
+
+
+@dataclass(frozen=True)
+class OutputChannel:
+    """A channel of the output file."""
+
+    id: int
+    topic: str
+    msgtype: str
+
+
+class Sink(Protocol):
+    """Where records go (an MCAP file, live publishers, ...)."""
+
+    def add_channel(
+        self,
+        topic: str,
+        msgtype: str,
+        schema_encoding: str,
+        schema_text: str,
+        message_encoding: str = 'cdr',
+        metadata: dict[str, str] | None = None,
+    ) -> int:
+        """Register a channel; return its id."""
+        ...
+
+    def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
+        """Write one message."""
+        ...
+
+
+class Observer(Protocol):
+    """Sees every output record and event in time order (assertions, fault manager)."""
+
+    def on_message(self, channel: OutputChannel, log_time: int, data: bytes | memoryview) -> None:
+        """An output message."""
+        ...
+
+    def on_event(self, event: FaultEvent) -> None:
+        """A fault event."""
+        ...
+
+
+@dataclass(eq=False)
+class InjectorRuntime:
+    """An injector wired into the pipeline."""
+
+    spec: InjectorSpec
+    injector: Injector
+    faults: list[FaultSpec]
+    channel: OutputChannel
+    rank: int
+    active: list[ActiveFault] = field(default_factory=list)
+
+
+@dataclass
+class RunStats:
+    """What a run did, for the summary and the report."""
+
+    input_messages: int = 0
+    output_messages: int = 0
+    first_time: int | None = None
+    last_time: int | None = None
+    origin: int | None = None
+    per_topic_out: dict[str, int] = field(default_factory=dict)
+    events: list[FaultEvent] = field(default_factory=list)
+    replaced_topics: list[str] = field(default_factory=list)
+
+
+class Pipeline:
+    """Runs a scenario over an input set into a sink."""
+
+    def __init__(
+        self,
+        inputs: InputSet,
+        scenario: Scenario,
+        sink: Sink,
+        catalog: TypeCatalog,
+        routes: dict[int, list[InjectorRuntime]],
+        copies: dict[int, OutputChannel],
+        *,
+        seed: int,
+        activations: Sequence[Activation] = (),
+        start_offset: float = 0.0,
+        batch: bool = True,
+        observers: Sequence[Observer] = (),
+        progress: Callable[[int, int], None] | None = None,
+    ) -> None:
+        self.inputs = inputs
+        self.scenario = scenario
+        self.sink = sink
+        self.catalog = catalog
+        self.routes = routes
+        self.copies = copies
+        self.seed = seed
+        self.activations = activations
+        self.start_offset = start_offset
+        self.batch = batch
+        self.observers = list(observers)
+        self.progress = progress
+        self.stats = RunStats()
+        self.scheduler: FaultScheduler | None = None
+        self._counter = itertools.count()
+        self._merge = TimeOrderedMerge()
+        self._event_channel: OutputChannel | None = None
+        self._event_codec: Any = None
+        self._runtimes = [runtime for runtimes in routes.values() for runtime in runtimes]
+
+    # -- events -----------------------------------------------------------
+    def _event_output(self) -> OutputChannel:
+        if self._event_channel is None:
+            msgtype = FaultEvent.msgtype
+            self.catalog.add_definition(msgtype, DEFINITIONS[msgtype])
+            channel_id = self.sink.add_channel(FaultEvent.topic, msgtype, 'ros2msg', DEFINITIONS[msgtype])
+            self._event_channel = OutputChannel(channel_id, FaultEvent.topic, msgtype)
+            self._event_codec = self.catalog.codec(msgtype)
+        return self._event_channel
+
+    def _refresh_active(self) -> None:
+        assert self.scheduler is not None
+        for runtime in self._runtimes:
+            runtime.active = [
+                ActiveFault(f, self.scheduler.active[f.id], self.scheduler.random[f.id])
+                for f in runtime.faults
+                if f.id in self.scheduler.active
+            ]
+
+    # -- main loop --------------------------------------------------------
+    def run(self) -> RunStats:
+        """Process every input message; return statistics."""
+        if self.scenario.faults:
+            self._event_output()
+        batch: list[tuple[int, int, int, bytes | memoryview]] = []
+        order = 0
+        for item in self.inputs.messages():
+            if self.scheduler is None:
+                self._start(item[1])
+            batch.append(item)
+            if len(batch) >= BATCH:
+                self._process(batch, order)
+                order += len(batch)
+                batch = []
+        if batch:
+            self._process(batch, order)
+        self._emit(self._merge.drain())
+        return self.stats
+
+    def _start(self, first_time: int) -> None:
+        origin = first_time + seconds_to_ns(self.start_offset)
+        self.stats.first_time = first_time
+        self.stats.origin = origin
+        self.scheduler = FaultScheduler(self.scenario, origin, self.seed, self.activations)
+        self._refresh_active()
+
+    def _process(self, batch: list[tuple[int, int, int, bytes | memoryview]], first_order: int) -> None:
+        scheduler = self.scheduler
+        assert scheduler is not None
+        times = [item[1] for item in batch]
+        self.stats.input_messages += len(batch)
+        self.stats.last_time = times[-1]
+        start = 0
+        while start < len(batch):
+            change = scheduler.next_time()
+            if change is not None and change <= times[start]:
+                events = scheduler.advance(times[start])
+                self._refresh_active()
+                order = first_order + start
+                records = [
+                    (e.time, order, EVENT_RANK, next(self._counter), e) for e in events
+                ]
+                self.stats.events.extend(events)
+                self._emit(self._merge.release(records, times[start], is_sorted=True))
+                continue
+            stop = len(batch) if change is None else bisect_left(times, change, start)
+            self._segment(batch, start, stop, first_order)
+            start = stop
+        if self.progress is not None:
+            self.progress(self.stats.input_messages, times[-1])
+
+    def _segment(
+        self,
+        batch: list[tuple[int, int, int, bytes | memoryview]],
+        start: int,
+        stop: int,
+        first_order: int,
+    ) -> None:
+        copies, routes, counter = self.copies, self.routes, self._counter
+        records: list[tuple[Any, ...]] = []
+        grouped: dict[InjectorRuntime, list[RawMessage]] = {}
+        for index in range(start, stop):
+            channel, log_time, publish_time, data = batch[index]
+            copy = copies.get(channel)
+            if copy is not None:
+                records.append((log_time, first_order + index, COPY_RANK, next(counter), copy, publish_time, data))
+            for runtime in routes.get(channel, ()):
+                grouped.setdefault(runtime, []).append(
+                    RawMessage(log_time, publish_time, data, first_order + index)
+                )
+        is_sorted = True
+        for runtime, messages in grouped.items():
+            if not runtime.active:
+                outputs = messages
+            elif self.batch:
+                outputs = runtime.injector.process_batch(messages, runtime.active)
+            else:
+                outputs = [out for m in messages for out in runtime.injector.process(m, runtime.active)]
+            out_channel, rank = runtime.channel, runtime.rank
+            records.extend(
+                (m.log_time, m.order, rank, next(counter), out_channel, m.publish_time, m.data) for m in outputs
+            )
+            is_sorted = False
+        horizon = batch[stop - 1][1]
+        self._emit(self._merge.release(records, horizon, is_sorted=is_sorted))
+
+    def _emit(self, records: Any) -> None:
+        write, observers, stats = self.sink.write, self.observers, self.stats
+        per_topic = stats.per_topic_out
+        for record in records:
+            if record[2] == EVENT_RANK:
+                event = record[4]
+                channel = self._event_output()
+                data = self._event_codec.encode(to_message(event, self._event_codec.store))
+                write(channel.id, event.time, event.time, data)
+                for observer in observers:
+                    observer.on_event(event)
+            else:
+                time, _, _, _, channel, publish_time, data = record
+                write(channel.id, time, publish_time, data)
+                for observer in observers:
+                    observer.on_message(channel, time, data)
+            stats.output_messages += 1
+            per_topic[channel.topic] = per_topic.get(channel.topic, 0) + 1

@@ -1,0 +1,217 @@
+"""Fault activation and deactivation on bag time.
+
+Every schedule is a lazy sequence of (time, state) toggles; the scheduler
+merges them, applies each toggle at its exact bag time and reports it as a
+FaultEvent. Nothing here reads a clock: the caller says what time it is.
+
+Schedules (times in seconds from bag time zero):
+- `active_on_startup`: active at zero (source `startup`), until `duration`;
+- `start` [+ `duration`]: active in [start, start + duration) (`scheduled`);
+- `repeat: {period, on}` inside the start/duration window;
+- `probability_per_second` with `hold`, seeded, inside the window;
+- `after: {fault, delay}`: follows another fault's activations;
+- `--activate FAULT[@START[+DURATION]]` replaces the fault's schedule (`cli`).
+Manual-only faults stay inactive until activated.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from bagfault.engine.rng import FaultRandom
+from bagfault.events import FaultEvent
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator, Sequence
+
+    from bagfault.scenario.model import FaultSpec, Scenario
+
+NS = 1_000_000_000
+
+
+def seconds_to_ns(seconds: float) -> int:
+    """Seconds (float) to integer nanoseconds, rounded."""
+    return round(seconds * NS)
+
+
+@dataclass(frozen=True)
+class Activation:
+    """A `--activate FAULT[@START[+DURATION]]` request (seconds)."""
+
+    fault_id: str
+    start: float = 0.0
+    duration: float | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> Activation:
+        """Parse FAULT, FAULT@START or FAULT@START+DURATION."""
+        fault_id, _, when = text.partition('@')
+        if not fault_id:
+            raise ValueError(f'{text!r}: expected FAULT[@START[+DURATION]]')
+        start_text, plus, duration_text = when.partition('+')
+        try:
+            start = float(start_text) if start_text else 0.0
+            duration = float(duration_text) if plus else None
+        except ValueError:
+            raise ValueError(f'{text!r}: START and DURATION must be seconds, e.g. imu_bias@5+10') from None
+        if start < 0 or (duration is not None and duration < 0) or not math.isfinite(start):
+            raise ValueError(f'{text!r}: times must be 0 or more seconds')
+        return cls(fault_id, start, duration)
+
+
+def _window(fault: FaultSpec) -> tuple[int, int | None]:
+    begin = 0 if fault.active_on_startup else seconds_to_ns(fault.start or 0.0)
+    end = None if fault.duration is None else begin + seconds_to_ns(fault.duration)
+    return begin, end
+
+
+def _plain(begin: int, end: int | None) -> Iterator[tuple[int, bool]]:
+    yield begin, True
+    if end is not None:
+        yield end, False
+
+
+def _repeat(fault: FaultSpec) -> Iterator[tuple[int, bool]]:
+    assert fault.repeat is not None
+    begin, end = _window(fault)
+    period, on = seconds_to_ns(fault.repeat.period), seconds_to_ns(fault.repeat.on)
+    if on >= period:
+        yield from _plain(begin, end)
+        return
+    cycle = begin
+    while end is None or cycle < end:
+        yield cycle, True
+        off = cycle + on
+        yield (off if end is None else min(off, end)), False
+        cycle += period
+
+
+def _random(fault: FaultSpec, random: FaultRandom) -> Iterator[tuple[int, bool]]:
+    assert fault.probability_per_second is not None and fault.hold is not None
+    stream = random.stream('schedule')
+    begin, end = _window(fault)
+    hold = seconds_to_ns(fault.hold)
+    clock = begin
+    while True:
+        clock += seconds_to_ns(float(stream.exponential(1.0 / fault.probability_per_second)))
+        if end is not None and clock >= end:
+            return
+        yield clock, True
+        clock += hold
+        yield (clock if end is None else min(clock, end)), False
+
+
+class FaultScheduler:
+    """Knows which faults are active at any bag time and emits their events."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        origin: int,
+        seed: int,
+        activations: Sequence[Activation] = (),
+    ) -> None:
+        self.scenario = scenario
+        self.origin = origin
+        self.random = {
+            f.id: FaultRandom(_fault_seed(scenario, f, seed), f.id) for f in scenario.faults
+        }
+        self.active: dict[str, int] = {}
+        self._order = {f.id: i for i, f in enumerate(scenario.faults)}
+        self._heap: list[tuple[int, int, int, str, bool, str]] = []
+        self._sequences: dict[str, tuple[Iterator[tuple[int, bool]], str]] = {}
+        self._counter = 0
+        self._followers: dict[str, list[FaultSpec]] = {}
+        requested: dict[str, list[Activation]] = {}
+        for activation in activations:
+            requested.setdefault(activation.fault_id, []).append(activation)
+        for fault in scenario.faults:
+            if fault.id in requested:
+                windows = sorted(requested[fault.id], key=lambda a: a.start)
+                self._add(fault.id, self._windows(windows), 'cli')
+            elif fault.after is not None:
+                self._followers.setdefault(fault.after.fault, []).append(fault)
+            elif fault.repeat is not None:
+                self._add(fault.id, _repeat(fault), 'scheduled')
+            elif fault.probability_per_second is not None:
+                self._add(fault.id, _random(fault, self.random[fault.id]), 'scheduled')
+            elif fault.active_on_startup:
+                self._add(fault.id, _plain(*_window(fault)), 'startup')
+            elif fault.start is not None:
+                self._add(fault.id, _plain(*_window(fault)), 'scheduled')
+
+    @staticmethod
+    def _windows(windows: list[Activation]) -> Iterator[tuple[int, bool]]:
+        for window in windows:
+            begin = seconds_to_ns(window.start)
+            yield from _plain(begin, None if window.duration is None else begin + seconds_to_ns(window.duration))
+
+    def _add(self, fault_id: str, sequence: Iterator[tuple[int, bool]], source: str) -> None:
+        self._sequences[fault_id] = (sequence, source)
+        self._pull(fault_id)
+
+    def _pull(self, fault_id: str) -> None:
+        sequence, source = self._sequences[fault_id]
+        step = next(sequence, None)
+        if step is not None:
+            self._push(self.origin + step[0], fault_id, step[1], source)
+
+    def _push(self, time: int, fault_id: str, state: bool, source: str) -> None:
+        self._counter += 1
+        heapq.heappush(self._heap, (time, self._order[fault_id], self._counter, fault_id, state, source))
+
+    def next_time(self) -> int | None:
+        """Bag time (ns) of the next pending change, or None."""
+        return self._heap[0][0] if self._heap else None
+
+    def advance(self, now: int) -> list[FaultEvent]:
+        """Apply every change due at or before `now`; return their events in order."""
+        events = []
+        while self._heap and self._heap[0][0] <= now:
+            time, _, _, fault_id, state, source = heapq.heappop(self._heap)
+            if fault_id in self._sequences:
+                self._pull(fault_id)
+            event = self.set_state(fault_id, state, time, source)
+            if event is not None:
+                events.append(event)
+        return events
+
+    def set_state(self, fault_id: str, state: bool, time: int, source: str) -> FaultEvent | None:
+        """Activate or deactivate a fault now (also for live/manual changes)."""
+        fault = self.scenario.fault(fault_id)
+        if fault is None or (fault_id in self.active) == state:
+            return None
+        if state:
+            self.active[fault_id] = time
+        else:
+            del self.active[fault_id]
+        for follower in self._followers.get(fault_id, ()):
+            assert follower.after is not None
+            delay = seconds_to_ns(follower.after.delay)
+            if state:
+                self._push(time + delay, follower.id, True, 'scheduled')
+                if follower.duration is not None:
+                    self._push(time + delay + seconds_to_ns(follower.duration), follower.id, False, 'scheduled')
+            elif follower.duration is None:
+                self._push(time + delay, follower.id, False, 'scheduled')
+        injector = self.scenario.injector(fault.injector_id)
+        return FaultEvent(
+            time=time,
+            fault_id=fault_id,
+            injector_id=injector.id if injector else fault.injector_id,
+            state='active' if state else 'inactive',
+            source=source,
+            details=fault.describe_config(),
+        )
+
+    def is_active(self, fault_id: str) -> bool:
+        """True while the fault is active."""
+        return fault_id in self.active
+
+
+def _fault_seed(scenario: Scenario, fault: FaultSpec, seed: int) -> int:
+    injector = scenario.injector(fault.injector_id)
+    return injector.seed if injector is not None and injector.seed is not None else seed

@@ -1,0 +1,99 @@
+"""Event records and their ros2msg definitions (those of ros2_fault_injection).
+
+The output MCAP carries these on fixed topics with the anchor's type names
+and fields, so tools made for ros2_fault_injection read them unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+TIME_DEFINITION = 'int32 sec\nuint32 nanosec\n'
+SEPARATOR = '=' * 80
+
+
+def with_time(definition: str) -> str:
+    """A definition followed by builtin_interfaces/Time, so readers need nothing else."""
+    return f'{definition}{SEPARATOR}\nMSG: builtin_interfaces/Time\n{TIME_DEFINITION}'
+
+
+FAULT_EVENT_TOPIC = '/fault_injection/events'
+FAULT_EVENT_TYPE = 'ros2_fault_injection/msg/FaultEvent'
+FAULT_EVENT_MSG = with_time(
+    'builtin_interfaces/Time stamp\nstring fault_id\nstring injector_id\nstring state\nstring source\nstring details\n'
+)
+
+ASSERTION_EVENT_TOPIC = '/fault_injection/assertion_events'
+ASSERTION_EVENT_TYPE = 'ros2_fault_injection/msg/AssertionEvent'
+ASSERTION_EVENT_MSG = with_time(
+    'builtin_interfaces/Time stamp\nstring assertion_id\nstring assertion_type\nstring state\nstring message\n'
+)
+
+SCENARIO_STATUS_TOPIC = '/fault_injection/scenario_status'
+SCENARIO_STATUS_TYPE = 'ros2_fault_injection/msg/ScenarioStatus'
+SCENARIO_STATUS_MSG = with_time(
+    'builtin_interfaces/Time stamp\nstring state\nuint32 pending_count\nuint32 passed_count\n'
+    'uint32 failed_count\nstring[] failed_assertion_ids\nstring[] failed_messages\n'
+)
+
+DEFINITIONS = {
+    FAULT_EVENT_TYPE: FAULT_EVENT_MSG,
+    ASSERTION_EVENT_TYPE: ASSERTION_EVENT_MSG,
+    SCENARIO_STATUS_TYPE: SCENARIO_STATUS_MSG,
+}
+
+
+@dataclass(frozen=True)
+class FaultEvent:
+    """A fault changed state (`active`/`inactive`) or config, at bag time `time` (ns)."""
+
+    time: int
+    fault_id: str
+    injector_id: str
+    state: str
+    source: str
+    details: str
+
+    topic = FAULT_EVENT_TOPIC
+    msgtype = FAULT_EVENT_TYPE
+
+
+@dataclass(frozen=True)
+class AssertionEvent:
+    """An assertion passed or failed at bag time `time` (ns)."""
+
+    time: int
+    assertion_id: str
+    assertion_type: str
+    state: str
+    message: str
+
+    topic = ASSERTION_EVENT_TOPIC
+    msgtype = ASSERTION_EVENT_TYPE
+
+
+@dataclass(frozen=True)
+class ScenarioStatus:
+    """Summary of all assertions at bag time `time` (ns)."""
+
+    time: int
+    state: str
+    pending_count: int
+    passed_count: int
+    failed_count: int
+    failed_assertion_ids: list[str] = field(default_factory=list)
+    failed_messages: list[str] = field(default_factory=list)
+
+    topic = SCENARIO_STATUS_TOPIC
+    msgtype = SCENARIO_STATUS_TYPE
+
+
+Event = FaultEvent | AssertionEvent | ScenarioStatus
+
+
+def to_message(event: Event, store: object) -> object:
+    """Build the typestore message object of an event."""
+    types = store.types  # type: ignore[attr-defined]
+    stamp = types['builtin_interfaces/msg/Time'](sec=event.time // 1_000_000_000, nanosec=event.time % 1_000_000_000)
+    values = {k: v for k, v in event.__dict__.items() if k != 'time'}
+    return types[event.msgtype](stamp=stamp, **values)

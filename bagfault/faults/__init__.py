@@ -1,0 +1,1 @@
+"""Reusable fault primitives: combining active faults, drop, noise, rotations."""

@@ -1,0 +1,201 @@
+"""Injector base class: one message and the active faults in, 0..n messages out.
+
+An injector never does I/O and never reads a clock. The engine gives it the
+serialized message with its bag time and the faults active at that time;
+offline, play and proxy modes all call the same code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+from bagfault.faults.combine import strongest
+from bagfault.faults.drop import drop_mask, should_drop
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from bagfault.engine.rng import FaultRandom
+    from bagfault.scenario.model import FaultSpec, InjectorSpec
+
+
+@dataclass(slots=True)
+class RawMessage:
+    """A serialized message with its times (ns): what flows between stages.
+
+    `order` is the position of the input message it came from; it keeps
+    outputs with equal times in input order and survives every fault.
+    """
+
+    log_time: int
+    publish_time: int
+    data: bytes | memoryview
+    order: int = 0
+
+
+@dataclass
+class ActiveFault:
+    """A fault that is active now: its spec, when it started, its random streams."""
+
+    spec: FaultSpec
+    since: int
+    random: FaultRandom
+
+    @property
+    def id(self) -> str:
+        """Fault id."""
+        return self.spec.id
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """Validated config values."""
+        return self.spec.config
+
+
+class Codec(Protocol):
+    """Turns CDR bytes of one message type into objects and back."""
+
+    msgtype: str
+
+    def decode(self, data: bytes | memoryview) -> Any:
+        """Deserialize."""
+        ...
+
+    def encode(self, message: Any) -> bytes:
+        """Serialize."""
+        ...
+
+
+class InjectorConfigError(ValueError):
+    """An injector's options or a fault config fail a cross-field check."""
+
+
+class Injector:
+    """Base of all topic injectors.
+
+    Subclasses set the class attributes and implement `mutate`. The default
+    flow follows the anchor: drop (drop_probability, strongest active fault
+    wins), mutate the decoded message, delay (delay_ms, longest wins).
+    """
+
+    type_name: ClassVar[str] = ''
+    description: ClassVar[str] = ''
+    message_types: ClassVar[tuple[str, ...]] = ()
+    fields: ClassVar[tuple[ConfigField, ...]] = (DROP_PROBABILITY, DELAY_MS)
+    options: ClassVar[tuple[ConfigField, ...]] = ()
+    live_only: ClassVar[bool] = False
+    stream_keys: ClassVar[frozenset[str]] = frozenset({'drop_probability', 'delay_ms'})
+
+    def __init__(self, spec: InjectorSpec, codec: Codec | None = None) -> None:
+        self.spec = spec
+        self.codec = codec
+
+    @classmethod
+    def check_options(cls, options: dict[str, Any]) -> None:
+        """Cross-field checks of injector options; raise InjectorConfigError."""
+
+    @classmethod
+    def check_fault(cls, config: dict[str, Any], options: dict[str, Any]) -> None:
+        """Cross-field checks of one fault config; raise InjectorConfigError."""
+
+    @classmethod
+    def field(cls, key: str) -> ConfigField | None:
+        """Schema entry for a fault config key."""
+        return next((x for x in cls.fields if x.key == key), None)
+
+    def needs_decoding(self, active: Sequence[ActiveFault]) -> bool:
+        """True when an active fault changes message content."""
+        return any(key not in self.stream_keys for fault in active for key in fault.config)
+
+    def process(self, message: RawMessage, active: Sequence[ActiveFault]) -> list[RawMessage]:
+        """Reference path: apply the active faults to one message."""
+        if not active:
+            return [message]
+        if should_drop(active):
+            return []
+        out = message
+        if self.needs_decoding(active):
+            assert self.codec is not None
+            decoded = self.codec.decode(message.data)
+            self.mutate(decoded, message.log_time, active)
+            out = replace(message, data=self.codec.encode(decoded))
+        return self.retime([out], active)
+
+    def process_batch(
+        self,
+        messages: list[RawMessage],
+        active: Sequence[ActiveFault],
+    ) -> list[RawMessage]:
+        """Apply the active faults to consecutive messages; same bytes as `process`.
+
+        Subclasses with a vectorised path override `mutate_batch`.
+        """
+        if not active:
+            return messages
+        keep = drop_mask(active, len(messages))
+        kept = [m for m, k in zip(messages, keep) if k] if keep is not None else messages
+        if kept and self.needs_decoding(active):
+            kept = self.mutate_batch(kept, active)
+        return self.retime(kept, active)
+
+    def mutate(self, message: Any, time: int, active: Sequence[ActiveFault]) -> None:
+        """Change a decoded message in place."""
+        raise NotImplementedError
+
+    def mutate_batch(
+        self,
+        messages: list[RawMessage],
+        active: Sequence[ActiveFault],
+    ) -> list[RawMessage]:
+        """Mutate many messages; default decodes each one."""
+        assert self.codec is not None
+        out = []
+        for message in messages:
+            decoded = self.codec.decode(message.data)
+            self.mutate(decoded, message.log_time, active)
+            out.append(replace(message, data=self.codec.encode(decoded)))
+        return out
+
+    def retime(
+        self,
+        messages: list[RawMessage],
+        active: Sequence[ActiveFault],
+    ) -> list[RawMessage]:
+        """Shift log and publish time by the longest active delay."""
+        delay_ms, _ = strongest(active, 'delay_ms')
+        if delay_ms <= 0:
+            return messages
+        shift = int(delay_ms) * 1_000_000
+        return [
+            RawMessage(m.log_time + shift, m.publish_time + shift, m.data, m.order) for m in messages
+        ]
+
+
+class ServiceInjector:
+    """Base of service injectors: schema only offline, behaviour in live mode."""
+
+    type_name: ClassVar[str] = ''
+    description: ClassVar[str] = ''
+    service_type: ClassVar[str] = ''
+    fields: ClassVar[tuple[ConfigField, ...]] = ()
+    options: ClassVar[tuple[ConfigField, ...]] = ()
+    live_only: ClassVar[bool] = True
+    message_types: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def check_options(cls, options: dict[str, Any]) -> None:
+        """Cross-field checks of injector options."""
+
+    @classmethod
+    def check_fault(cls, config: dict[str, Any], options: dict[str, Any]) -> None:
+        """Cross-field checks of one fault config."""
+
+    @classmethod
+    def field(cls, key: str) -> ConfigField | None:
+        """Schema entry for a fault config key."""
+        return next((x for x in cls.fields if x.key == key), None)
+
+
+InjectorType = type[Injector] | type[ServiceInjector]

@@ -1,0 +1,46 @@
+"""IMU injector (`imu`, sensor_msgs/msg/Imu), keys and meaning of the anchor."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from bagfault.faults.combine import add, total
+from bagfault.faults.noise import gaussian_one
+from bagfault.injectors.base import Injector
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, stddev
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from bagfault.injectors.base import ActiveFault
+
+AXES = ('x', 'y', 'z')
+
+
+class ImuInjector(Injector):
+    """Yaw-rate and linear acceleration bias and noise."""
+
+    type_name = 'imu'
+    description = 'sensor_msgs/msg/Imu: angular velocity z and linear acceleration bias and noise.'
+    message_types = ('sensor_msgs/msg/Imu',)
+    fields: ClassVar[tuple[ConfigField, ...]] = (
+        DROP_PROBABILITY,
+        DELAY_MS,
+        double('angular_velocity_z_bias', 'Added to angular_velocity.z, in rad/s.'),
+        stddev('angular_velocity_z_noise_stddev', 'Gaussian noise on angular_velocity.z, stddev in rad/s.'),
+        *(double(f'linear_acceleration_{a}_bias', f'Added to linear_acceleration.{a}, in m/s^2.') for a in AXES),
+        *(
+            stddev(f'linear_acceleration_{a}_noise_stddev', f'Gaussian noise on linear_acceleration.{a}, stddev in m/s^2.')
+            for a in AXES
+        ),
+    )
+
+    def mutate(self, message: Any, time: int, active: Sequence[ActiveFault]) -> None:
+        """Angular velocity bias, its noise, acceleration biases, their noise (anchor order)."""
+        add(message.angular_velocity, 'z', total(active, 'angular_velocity_z_bias'))
+        add(message.angular_velocity, 'z', gaussian_one(active, 'angular_velocity_z_noise_stddev'))
+        accel = message.linear_acceleration
+        for axis in AXES:
+            add(accel, axis, total(active, f'linear_acceleration_{axis}_bias'))
+        for axis in AXES:
+            add(accel, axis, gaussian_one(active, f'linear_acceleration_{axis}_noise_stddev'))

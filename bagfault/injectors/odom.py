@@ -1,0 +1,70 @@
+"""Odometry injector (`odom`, nav_msgs/msg/Odometry), keys and meaning of the anchor."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from bagfault.faults.combine import add, strongest, total
+from bagfault.faults.noise import gaussian_one
+from bagfault.faults.rotation import add_rpy
+from bagfault.injectors.base import Injector
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, stddev
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from bagfault.injectors.base import ActiveFault
+
+
+class OdomInjector(Injector):
+    """Position and yaw bias/noise and covariance inflation on odometry."""
+
+    type_name = 'odom'
+    description = 'nav_msgs/msg/Odometry: position and yaw bias and noise, covariance inflation.'
+    message_types = ('nav_msgs/msg/Odometry',)
+    fields: ClassVar[tuple[ConfigField, ...]] = (
+        DROP_PROBABILITY,
+        DELAY_MS,
+        double('x_bias', 'Added to pose.pose.position.x, in metres; biases of several faults add.'),
+        double('y_bias', 'Added to pose.pose.position.y, in metres; biases of several faults add.'),
+        stddev('x_noise_stddev', 'Gaussian noise on pose.pose.position.x, stddev in metres.'),
+        stddev('y_noise_stddev', 'Gaussian noise on pose.pose.position.y, stddev in metres.'),
+        double('yaw_bias_deg', 'Added to the yaw of pose.pose.orientation, in degrees.'),
+        stddev('yaw_noise_stddev_deg', 'Gaussian noise on the yaw of pose.pose.orientation, stddev in degrees.'),
+        ConfigField('pose_covariance_scale', 'double', 'Multiplies every pose covariance entry (factor).', 1.0, min=0.0),
+        ConfigField('twist_covariance_scale', 'double', 'Multiplies every twist covariance entry (factor).', 1.0, min=0.0),
+        ConfigField('pose_covariance_floor', 'double', 'Minimum of every pose covariance entry after scaling.', 0.0, min=0.0),
+        ConfigField('twist_covariance_floor', 'double', 'Minimum of every twist covariance entry after scaling.', 0.0, min=0.0),
+    )
+
+    def mutate(self, message: Any, time: int, active: Sequence[ActiveFault]) -> None:
+        """Apply bias, noise, yaw bias, yaw noise, covariance (anchor order)."""
+        position = message.pose.pose.position
+        add(position, 'x', total(active, 'x_bias'))
+        add(position, 'y', total(active, 'y_bias'))
+        add(position, 'x', gaussian_one(active, 'x_noise_stddev'))
+        add(position, 'y', gaussian_one(active, 'y_noise_stddev'))
+
+        yaw_bias = total(active, 'yaw_bias_deg')
+        if yaw_bias != 0.0:
+            add_rpy(message.pose.pose.orientation, 0.0, 0.0, math.radians(yaw_bias))
+        yaw_noise = gaussian_one(active, 'yaw_noise_stddev_deg')
+        if yaw_noise != 0.0:
+            add_rpy(message.pose.pose.orientation, 0.0, 0.0, math.radians(yaw_noise))
+
+        inflate_covariance(message.pose, active, 'pose')
+        inflate_covariance(message.twist, active, 'twist')
+
+
+def inflate_covariance(holder: Any, active: Sequence[ActiveFault], prefix: str) -> None:
+    """covariance = max(scale * covariance, floor) when a scale or floor is active."""
+    scale, scale_owner = strongest(active, f'{prefix}_covariance_scale', 1.0)
+    floor, _ = strongest(active, f'{prefix}_covariance_floor', 0.0)
+    if scale_owner is None and floor <= 0.0:
+        return
+    if scale == 1.0 and floor <= 0.0:
+        return
+    holder.covariance = np.maximum(np.asarray(holder.covariance, dtype=np.float64) * scale, floor)

@@ -1,0 +1,59 @@
+"""Injector types by name: the built-ins plus entry points of group `bagfault.injectors`.
+
+An external package adds a type by declaring, in its pyproject.toml,
+
+    [project.entry-points."bagfault.injectors"]
+    battery_state = "my_package.battery:BatteryStateInjector"
+
+and subclassing `bagfault.injectors.base.Injector`.
+"""
+
+from __future__ import annotations
+
+import sys
+from functools import lru_cache
+from importlib.metadata import entry_points
+
+from bagfault.injectors.base import Injector, InjectorType, ServiceInjector
+from bagfault.injectors.imu import ImuInjector
+from bagfault.injectors.joint_state import JointStateInjector
+from bagfault.injectors.odom import OdomInjector
+from bagfault.injectors.scan import ScanInjector
+from bagfault.injectors.tf import TfInjector
+from bagfault.injectors.trigger_service import TriggerServiceInjector
+
+GROUP = 'bagfault.injectors'
+
+BUILTIN: tuple[InjectorType, ...] = (
+    OdomInjector,
+    ScanInjector,
+    JointStateInjector,
+    ImuInjector,
+    TfInjector,
+    TriggerServiceInjector,
+)
+
+
+@lru_cache(maxsize=1)
+def injector_types() -> dict[str, InjectorType]:
+    """All known injector types, built-ins first; a plugin cannot replace a built-in."""
+    types: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}
+    for entry in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        if entry.name in types:
+            print(f'bagfault: plugin {entry.value} ignored: type {entry.name!r} is built in', file=sys.stderr)
+            continue
+        try:
+            cls = entry.load()
+        except Exception as exc:  # noqa: BLE001 - a broken plugin must not break bagfault
+            print(f'bagfault: plugin {entry.name} = {entry.value} failed to load: {exc}', file=sys.stderr)
+            continue
+        if not (isinstance(cls, type) and issubclass(cls, (Injector, ServiceInjector))):
+            print(f'bagfault: plugin {entry.name} = {entry.value} is not an Injector subclass', file=sys.stderr)
+            continue
+        types[entry.name] = cls
+    return types
+
+
+def get_injector_type(name: str) -> InjectorType | None:
+    """Injector class for a type name, or None."""
+    return injector_types().get(name)

@@ -1,0 +1,78 @@
+"""Progress bar on a terminal: messages and bag seconds done, throughput, ETA.
+
+Display only: it reads the wall clock to pace itself and estimate time
+left; the engine never sees it. Silent when stderr is not a terminal.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import TextIO
+
+
+def _clock(seconds: float) -> str:
+    seconds = max(0, int(seconds))
+    hours, rest = divmod(seconds, 3600)
+    minutes, secs = divmod(rest, 60)
+    return f'{hours}:{minutes:02d}:{secs:02d}' if hours else f'{minutes:02d}:{secs:02d}'
+
+
+class ProgressBar:
+    """Callable given to the pipeline: progress(messages_done, bag_time_ns)."""
+
+    def __init__(self, *, stream: TextIO | None = None, enabled: bool | None = None) -> None:
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.start_time: int | None = None
+        self.end_time: int | None = None
+        self.total: int | None = None
+        self.began = time.monotonic()
+        self.last_draw = 0.0
+        self.shown = False
+
+    def begin(self, start_time: int | None, end_time: int | None, total_messages: int | None) -> None:
+        """What the whole job is: bag time span and message count, when known."""
+        self.start_time, self.end_time, self.total = start_time, end_time, total_messages
+        self.began = time.monotonic()
+
+    def fraction(self, messages: int, bag_time: int) -> float | None:
+        """Share of the work done, from bag time if known, else from message count."""
+        if self.start_time is not None and self.end_time is not None and self.end_time > self.start_time:
+            return min(1.0, max(0.0, (bag_time - self.start_time) / (self.end_time - self.start_time)))
+        if self.total:
+            return min(1.0, messages / self.total)
+        return None
+
+    def line(self, messages: int, bag_time: int, elapsed: float) -> str:
+        """The text of one update."""
+        done_s = (bag_time - self.start_time) / 1e9 if self.start_time is not None else 0.0
+        total_s = (self.end_time - self.start_time) / 1e9 if self.end_time and self.start_time is not None else None
+        fraction = self.fraction(messages, bag_time)
+        width = 24
+        if fraction is None:
+            bar, eta = '', ''
+        else:
+            filled = int(fraction * width)
+            bar = '[' + '#' * filled + '.' * (width - filled) + f'] {fraction * 100:5.1f}% '
+            eta = f' ETA {_clock(elapsed * (1 - fraction) / fraction)}' if fraction > 0 else ''
+        bag = f'{done_s:.1f}/{total_s:.1f} s bag' if total_s is not None else f'{done_s:.1f} s bag'
+        rate = messages / elapsed if elapsed > 0 else 0.0
+        return f'{bar}{messages} msgs, {bag}, {rate:,.0f} msg/s, {_clock(elapsed)} elapsed{eta}'
+
+    def __call__(self, messages: int, bag_time: int) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self.last_draw < 0.2:
+            return
+        self.last_draw = now
+        self.stream.write('\r\x1b[2K' + self.line(messages, bag_time, now - self.began))
+        self.stream.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        """End the progress line."""
+        if self.enabled and self.shown:
+            self.stream.write('\r\x1b[2K')
+            self.stream.flush()

@@ -1,0 +1,1 @@
+"""Human and machine readable output: terminal summary, markdown, JSON, JUnit, HTML."""

@@ -1,0 +1,49 @@
+"""`bagfault info`: storage, time span and topics of one or more bags."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from bagfault.io.sources import InputSet
+from bagfault.io.types import TypeCatalog
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from pathlib import Path
+
+
+def render_info(paths: Sequence[Path]) -> str:
+    """Topics with type, count, definition source and QoS; time span."""
+    inputs = InputSet(paths)
+    try:
+        counts = [0] * len(inputs.channels)
+        first = last = None
+        for channel, log_time, _, _ in inputs.messages():
+            counts[channel] += 1
+            first = log_time if first is None else first
+            last = log_time
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
+        lines = [f'inputs:    {", ".join(str(p) for p in paths)}',
+                 f'distro:    {inputs.ros_distro or "unknown (standard types of " + catalog.distro + ")"}',
+                 f'messages:  {sum(counts)}']
+        if first is not None and last is not None:
+            lines.append(f'duration:  {(last - first) / 1e9:.3f} s  (start {stamp(first)}, end {stamp(last)})')
+        lines.append('topics:')
+        width = max((len(c.topic) for c in inputs.channels), default=10)
+        for channel, count in zip(inputs.channels, counts):
+            if channel.schema_text:
+                definition = 'stored'
+            elif catalog.schema(channel.msgtype)[1]:
+                definition = 'standard'
+            else:
+                definition = 'none: passed through undecoded'
+            qos = ' qos' if channel.qos else ''
+            lines.append(f'  {channel.topic:<{width}}  {count:8d}  {channel.msgtype or "?"}  [{definition}{qos}]')
+        return '\n'.join(lines)
+    finally:
+        inputs.close()
+
+
+def stamp(time: int) -> str:
+    """Exact seconds.nanoseconds text of a time in ns."""
+    return f'{time // 1_000_000_000}.{time % 1_000_000_000:09d}'

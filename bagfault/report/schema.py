@@ -1,0 +1,57 @@
+"""`bagfault schema`: the config keys of injector types, as text or JSON."""
+
+from __future__ import annotations
+
+import json
+
+from bagfault.errors import BagfaultError
+from bagfault.injectors.registry import injector_types
+
+
+def schema_dict(type_name: str | None = None) -> dict[str, object]:
+    """{type: {description, message_types, live_only, options, fields}}."""
+    types = injector_types()
+    if type_name is not None and type_name not in types:
+        raise BagfaultError(f'unknown injector type {type_name!r} (known: {", ".join(sorted(types))})')
+    selected = [type_name] if type_name else sorted(types)
+    return {
+        name: {
+            'description': types[name].description,
+            'message_types': list(types[name].message_types),
+            'live_only': types[name].live_only,
+            'options': [f.to_dict() for f in types[name].options],
+            'fields': [f.to_dict() for f in types[name].fields],
+        }
+        for name in selected
+    }
+
+
+def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str:
+    """Human table or JSON of one or all injector types."""
+    data = schema_dict(type_name)
+    if as_json:
+        return json.dumps(data, indent=2, sort_keys=True)
+    lines = []
+    for name, entry in data.items():
+        kinds = ', '.join(entry['message_types']) or 'any message type'  # type: ignore[arg-type]
+        live = ' (live mode only)' if entry['live_only'] else ''
+        lines.append(f'{name}: {entry["description"]}{live}')
+        lines.append(f'  messages: {kinds}')
+        for title in ('options', 'fields'):
+            fields = entry[title]
+            if not fields:
+                continue
+            lines.append('  injector options:' if title == 'options' else '  fault config keys:')
+            for field in fields:  # type: ignore[attr-defined]
+                limits = []
+                if field['min'] is not None:
+                    limits.append(f'min {field["min"]}')
+                if field['max'] is not None:
+                    limits.append(f'max {field["max"]}')
+                if field['required']:
+                    limits.append('required')
+                extra = f' [{", ".join(limits)}]' if limits else ''
+                default = '' if field['default'] in (None, '') else f' (default {field["default"]})'
+                lines.append(f'    {field["key"]:<36} {field["type"]:<16} {field["description"]}{default}{extra}')
+        lines.append('')
+    return '\n'.join(lines).rstrip()

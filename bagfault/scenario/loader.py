@@ -1,0 +1,278 @@
+"""Read a scenario file in any of the anchor's layouts into the model.
+
+Layouts of ros2_fault_injection, all accepted unchanged:
+- `injectors:` list whose entries nest endpoints under `topic:`;
+- `injectors:` list with flat `input_topic`/`output_topic` keys;
+- a single `injector:` mapping.
+Structural problems are collected, not raised one by one; `validate`
+then checks values against the injector and assertion schemas.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
+from bagfault.scenario.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
+
+TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description'}
+INJECTOR_KEYS = {'id', 'type', 'topic', 'input_topic', 'output_topic', 'qos_depth', 'trigger_service',
+                 'proxy_service', 'target_service', 'seed'}
+ENDPOINT_KEYS = {'input_topic', 'output_topic', 'qos_depth'}
+SERVICE_KEYS = {'proxy_service', 'target_service'}
+FAULT_KEYS = {'id', 'injector_id', 'active_on_startup', 'active', 'start', 'duration', 'config',
+              'repeat', 'probability_per_second', 'hold', 'after'}
+SEED_MAX = 2**64 - 1
+
+
+class _Collector:
+    """Accumulates problems with their YAML positions."""
+
+    def __init__(self, file: str, located: LocatedYaml) -> None:
+        self.file = file
+        self.located = located
+        self.problems: list[Any] = []
+
+    def add(self, path: PathKey, message: str) -> None:
+        from bagfault.scenario import Problem  # noqa: PLC0415 - avoid import cycle
+
+        self.problems.append(Problem(self.file, self.located.where(path), format_path(path), message))
+
+
+def load_scenario(path: str | Path, *, validate: bool = True) -> Scenario:
+    """Load and (by default) validate a scenario file; raise ScenarioError listing all problems."""
+    from bagfault.scenario import ScenarioError  # noqa: PLC0415
+
+    file = Path(path)
+    try:
+        text = file.read_text(encoding='utf-8')
+    except FileNotFoundError:
+        raise ScenarioError(f'{file}: scenario file not found') from None
+    except IsADirectoryError:
+        raise ScenarioError(f'{file}: is a directory, not a scenario file') from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f'{file}: cannot read scenario file: {exc}') from None
+    return parse_scenario(text, source=file, validate=validate)
+
+
+def parse_scenario(text: str, *, source: Path | None = None, validate: bool = True) -> Scenario:
+    """Parse scenario text; raise ScenarioError listing every problem found."""
+    from bagfault.scenario import Problem, ScenarioError  # noqa: PLC0415
+    from bagfault.scenario.validator import validate_scenario  # noqa: PLC0415
+
+    name = str(source) if source else '<scenario>'
+    try:
+        located = load_located(text)
+    except YamlSyntaxError as exc:
+        where, _, message = str(exc).partition(': ')
+        raise ScenarioError([Problem(name, where, '<top>', message)]) from None
+    out = _Collector(name, located)
+    scenario = _build(located, out)
+    scenario.source = source
+    scenario.text = text
+    scenario.located = located
+    if validate:
+        validate_scenario(scenario, out)
+    if out.problems:
+        raise ScenarioError(out.problems)
+    return scenario
+
+
+def _build(located: LocatedYaml, out: _Collector) -> Scenario:
+    root = located.data
+    scenario = Scenario([], [], [])
+    if not isinstance(root, dict):
+        out.add((), 'a scenario must be a YAML mapping with injectors and faults')
+        return scenario
+    for key in root:
+        if key not in TOP_KEYS:
+            out.add((key,), f'unknown top-level key {key!r} (known: {", ".join(sorted(TOP_KEYS))})')
+
+    if 'injectors' in root and 'injector' in root:
+        out.add(('injector',), "use either 'injector' or 'injectors', not both")
+    if 'injectors' in root:
+        items = root['injectors']
+        if not isinstance(items, list):
+            out.add(('injectors',), 'must be a list of injectors')
+        else:
+            scenario.injectors = [x for i, n in enumerate(items) if (x := _injector(n, ('injectors', i), out))]
+    elif 'injector' in root:
+        if not isinstance(root['injector'], dict):
+            out.add(('injector',), 'must be a mapping')
+        elif injector := _injector(root['injector'], ('injector',), out):
+            scenario.injectors = [injector]
+    else:
+        out.add((), "scenario has no 'injector' or 'injectors' block")
+
+    faults = root.get('faults', [])
+    if faults is None:
+        faults = []
+    if not isinstance(faults, list):
+        out.add(('faults',), 'must be a list of faults')
+    else:
+        scenario.faults = [x for i, n in enumerate(faults) if (x := _fault(n, ('faults', i), out, located))]
+
+    assertions = root.get('assertions', [])
+    if assertions is None:
+        assertions = []
+    if not isinstance(assertions, list):
+        out.add(('assertions',), 'must be a list of assertions')
+    else:
+        scenario.assertions = [
+            x for i, n in enumerate(assertions) if (x := _assertion(n, ('assertions', i), out))
+        ]
+
+    if 'seed' in root:
+        scenario.seed = _seed(root['seed'], ('seed',), out)
+    return scenario
+
+
+def _text(node: dict[str, Any], key: str, path: PathKey, out: _Collector, *, required: bool = True) -> str | None:
+    if key not in node or node[key] is None:
+        if required:
+            out.add(path, f'missing required key {key!r}')
+        return None
+    value = node[key]
+    if not isinstance(value, (str, int, float)) or isinstance(value, bool):
+        out.add((*path, key), f'{value!r} is not a string')
+        return None
+    text = str(value)
+    if not text:
+        out.add((*path, key), 'must not be empty')
+        return None
+    return text
+
+
+def _number(value: object, path: PathKey, out: _Collector, *, minimum: float | None = 0.0) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        out.add(path, f'{value!r} is not a number of seconds')
+        return None
+    if not math.isfinite(value):
+        out.add(path, f'{value} is not a finite number')
+        return None
+    if minimum is not None and value < minimum:
+        out.add(path, f'{value} is negative' if minimum == 0.0 else f'{value} is below {minimum}')
+        return None
+    return float(value)
+
+
+def _bool(value: object, path: PathKey, out: _Collector) -> bool:
+    if isinstance(value, bool):
+        return value
+    out.add(path, f'{value!r} is not true or false')
+    return False
+
+
+def _seed(value: object, path: PathKey, out: _Collector) -> int | None:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= SEED_MAX:
+        out.add(path, f'{value!r} is not an integer seed from 0 to {SEED_MAX}')
+        return None
+    return value
+
+
+def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | None:
+    from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
+
+    if not isinstance(node, dict):
+        out.add(path, 'an injector must be a mapping')
+        return None
+    injector_id = _text(node, 'id', path, out)
+    injector_type = _text(node, 'type', path, out)
+    spec = InjectorSpec(id=injector_id or '', type=injector_type or '', path=path)
+    cls = get_injector_type(spec.type) if injector_type else None
+    option_keys = {f.key for f in cls.options} if cls else set()
+
+    for key in node:
+        if key not in INJECTOR_KEYS and key not in option_keys:
+            if cls is None and injector_type:
+                continue  # unknown type: its keys cannot be judged; the type itself is reported
+            known = sorted(INJECTOR_KEYS | option_keys)
+            out.add((*path, key), f'unknown injector key {key!r} (known: {", ".join(known)})')
+        elif key in option_keys:
+            spec.options[key] = node[key]
+
+    if 'seed' in node:
+        spec.seed = _seed(node['seed'], (*path, 'seed'), out)
+
+    service_node, service_path = node, path
+    if 'trigger_service' in node:
+        service_node, service_path = node['trigger_service'], (*path, 'trigger_service')
+        if not isinstance(service_node, dict):
+            out.add(service_path, 'must be a mapping with proxy_service and target_service')
+            return spec
+    is_service = 'trigger_service' in node or any(k in node for k in SERVICE_KEYS) or spec.type == 'trigger_service'
+    if is_service:
+        spec.proxy_service = _text(service_node, 'proxy_service', service_path, out) or ''
+        spec.target_service = _text(service_node, 'target_service', service_path, out) or ''
+        return spec
+
+    endpoint, endpoint_path = node, path
+    if 'topic' in node:
+        endpoint, endpoint_path = node['topic'], (*path, 'topic')
+        if not isinstance(endpoint, dict):
+            out.add(endpoint_path, 'must be a mapping with input_topic and output_topic')
+            return spec
+        for key in endpoint:
+            if key not in ENDPOINT_KEYS:
+                out.add((*endpoint_path, key), f'unknown topic key {key!r} (known: {", ".join(sorted(ENDPOINT_KEYS))})')
+        for key in ENDPOINT_KEYS & set(node):
+            out.add((*path, key), f"{key!r} is given both here and inside 'topic'")
+    spec.input_topic = _topic(endpoint, 'input_topic', endpoint_path, out)
+    spec.output_topic = _topic(endpoint, 'output_topic', endpoint_path, out)
+    if 'qos_depth' in endpoint:
+        depth = endpoint['qos_depth']
+        if isinstance(depth, bool) or not isinstance(depth, int) or depth <= 0:
+            out.add((*endpoint_path, 'qos_depth'), f'{depth!r} is not a positive integer')
+        else:
+            spec.qos_depth = depth
+    return spec
+
+
+def _topic(node: dict[str, Any], key: str, path: PathKey, out: _Collector) -> str | None:
+    name = _text(node, key, path, out)
+    if name is not None and not name.startswith('/'):
+        name = '/' + name
+    return name
+
+
+def _fault(node: object, path: PathKey, out: _Collector, located: LocatedYaml) -> FaultSpec | None:
+    if not isinstance(node, dict):
+        out.add(path, 'a fault must be a mapping')
+        return None
+    fault = FaultSpec(id=_text(node, 'id', path, out) or '', injector_id=_text(node, 'injector_id', path, out) or '',
+                      path=path)
+    for key in node:
+        if key not in FAULT_KEYS:
+            out.add((*path, key), f'unknown fault key {key!r} (known: {", ".join(sorted(FAULT_KEYS))})')
+    if 'active_on_startup' in node:
+        fault.active_on_startup = _bool(node['active_on_startup'], (*path, 'active_on_startup'), out)
+    if 'active' in node:  # deprecated alias kept by the anchor
+        fault.active_on_startup = fault.active_on_startup or _bool(node['active'], (*path, 'active'), out)
+    for key in ('start', 'duration'):
+        if key in node and node[key] is not None:
+            setattr(fault, key, _number(node[key], (*path, key), out))
+    config = node.get('config', {})
+    if config is None:
+        config = {}
+    if not isinstance(config, dict):
+        out.add((*path, 'config'), 'must be a mapping of config keys')
+    else:
+        fault.config = dict(config)
+        fault.config_text = {str(k): located.raw_text((*path, 'config', k), v) for k, v in config.items()}
+    from bagfault.scenario.schedules import parse_extended_schedule  # noqa: PLC0415
+
+    parse_extended_schedule(fault, node, path, out)
+    return fault
+
+
+def _assertion(node: object, path: PathKey, out: _Collector) -> AssertionSpec | None:
+    if not isinstance(node, dict):
+        out.add(path, 'an assertion must be a mapping')
+        return None
+    spec = AssertionSpec(id=_text(node, 'id', path, out) or '', type=_text(node, 'type', path, out) or '', path=path)
+    if 'within' in node and node['within'] is not None:
+        spec.within = _number(node['within'], (*path, 'within'), out)
+    spec.params = {k: v for k, v in node.items() if k not in {'id', 'type', 'within'}}
+    return spec

@@ -1,0 +1,133 @@
+"""Scenario records: injectors, faults with their schedules, assertions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bagfault.scenario.yamlnodes import LocatedYaml, PathKey
+
+
+@dataclass
+class InjectorSpec:
+    """One injector: where it reads, where it writes, which type mutates.
+
+    Topic injectors have input_topic/output_topic; service injectors have
+    proxy_service/target_service. `options` holds type-specific injector
+    keys (for example `message_type` of generic injectors).
+    """
+
+    id: str
+    type: str
+    input_topic: str | None = None
+    output_topic: str | None = None
+    qos_depth: int = 10
+    proxy_service: str | None = None
+    target_service: str | None = None
+    seed: int | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+    path: PathKey = ()
+
+    @property
+    def is_service(self) -> bool:
+        """True for injectors that proxy a service instead of a topic."""
+        return self.proxy_service is not None or self.target_service is not None
+
+
+@dataclass
+class Repeat:
+    """Intermittent schedule: on for `on` seconds at the start of every `period`."""
+
+    period: float
+    on: float
+
+
+@dataclass
+class After:
+    """Chained schedule: activate `delay` seconds after fault `fault` activates."""
+
+    fault: str
+    delay: float
+
+
+@dataclass
+class FaultSpec:
+    """A named fault owned by one injector, with its config and schedule.
+
+    Times are seconds from bag time zero. A fault with neither
+    `active_on_startup` nor `start` (nor an extended schedule) is manual-only.
+    """
+
+    id: str
+    injector_id: str
+    config: dict[str, Any] = field(default_factory=dict)
+    config_text: dict[str, str] = field(default_factory=dict)
+    active_on_startup: bool = False
+    start: float | None = None
+    duration: float | None = None
+    repeat: Repeat | None = None
+    probability_per_second: float | None = None
+    hold: float | None = None
+    after: After | None = None
+    report: dict[str, Any] | None = None
+    path: PathKey = ()
+
+    @property
+    def manual_only(self) -> bool:
+        """True when nothing in the scenario ever activates the fault."""
+        return not (
+            self.active_on_startup
+            or self.start is not None
+            or self.repeat is not None
+            or self.probability_per_second is not None
+            or self.after is not None
+        )
+
+    def describe_config(self) -> str:
+        """The anchor's `config={k=v, ...}` text, keys sorted, values as written."""
+        items = sorted(self.config_text.items())
+        return 'config={' + ', '.join(f'{k}={v}' for k, v in items) + '}'
+
+
+@dataclass
+class AssertionSpec:
+    """An expected outcome; `params` holds the type-specific keys."""
+
+    id: str
+    type: str
+    within: float | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+    path: PathKey = ()
+
+
+@dataclass
+class Scenario:
+    """A loaded scenario file."""
+
+    injectors: list[InjectorSpec]
+    faults: list[FaultSpec]
+    assertions: list[AssertionSpec]
+    seed: int | None = None
+    fault_manager: dict[str, Any] | None = None
+    warnings: list[str] = field(default_factory=list)
+    source: Path | None = None
+    text: str = ''
+    located: LocatedYaml = field(default_factory=lambda: LocatedYaml(None))
+
+    @property
+    def name(self) -> str:
+        """File name, or '<scenario>' for one built in memory."""
+        return self.source.name if self.source else '<scenario>'
+
+    def injector(self, injector_id: str) -> InjectorSpec | None:
+        """Injector with this id, if any."""
+        return next((x for x in self.injectors if x.id == injector_id), None)
+
+    def fault(self, fault_id: str) -> FaultSpec | None:
+        """Fault with this id, if any."""
+        return next((x for x in self.faults if x.id == fault_id), None)
+
+    def faults_of(self, injector_id: str) -> list[FaultSpec]:
+        """Faults owned by one injector, in file order."""
+        return [x for x in self.faults if x.injector_id == injector_id]

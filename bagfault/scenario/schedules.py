@@ -1,0 +1,67 @@
+"""Extended schedule keys: `repeat`, `probability_per_second` with `hold`, `after`.
+
+`start` and `duration` bound the window in which `repeat` and
+`probability_per_second` act (default: the whole bag). `after` activates a
+fault `delay` seconds after another one activates; it lasts `duration`
+seconds, or until `delay` seconds after the trigger deactivates.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from bagfault.scenario.model import After, FaultSpec, Repeat
+
+if TYPE_CHECKING:
+    from bagfault.scenario.loader import _Collector
+    from bagfault.scenario.yamlnodes import PathKey
+
+
+def _seconds(value: object, path: PathKey, out: _Collector, *, positive: bool) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:  # noqa: PLR0124
+        out.add(path, f'{value!r} is not a number of seconds')
+        return None
+    if value < 0 or (positive and value == 0):
+        out.add(path, f'{value} must be {"greater than 0" if positive else "0 or more"}')
+        return None
+    return float(value)
+
+
+def parse_extended_schedule(fault: FaultSpec, node: dict[str, Any], path: PathKey, out: _Collector) -> None:
+    """Fill fault.repeat / probability_per_second / hold / after from the fault's mapping."""
+    if 'repeat' in node:
+        value, where = node['repeat'], (*path, 'repeat')
+        if not isinstance(value, dict) or set(value) != {'period', 'on'}:
+            out.add(where, 'must be a mapping {period: S, on: S}')
+        else:
+            period = _seconds(value['period'], (*where, 'period'), out, positive=True)
+            on = _seconds(value['on'], (*where, 'on'), out, positive=True)
+            if period is not None and on is not None:
+                if on > period:
+                    out.add((*where, 'on'), f'{on} is longer than the period {period}')
+                else:
+                    fault.repeat = Repeat(period=period, on=on)
+    if 'probability_per_second' in node:
+        where = (*path, 'probability_per_second')
+        rate = _seconds(node['probability_per_second'], where, out, positive=True)
+        if rate is not None:
+            fault.probability_per_second = rate
+        if 'hold' not in node:
+            out.add(where, "needs 'hold': how long each random activation lasts, in seconds")
+    if 'hold' in node:
+        fault.hold = _seconds(node['hold'], (*path, 'hold'), out, positive=True)
+        if 'probability_per_second' not in node:
+            out.add((*path, 'hold'), "only makes sense with 'probability_per_second'")
+    if 'after' in node:
+        value, where = node['after'], (*path, 'after')
+        if not isinstance(value, dict) or 'fault' not in value or not set(value) <= {'fault', 'delay'}:
+            out.add(where, 'must be a mapping {fault: ID, delay: S}')
+        else:
+            delay = _seconds(value.get('delay', 0.0), (*where, 'delay'), out, positive=False)
+            if delay is not None:
+                fault.after = After(fault=str(value['fault']), delay=delay)
+    kinds = [k for k in ('repeat', 'probability_per_second', 'after') if node.get(k) is not None]
+    if len(kinds) > 1:
+        out.add(path, f'choose one schedule: {" and ".join(kinds)} cannot be combined')
+    if 'after' in kinds and (node.get('start') is not None or node.get('active_on_startup')):
+        out.add((*path, 'after'), "a chained fault starts from its trigger; drop 'start'/'active_on_startup'")

@@ -1,0 +1,178 @@
+"""Scenario checks against the injector and assertion schemas.
+
+Every problem is collected with its YAML location; config values are
+replaced by their coerced form (`'inf'` -> float('inf'), `"2"` -> 2) so the
+engine never parses text. Warnings follow the anchor: things it accepts but
+ignores (`start` with `active_on_startup`, `duration` without `start`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import TYPE_CHECKING, Any
+
+from bagfault.assertions.registry import ASSERTION_TYPES
+from bagfault.injectors.base import InjectorConfigError, ServiceInjector
+from bagfault.injectors.registry import get_injector_type, injector_types
+from bagfault.schema import ConfigField, FieldValueError
+
+if TYPE_CHECKING:
+    from bagfault.scenario.loader import _Collector
+    from bagfault.scenario.model import Scenario
+
+
+def validate_scenario(scenario: Scenario, out: _Collector) -> None:
+    """Check everything; append problems to `out`, warnings to scenario.warnings."""
+    scenario.warnings = []
+    _duplicates(scenario, out)
+    for injector in scenario.injectors:
+        _check_injector(injector, out)
+    _check_outputs(scenario, out)
+    for fault in scenario.faults:
+        _check_fault(scenario, fault, out)
+    _check_chains(scenario, out)
+    for assertion in scenario.assertions:
+        _check_assertion(scenario, assertion, out)
+
+
+def _duplicates(scenario: Scenario, out: _Collector) -> None:
+    for kind, items in (('injector', scenario.injectors), ('fault', scenario.faults),
+                        ('assertion', scenario.assertions)):
+        counts = Counter(x.id for x in items if x.id)
+        seen: set[str] = set()
+        for item in items:
+            if counts[item.id] > 1:
+                if item.id in seen:
+                    out.add((*item.path, 'id'), f'duplicate {kind} id {item.id!r}')
+                seen.add(item.id)
+
+
+def _coerce(field: ConfigField, value: Any, path: tuple[Any, ...], out: _Collector) -> Any:
+    try:
+        return field.coerce(value)
+    except FieldValueError as exc:
+        out.add(path, str(exc))
+        return None
+
+
+def _check_injector(injector: Any, out: _Collector) -> None:
+    if not injector.type:
+        return
+    cls = get_injector_type(injector.type)
+    if cls is None:
+        known = ', '.join(sorted(injector_types()))
+        out.add((*injector.path, 'type'), f'unknown injector type {injector.type!r} (known: {known})')
+        return
+    is_service_type = issubclass(cls, ServiceInjector)
+    if is_service_type and not injector.is_service:
+        out.add(injector.path, f'injector type {injector.type!r} proxies a service: give proxy_service and target_service')
+    if not is_service_type and injector.is_service:
+        out.add(injector.path, f'injector type {injector.type!r} proxies a topic: give input_topic and output_topic')
+    for field in cls.options:
+        if field.key in injector.options:
+            injector.options[field.key] = _coerce(field, injector.options[field.key], (*injector.path, field.key), out)
+        elif field.required:
+            out.add(injector.path, f'missing required key {field.key!r} for injector type {injector.type!r}')
+    try:
+        cls.check_options(injector.options)
+    except InjectorConfigError as exc:
+        out.add(injector.path, str(exc))
+
+
+def _check_outputs(scenario: Scenario, out: _Collector) -> None:
+    writers: dict[str, str] = {}
+    for injector in scenario.injectors:
+        if not injector.output_topic:
+            continue
+        if injector.output_topic in writers:
+            out.add((*injector.path, 'output_topic'),
+                    f'output topic {injector.output_topic} is already written by injector {writers[injector.output_topic]!r}')
+        writers[injector.output_topic] = injector.id
+
+
+def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
+    if fault.active_on_startup and fault.start is not None:
+        scenario.warnings.append(f'fault {fault.id!r} has active_on_startup and start; start is ignored')
+    if (not fault.active_on_startup and fault.duration is not None and fault.start is None
+            and fault.after is None and fault.repeat is None and fault.probability_per_second is None):
+        scenario.warnings.append(f'fault {fault.id!r} has duration but no start; duration is ignored')
+    if not fault.injector_id:
+        return
+    injector = scenario.injector(fault.injector_id)
+    if injector is None:
+        known = ', '.join(x.id for x in scenario.injectors) or 'none'
+        out.add((*fault.path, 'injector_id'), f'unknown injector {fault.injector_id!r} (injectors: {known})')
+        return
+    cls = get_injector_type(injector.type)
+    if cls is None:
+        return
+    keys = [f.key for f in cls.fields]
+    for key, value in list(fault.config.items()):
+        path = (*fault.path, 'config', key)
+        field = cls.field(str(key))
+        if field is None:
+            hint = _closest(str(key), keys)
+            out.add(path, f'unknown key {key!r} for injector type {injector.type!r}'
+                          + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+            continue
+        fault.config[key] = _coerce(field, value, path, out)
+    for field in cls.fields:
+        if field.required and field.key not in fault.config:
+            out.add((*fault.path, 'config'), f'missing required key {field.key!r} for injector type {injector.type!r}')
+    if all(v is not None for v in fault.config.values()):
+        try:
+            cls.check_fault(fault.config, injector.options)
+        except InjectorConfigError as exc:
+            out.add((*fault.path, 'config'), str(exc))
+
+
+def _check_chains(scenario: Scenario, out: _Collector) -> None:
+    for fault in scenario.faults:
+        if fault.after is None:
+            continue
+        path = (*fault.path, 'after', 'fault')
+        if scenario.fault(fault.after.fault) is None:
+            out.add(path, f'unknown fault {fault.after.fault!r}')
+            continue
+        seen, probe = {fault.id}, scenario.fault(fault.after.fault)
+        while probe is not None and probe.after is not None:
+            if probe.id in seen:
+                out.add(path, f'chain of "after" faults loops back to {probe.id!r}')
+                break
+            seen.add(probe.id)
+            probe = scenario.fault(probe.after.fault)
+        if probe is not None and probe.id == fault.id:
+            out.add(path, 'a fault cannot be chained after itself')
+
+
+def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> None:
+    if not assertion.type:
+        return
+    cls = ASSERTION_TYPES.get(assertion.type)
+    if cls is None:
+        known = ', '.join(sorted(ASSERTION_TYPES))
+        out.add((*assertion.path, 'type'), f'unknown assertion type {assertion.type!r} (known: {known})')
+        return
+    keys = [f.key for f in cls.fields]
+    for key, value in list(assertion.params.items()):
+        field = cls.field(str(key))
+        path = (*assertion.path, key)
+        if field is None:
+            hint = _closest(str(key), keys)
+            out.add(path, f'unknown key {key!r} for assertion type {assertion.type!r}'
+                          + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+            continue
+        assertion.params[key] = _coerce(field, value, path, out)
+    for field in cls.fields:
+        if field.required and field.key not in assertion.params:
+            out.add(assertion.path, f'missing required key {field.key!r} for assertion type {assertion.type!r}')
+    if all(v is not None for v in assertion.params.values()):
+        for key, message in cls.check(assertion, scenario):
+            out.add((*assertion.path, key) if key else assertion.path, message)
+
+
+def _closest(word: str, candidates: list[str]) -> str | None:
+    import difflib  # noqa: PLC0415
+
+    match = difflib.get_close_matches(word, candidates, n=1, cutoff=0.6)
+    return match[0] if match else None
