@@ -39,5 +39,5 @@ def fault_reference_problem(
     value: Any = spec.params.get(key)
     if value is None or scenario.fault(str(value)) is not None:
         return []
-    known = ', '.join(f.id for f in scenario.faults) or 'none'
+    known = ', '.join(dict.fromkeys(f.id for f in scenario.faults)) or 'none'
     return [(key, f'unknown fault {value!r} (faults: {known})')]

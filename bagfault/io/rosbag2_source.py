@@ -118,20 +118,26 @@ class Rosbag2Source:
     def _merge_channels(self) -> None:
         """One channel per (topic, type, encoding) across files, first definition wins."""
         index: dict[tuple[str, str, str], int] = {}
-        qos = {
-            t['topic_metadata']['name']: t['topic_metadata'].get('offered_qos_profiles', '')
-            for t in self.metadata.get('topics_with_message_count', [])
-            if isinstance(t, dict) and 'topic_metadata' in t
-        }
+        declared = [
+            t['topic_metadata'] for t in self.metadata.get('topics_with_message_count', [])
+            if isinstance(t, dict) and isinstance(t.get('topic_metadata'), dict)
+        ]
+        qos = {t.get('name'): t.get('offered_qos_profiles', '') for t in declared}
+        # A format declared in metadata.yaml counts even if the storage says cdr.
+        formats = {t.get('name'): t.get('serialization_format') for t in declared}
         for part in self._parts:
             mapping = []
             for channel in part.channels:
                 key = (channel.topic, channel.msgtype, channel.message_encoding)
                 if key not in index:
+                    metadata = channel.metadata
                     if not channel.qos and isinstance(qos.get(channel.topic), str) and qos[channel.topic]:
-                        channel = Channel(channel.topic, channel.msgtype, channel.schema_encoding,
-                                          channel.schema_text, channel.message_encoding,
-                                          (('offered_qos_profiles', qos[channel.topic]),))
+                        metadata = (('offered_qos_profiles', qos[channel.topic]),)
+                    encoding = formats.get(channel.topic) or channel.message_encoding
+                    if encoding != 'cdr':
+                        encoding = encoding if channel.message_encoding == 'cdr' else channel.message_encoding
+                    channel = Channel(channel.topic, channel.msgtype, channel.schema_encoding,
+                                      channel.schema_text, encoding, metadata)
                     index[key] = len(self.channels)
                     self.channels.append(channel)
                 elif channel.schema_text and not self.channels[index[key]].schema_text:
@@ -150,11 +156,7 @@ class Rosbag2Source:
             for channel, log_time, publish_time, data in self._parts[0].messages():
                 yield mapping[channel], log_time, publish_time, data
             return
-        streams = [
-            ((log_time, number, mapping[channel], publish_time, data)
-             for channel, log_time, publish_time, data in part.messages())
-            for number, (part, mapping) in enumerate(zip(self._parts, self._maps))
-        ]
+        streams = [_keyed(part, number, mapping) for number, (part, mapping) in enumerate(zip(self._parts, self._maps))]
         for log_time, _, channel, publish_time, data in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
             yield channel, log_time, publish_time, data
 
@@ -166,3 +168,9 @@ class Rosbag2Source:
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
+
+
+def _keyed(source: Any, number: int, mapping: list[int]) -> Iterator[tuple[int, int, int, int, Any]]:
+    """Messages of one part as (log_time, part number, channel, publish_time, data) for merging."""
+    for channel, log_time, publish_time, data in source.messages():
+        yield log_time, number, mapping[channel], publish_time, data

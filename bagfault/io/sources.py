@@ -6,7 +6,7 @@ import hashlib
 import heapq
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from bagfault.io import InputError
 from bagfault.io.channel import Channel
@@ -128,11 +128,7 @@ class InputSet:
             for channel, log_time, publish_time, data in self.sources[0].messages():
                 yield mapping[channel], log_time, publish_time, data
             return
-        streams = [
-            ((log_time, number, mapping[channel], publish_time, data)
-             for channel, log_time, publish_time, data in source.messages())
-            for number, (source, mapping) in enumerate(zip(self.sources, self._maps))
-        ]
+        streams = [_keyed(source, number, mapping) for number, (source, mapping) in enumerate(zip(self.sources, self._maps))]
         for log_time, _, channel, publish_time, data in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
             yield channel, log_time, publish_time, data
 
@@ -148,3 +144,9 @@ class InputSet:
         for source in self.sources:
             source.close()
         self.sources = []
+
+
+def _keyed(source: Any, number: int, mapping: list[int]) -> Iterator[tuple[int, int, int, int, Any]]:
+    """Messages of one part as (log_time, part number, channel, publish_time, data) for merging."""
+    for channel, log_time, publish_time, data in source.messages():
+        yield log_time, number, mapping[channel], publish_time, data

@@ -76,8 +76,13 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
     if validate:
         validate_scenario(scenario, out)
     if out.problems:
-        raise ScenarioError(out.problems)
+        raise ScenarioError(sorted(out.problems, key=_position))
     return scenario
+
+
+def _position(problem: Any) -> tuple[int, int]:
+    line, _, col = problem.where.partition(':')
+    return int(line), int(col or 0)
 
 
 def _build(located: LocatedYaml, out: _Collector) -> Scenario:

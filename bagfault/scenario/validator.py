@@ -100,7 +100,7 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
         return
     injector = scenario.injector(fault.injector_id)
     if injector is None:
-        known = ', '.join(x.id for x in scenario.injectors) or 'none'
+        known = ', '.join(dict.fromkeys(x.id for x in scenario.injectors)) or 'none'
         out.add((*fault.path, 'injector_id'), f'unknown injector {fault.injector_id!r} (injectors: {known})')
         return
     cls = get_injector_type(injector.type)

@@ -73,12 +73,11 @@ def _convert(node: yaml.Node, path: PathKey, out: LocatedYaml, ctor: yaml.SafeLo
     if isinstance(node, yaml.MappingNode):
         mapping: dict[Any, Any] = {}
         for key_node, value_node in node.value:
-            key = ctor.construct_object(key_node, deep=True)
-            if not isinstance(key, (str, int, float, bool)):
-                key = str(key)
-            if isinstance(key, str) and key == '<<':
+            # Keys stay as written: YAML 1.1 would turn `on:` (repeat: {period, on}) into True.
+            key = key_node.value if isinstance(key_node, yaml.ScalarNode) else str(ctor.construct_object(key_node))
+            if key == '<<':
                 continue
-            mapping[key] = _convert(value_node, (*path, str(key)), out, ctor)
+            mapping[key] = _convert(value_node, (*path, key), out, ctor)
         return mapping
     if isinstance(node, yaml.SequenceNode):
         return [_convert(item, (*path, i), out, ctor) for i, item in enumerate(node.value)]

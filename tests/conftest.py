@@ -1,0 +1,43 @@
+"""Shared fixtures: paths of generated and third-party bags, output readers."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from helpers import ANCHORS, EXTERNAL, FIXTURES  # noqa: E402
+
+
+def need(path: Path) -> Path:
+    """Skip the test cleanly when a third-party folder is absent."""
+    if not path.exists():
+        pytest.skip(f'{path} not present')
+    return path
+
+
+@pytest.fixture
+def rover_bag() -> Path:
+    """20 s MCAP with the multi-injector scenario's raw topics."""
+    return FIXTURES / 'rover_20s.mcap'
+
+
+@pytest.fixture
+def rover_sqlite() -> Path:
+    """3 s rosbag2 sqlite3 directory with the same streams."""
+    return FIXTURES / 'rover_3s_sqlite3'
+
+
+@pytest.fixture(scope='session')
+def anchors() -> Path:
+    """Folder of the anchor's scenario files."""
+    return need(ANCHORS)
+
+
+@pytest.fixture(scope='session')
+def external() -> Path:
+    """Folder of third-party bags."""
+    return need(EXTERNAL)

@@ -1,0 +1,75 @@
+"""Independent readers of output files: the mcap library and rosbags, never bagfault."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Any
+
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+NS = 1_000_000_000
+ROOT = Path(__file__).resolve().parent.parent
+FIXTURES = ROOT / 'tests' / 'fixtures'
+SHARED = Path(os.environ.get('BAGFAULT_SHARED', ROOT.parent / 'shared'))
+EXTERNAL = SHARED / 'external_bags'
+ANCHORS = SHARED / 'anchor_scenarios'
+CARET = SHARED / 'caret_samples'
+
+
+def counts(path: Path) -> Counter[str]:
+    """Messages per topic, read with the mcap library."""
+    with path.open('rb') as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        return Counter({summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()})
+
+
+def raw_messages(path: Path) -> dict[str, list[tuple[int, int, bytes]]]:
+    """topic -> [(log_time, publish_time, data)] in log-time order, with the mcap library."""
+    out: dict[str, list[tuple[int, int, bytes]]] = defaultdict(list)
+    with path.open('rb') as stream:
+        for _, channel, message in make_reader(stream).iter_messages(log_time_order=True):
+            out[channel.topic].append((message.log_time, message.publish_time, message.data))
+    return dict(out)
+
+
+def decoded(path: Path, topics: list[str] | None = None) -> dict[str, list[tuple[int, Any]]]:
+    """topic -> [(log_time, message)] decoded by rosbags from the definitions in the file.
+
+    Channels whose schema is empty (a type nobody could decode) give raw bytes.
+    """
+    out: dict[str, list[tuple[int, Any]]] = defaultdict(list)
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        connections = [c for c in reader.connections if topics is None or c.topic in topics]
+        for connection, time, raw in reader.messages(connections=connections):
+            opaque = path.suffix == '.mcap' and not connection.msgdef.data
+            out[connection.topic].append((time, bytes(raw) if opaque else reader.deserialize(raw, connection.msgtype)))
+    return dict(out)
+
+
+def rosbags_counts(path: Path) -> Counter[str]:
+    """Messages per topic as rosbags' AnyReader sees them (no decoding)."""
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        return Counter(connection.topic for connection, _, _ in reader.messages())
+
+
+def sha256(path: Path) -> str:
+    """Digest of a file."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def tree_digest(path: Path) -> str:
+    """Digest of a file or of every file below a folder (to prove inputs are untouched)."""
+    digest = hashlib.sha256()
+    files = sorted(p for p in path.rglob('*') if p.is_file()) if path.is_dir() else [path]
+    for file in files:
+        digest.update(file.name.encode())
+        digest.update(file.read_bytes())
+        digest.update(str(file.stat().st_mtime_ns).encode())
+    return digest.hexdigest()

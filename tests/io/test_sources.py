@@ -1,0 +1,165 @@
+"""Inputs written by other tools: every storage, metadata version, compression and quirk."""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from helpers import EXTERNAL
+from io_cases import ROSBAG2_DIRS, metadata_counts
+
+from bagfault.io import InputError
+from bagfault.io.sources import InputSet, open_source
+
+def read_all(path: Path) -> tuple[Counter[str], list[int]]:
+    source = open_source(path)
+    try:
+        topics = Counter()
+        times = []
+        for channel, log_time, _, _ in source.messages():
+            topics[source.channels[channel].topic] += 1
+            times.append(log_time)
+        return topics, times
+    finally:
+        source.close()
+
+
+@pytest.mark.parametrize('relative', ROSBAG2_DIRS)
+def test_rosbag2_directory_counts_match_metadata(external, relative):
+    path = external / relative
+    topics, times = read_all(path)
+    assert topics == metadata_counts(path)
+    assert times == sorted(times)
+
+
+@pytest.mark.parametrize(('relative', 'total'), [
+    ('rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/file_compression', 775),
+    ('rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/message_compression', 1127),
+    ('rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/multiple_files', 52),
+])
+def test_directories_without_metadata_read_all_storage_files(external, relative, total):
+    target = external / 'rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/target_metadata' / Path(relative).name
+    topics, times = read_all(external / relative)
+    assert sum(topics.values()) == total
+    assert topics == metadata_counts(target)
+    assert times == sorted(times)
+
+
+@pytest.mark.parametrize(('relative', 'expected'), [
+    ('rosbag2/rosbag2_cpp/test/rosbag2_cpp/bags/only_topics.mcap', {'/parameter_events': 7}),
+    ('rosbag2/rosbag2_cpp/test/rosbag2_cpp/bags/only_services.mcap', {'/add_two_ints/_service_event': 12}),
+    ('rosbag2/rosbag2_cpp/test/rosbag2_cpp/bags/topics_and_services.db3',
+     {'/parameter_events': 7, '/add_two_ints/_service_event': 6}),
+    ('rosbag2/rosbag2_cpp/test/rosbag2_cpp/bags/topics_and_services.mcap',
+     {'/parameter_events': 7, '/add_two_ints/_service_event': 6}),
+    ('mcap/testdata/db3/chatter.db3', {'/chatter': 7}),
+    ('evo/test/data/nav2_turtlebot.mcap', {'/odom': 2639, '/tf': 5422, '/tf_static': 1, '/amcl_pose': 135}),
+])
+def test_bare_storage_files(external, relative, expected):
+    topics, _ = read_all(external / relative)
+    assert topics == Counter(expected)
+
+
+def test_split_bag_topics_keep_their_names_across_files(external):
+    """Each file of a split bag numbers its topics differently; merged counts still match."""
+    topics, _ = read_all(external / 'rosbag2/rosbag2_py/test/resources/mcap/wbag')
+    assert topics == metadata_counts(external / 'rosbag2/rosbag2_py/test/resources/mcap/wbag')
+
+
+def test_humble_bag_without_definitions_reports_its_distro(external):
+    source = open_source(external / 'Turtlebot_Walker_Algorithm_ROS2/walker_bag_topics_list')
+    try:
+        assert source.ros_distro == 'humble'
+        assert all(not c.schema_text for c in source.channels)
+        imu = next(c for c in source.channels if c.topic == '/imu')
+        assert imu.msgtype == 'sensor_msgs/msg/Imu' and 'reliability' in imu.qos
+    finally:
+        source.close()
+
+
+def test_old_type_names_are_normalized(external):
+    source = open_source(external / 'rosbag2/rosbag2_transport/test/resources/sqlite3/test_bag_for_seek')
+    try:
+        assert {c.msgtype for c in source.channels} == {'test_msgs/msg/BasicTypes'}
+    finally:
+        source.close()
+
+
+CONFORMANCE = sorted((EXTERNAL / 'mcap/tests/conformance/data').glob('*/*.mcap'))
+
+
+@pytest.mark.parametrize('path', CONFORMANCE, ids=lambda p: p.name)
+def test_mcap_conformance_inputs(path):
+    expected = {'NoData': 0, 'OneMessage': 1, 'TenMessages': 10, 'OneAttachment': 0, 'OneMetadata': 0}
+    topics, times = read_all(path)
+    assert sum(topics.values()) == expected[path.parent.name]
+    assert times == sorted(times)
+    if topics:
+        assert set(topics) == {'example'}
+
+
+def test_multiple_inputs_merge_in_time_order(external):
+    bags = [external / 'rosbag2/rosbag2_py/test/resources/sqlite3/talker',
+            external / 'rosbag2/rosbag2_py/test/resources/mcap/talker']
+    inputs = InputSet(bags)
+    try:
+        times = [t for _, t, _, _ in inputs.messages()]
+        assert len(times) == 40 and times == sorted(times)
+        assert sorted(c.topic for c in inputs.channels) == ['/parameter_events', '/rosout', '/topic']
+    finally:
+        inputs.close()
+
+
+def _file(name: str, data: bytes):
+    def make(directory: Path) -> Path:
+        (directory / name).write_bytes(data)
+        return directory / name
+    return make
+
+
+def _folder(directory: Path) -> Path:
+    (directory / 'dir').mkdir()
+    return directory / 'dir'
+
+
+@pytest.mark.parametrize(('make', 'message'), [
+    (lambda d: d / 'missing.mcap', 'no such file or directory'),
+    (_file('empty.mcap', b''), 'file is empty'),
+    (_file('junk.db3', b'hello world, not a bag' * 10), 'not a bag'),
+    (_file('junk.mcap', b'\x89MCAP0\r\n' + bytes(10)), 'truncated'),
+    (_folder, 'no metadata.yaml and no .db3 or .mcap files'),
+])
+def test_bad_inputs_are_clear_errors(tmp_path, make, message):
+    path = make(tmp_path)
+    with pytest.raises(InputError, match=message) as info:
+        open_source(path)
+    assert str(path) in str(info.value)
+
+
+def test_truncated_and_corrupt_mcap(tmp_path, rover_bag):
+    data = rover_bag.read_bytes()
+    truncated = tmp_path / 'truncated.mcap'
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match='truncated'):
+        open_source(truncated)
+    corrupt = tmp_path / 'corrupt.mcap'
+    corrupt.write_bytes(data[:2000] + bytes(5000) + data[7000:])
+    with pytest.raises(InputError, match='corrupt'):
+        source = open_source(corrupt)
+        for _ in source.messages():
+            pass
+
+
+def test_metadata_listing_missing_files(tmp_path, rover_sqlite):
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    (bag / 'metadata.yaml').write_text((rover_sqlite / 'metadata.yaml').read_text())
+    with pytest.raises(InputError, match='files listed in metadata.yaml are missing'):
+        open_source(bag)
+
+
+def test_empty_file_bag_from_rosbag_js(external):
+    with pytest.raises(InputError, match='file is empty'):
+        open_source(external / 'rosbag.js/fixtures/empty-file.bag')

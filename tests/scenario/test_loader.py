@@ -1,0 +1,229 @@
+"""Scenario loading: the anchor's three layouts, meaning of schedules, every validation problem."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+
+import pytest
+
+from bagfault.scenario import ScenarioError, load_scenario, parse_scenario
+
+ANCHOR_FILES = [
+    'imu_faults.yaml',
+    'motor_feedback_faults.yaml',
+    'multi_injector_faults.yaml',
+    'odom_faults.yaml',
+    'scan_faults.yaml',
+    'service_integration_faults.yaml',
+    'tf_faults.yaml',
+    'trigger_service_faults.yaml',
+]
+
+
+@pytest.mark.parametrize('name', ANCHOR_FILES)
+def test_every_anchor_scenario_loads(anchors, name):
+    scenario = load_scenario(anchors / name)
+    assert scenario.injectors and scenario.faults
+    ids = [f.id for f in scenario.faults]
+    assert len(ids) == len(set(ids))
+
+
+def test_battery_scenario_names_the_unknown_type(anchors):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(anchors / 'battery_faults.yaml')
+    problems = info.value.problems
+    assert len(problems) == 1
+    assert "unknown injector type 'battery_state'" in problems[0].message
+    assert problems[0].path == 'injectors[0].type'
+    assert problems[0].where == '3:11'
+
+
+def test_nested_topic_layout(anchors):
+    scenario = load_scenario(anchors / 'service_integration_faults.yaml')
+    odom = scenario.injector('odom')
+    assert (odom.input_topic, odom.output_topic, odom.qos_depth) == ('/test/odom_raw', '/test/odom', 10)
+    assert scenario.faults[0].config == {'x_bias': 1.0, 'drop_probability': 0.0}
+
+
+def test_flat_list_layout_and_schedules(anchors):
+    scenario = load_scenario(anchors / 'multi_injector_faults.yaml')
+    assert [i.id for i in scenario.injectors] == ['odom', 'scan', 'motor_feedback', 'imu', 'enable_motors', 'tf_odom_base']
+    tf = scenario.injector('tf_odom_base')
+    assert (tf.input_topic, tf.output_topic, tf.qos_depth) == ('/tf_raw', '/tf', 50)
+    service = scenario.injector('enable_motors')
+    assert (service.proxy_service, service.target_service) == ('/enable_motors', '/enable_motors_raw')
+    bias = scenario.fault('odom_position_bias')
+    assert (bias.start, bias.duration, bias.active_on_startup, bias.manual_only) == (5.0, 10.0, False, False)
+    noise = scenario.fault('odom_position_noise')
+    assert noise.manual_only
+    blind = scenario.fault('scan_front_blind')
+    assert blind.config['sector_value'] == math.inf
+    assert blind.config_text['sector_value'] == 'inf'
+    failure = scenario.fault('enable_motors_forced_failure')
+    assert failure.config == {'force_failure': True, 'failure_message': 'Injected scheduled service failure'}
+    assert [a.id for a in scenario.assertions][:2] == ['odom_yaw_bias_activates', 'odom_yaw_bias_deactivates']
+    assert scenario.assertions[0].within == 6.0
+
+
+def test_single_injector_layout(anchors):
+    scenario = load_scenario(anchors / 'scan_faults.yaml')
+    assert len(scenario.injectors) == 1
+    assert scenario.fault('scan_range_noise').active_on_startup
+    assert scenario.fault('scan_delay').config == {'delay_ms': 250}
+
+
+def test_deprecated_active_alias_means_active_on_startup():
+    scenario = parse_scenario(textwrap.dedent("""
+        injector: {id: imu, type: imu, input_topic: /a, output_topic: /b}
+        faults:
+          - {id: f, injector_id: imu, active: true, config: {angular_velocity_z_bias: 1.0}}
+    """))
+    assert scenario.fault('f').active_on_startup
+
+
+def test_anchor_warnings_are_not_errors():
+    scenario = parse_scenario(textwrap.dedent("""
+        injector: {id: imu, type: imu, input_topic: /a, output_topic: /b}
+        faults:
+          - {id: f, injector_id: imu, active_on_startup: true, start: 3, config: {}}
+          - {id: g, injector_id: imu, duration: 3, config: {}}
+    """))
+    assert scenario.warnings == [
+        "fault 'f' has active_on_startup and start; start is ignored",
+        "fault 'g' has duration but no start; duration is ignored",
+    ]
+
+
+BAD = textwrap.dedent("""\
+    injectors:
+      - id: odom
+        type: odom
+        input_topic: /odom_raw
+        output_topic: /odom
+      - id: odom
+        type: lidar3d
+        input_topic: /x
+        output_topic: /y
+    faults:
+      - id: a
+        injector_id: odom
+        config:
+          drop_probability: 1.5
+      - id: a
+        injector_id: odom
+        start: -1.0
+        config:
+          x_bias: fast
+          bogus_key: 1
+      - id: c
+        injector_id: nowhere
+        duration: -2
+    assertions:
+      - id: late
+        type: fault_event
+        fault_id: ghost
+        state: active
+""")
+
+
+def test_validation_reports_every_problem_with_its_location():
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(BAD)
+    found = {(p.path, p.message) for p in info.value.problems}
+    where = {p.path: p.where for p in info.value.problems}
+    assert ('faults[1].start', '-1.0 is negative') in found
+    assert ('faults[2].duration', '-2 is negative') in found
+    assert ('injectors[1].id', "duplicate injector id 'odom'") in found
+    assert ('faults[1].id', "duplicate fault id 'a'") in found
+    assert any(p == 'injectors[1].type' and "unknown injector type 'lidar3d'" in m for p, m in found)
+    assert ('faults[0].config.drop_probability', '1.5 is above the maximum 1.0') in found
+    assert ('faults[1].config.x_bias', "'fast' is not a number") in found
+    assert any(p == 'faults[1].config.bogus_key' and "unknown key 'bogus_key' for injector type 'odom'" in m
+               for p, m in found)
+    assert any(p == 'faults[2].injector_id' and "unknown injector 'nowhere'" in m for p, m in found)
+    assert any(p == 'assertions[0].fault_id' and "unknown fault 'ghost'" in m for p, m in found)
+    assert where['faults[0].config.drop_probability'] == '14:25'
+    assert len(info.value.problems) == 10
+    text = str(info.value)
+    assert 'faults[0].config.drop_probability: 1.5 is above the maximum 1.0' in text
+
+
+def test_misspelled_key_gets_a_suggestion():
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(textwrap.dedent("""
+            injector: {id: imu, type: imu, input_topic: /a, output_topic: /b}
+            faults:
+              - {id: f, injector_id: imu, config: {angular_velocity_z_bais: 1.0}}
+        """))
+    assert "did you mean 'angular_velocity_z_bias'" in str(info.value)
+
+
+def test_required_and_cross_field_checks():
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(textwrap.dedent("""
+            injectors:
+              - {id: tf, type: tf, input_topic: /tf_raw, output_topic: /tf}
+              - {id: scan, type: scan, input_topic: /s, output_topic: /t}
+            faults:
+              - {id: f, injector_id: tf, config: {x_bias: 1.0}}
+              - {id: g, injector_id: scan, config: {sector_min_deg: 10}}
+        """))
+    messages = [p.message for p in info.value.problems]
+    assert "missing required key 'parent_frame' for injector type 'tf'" in messages
+    assert "missing required key 'child_frame' for injector type 'tf'" in messages
+    assert 'sector_min_deg needs sector_max_deg as well' in messages
+
+
+def test_wrong_types_and_structure():
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(textwrap.dedent("""
+            injector: {id: imu, type: imu, input_topic: /a, output_topic: /b, qos_depth: 0}
+            faults:
+              - {id: f, injector_id: imu, active_on_startup: maybe, config: {delay_ms: 2.5}}
+            asertions: []
+        """))
+    found = {(p.path, p.message) for p in info.value.problems}
+    assert ('injector.qos_depth', '0 is not a positive integer') in found
+    assert ('faults[0].active_on_startup', "'maybe' is not true or false") in found
+    assert ('faults[0].config.delay_ms', '2.5 is not an integer') in found
+    assert any(p == 'asertions' and 'unknown top-level key' in m for p, m in found)
+
+
+def test_yaml_syntax_error_has_a_location():
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario('injectors:\n  - id: [unclosed\n')
+    assert info.value.problems[0].where.startswith('3:') or info.value.problems[0].where.startswith('2:')
+    assert 'invalid YAML' in info.value.problems[0].message
+
+
+def test_missing_file_is_one_clear_problem(tmp_path):
+    with pytest.raises(ScenarioError, match='scenario file not found'):
+        load_scenario(tmp_path / 'nope.yaml')
+
+
+def test_extended_schedules_parse_and_validate():
+    scenario = parse_scenario(textwrap.dedent("""
+        injector: {id: imu, type: imu, input_topic: /a, output_topic: /b}
+        faults:
+          - {id: r, injector_id: imu, repeat: {period: 2.0, on: 0.5}, config: {}}
+          - {id: p, injector_id: imu, probability_per_second: 0.2, hold: 1.0, config: {}}
+          - {id: a, injector_id: imu, after: {fault: r, delay: 0.25}, duration: 1.0, config: {}}
+    """))
+    assert (scenario.fault('r').repeat.period, scenario.fault('r').repeat.on) == (2.0, 0.5)
+    assert (scenario.fault('p').probability_per_second, scenario.fault('p').hold) == (0.2, 1.0)
+    assert (scenario.fault('a').after.fault, scenario.fault('a').after.delay) == ('r', 0.25)
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(textwrap.dedent("""
+            injector: {id: imu, type: imu, input_topic: /a, output_topic: /b}
+            faults:
+              - {id: r, injector_id: imu, repeat: {period: 1.0, on: 2.0}, config: {}}
+              - {id: p, injector_id: imu, probability_per_second: 0.2, config: {}}
+              - {id: a, injector_id: imu, after: {fault: a}, config: {}}
+              - {id: b, injector_id: imu, after: {fault: ghost}, config: {}}
+        """))
+    messages = {(p.path, p.message) for p in info.value.problems}
+    assert ('faults[0].repeat.on', '2.0 is longer than the period 1.0') in messages
+    assert any(p == 'faults[1].probability_per_second' and "needs 'hold'" in m for p, m in messages)
+    assert ('faults[2].after.fault', 'a fault cannot be chained after itself') in messages
+    assert ('faults[3].after.fault', "unknown fault 'ghost'") in messages
