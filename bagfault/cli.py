@@ -40,6 +40,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument('--start', type=float, default=0.0, metavar='SECONDS',
                      help='bag time zero is this many seconds after the first message')
     run.add_argument('--compression', choices=['none', 'lz4', 'zstd'], default='zstd')
+    _report_options(run)
 
     validate = sub.add_parser('validate', help='check scenario files, report every problem')
     validate.add_argument('scenarios', type=Path, nargs='+', metavar='SCENARIO')
@@ -51,7 +52,32 @@ def _parser() -> argparse.ArgumentParser:
     info = sub.add_parser('info', help='what a bag holds')
     info.add_argument('inputs', type=Path, nargs='+', metavar='BAG')
 
+    demo = sub.add_parser('demo', help='run the embedded demo bag and scenario')
+    demo.add_argument('-o', '--output-dir', type=Path, default=Path('bagfault_demo'), metavar='DIR')
+
     return parser
+
+
+def _report_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--report', type=Path, metavar='R.md', help='markdown report')
+
+
+def _write_reports(args: argparse.Namespace, result: object) -> None:
+    from bagfault.report import model  # noqa: PLC0415
+    from bagfault.report import markdown  # noqa: PLC0415
+
+    report = model.build(result)  # type: ignore[arg-type]
+    if args.report:
+        _write_text(args.report, markdown.render(report))
+
+
+def _write_text(path: Path, text: str) -> None:
+    from bagfault.io import OutputError  # noqa: PLC0415
+
+    try:
+        path.write_text(text, encoding='utf-8')
+    except OSError as exc:
+        raise OutputError(f'{path}: cannot write report: {exc.strerror}') from None
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -68,7 +94,32 @@ def _cmd_run(args: argparse.Namespace) -> int:
         )
     finally:
         bar.close()
+    _write_reports(args, result)
     print_run_summary(result)
+    return EXIT_OK
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from bagfault import api, demo  # noqa: PLC0415
+    from bagfault.progress import ProgressBar  # noqa: PLC0415
+    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+
+    directory = args.output_dir
+    try:
+        bag, scenario = demo.prepare(directory)
+    except OSError as exc:
+        from bagfault.io import OutputError  # noqa: PLC0415
+
+        raise OutputError(f'{directory}: cannot write the demo files: {exc.strerror}') from None
+    bar = ProgressBar()
+    try:
+        result = api.run(scenario, [bag], directory / 'demo_output.mcap', progress=bar)
+    finally:
+        bar.close()
+    args.report = directory / 'demo_report.md'
+    _write_reports(args, result)
+    print_run_summary(result)
+    print(f'report    {args.report}')
     return EXIT_OK
 
 
@@ -103,6 +154,7 @@ COMMANDS = {
     'validate': _cmd_validate,
     'schema': _cmd_schema,
     'info': _cmd_info,
+    'demo': _cmd_demo,
 }
 
 

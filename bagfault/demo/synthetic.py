@@ -159,12 +159,30 @@ def tf_message(ts: Typestore, time: int, t: float) -> Any:
     return T['tf2_msgs/msg/TFMessage'](transforms=[odom_base, base_laser])
 
 
+def battery_values(t: float) -> tuple[float, float]:
+    """voltage (V) and percentage (0..1) at t seconds."""
+    return 12.6 - 0.01 * t, 0.9 - 0.001 * t
+
+
+def battery_state(ts: Typestore, time: int, t: float) -> Any:
+    """BatteryState of a slowly discharging pack."""
+    voltage, percentage = battery_values(t)
+    return ts.types['sensor_msgs/msg/BatteryState'](
+        header=_header(ts, time, 'battery'), voltage=voltage, temperature=25.0, current=-2.0, charge=math.nan,
+        capacity=math.nan, design_capacity=10.0, percentage=percentage, power_supply_status=2,
+        power_supply_health=1, power_supply_technology=3, present=True,
+        cell_voltage=np.full(3, voltage / 3, dtype=np.float32), cell_temperature=np.full(3, 25.0, dtype=np.float32),
+        location='base', serial_number='synthetic-1',
+    )
+
+
 BUILDERS = {
     'nav_msgs/msg/Odometry': odometry,
     'sensor_msgs/msg/LaserScan': laser_scan,
     'sensor_msgs/msg/JointState': joint_state,
     'sensor_msgs/msg/Imu': imu,
     'tf2_msgs/msg/TFMessage': tf_message,
+    'sensor_msgs/msg/BatteryState': battery_state,
 }
 
 ROVER_STREAMS = (
