@@ -8,6 +8,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from helpers import counts, tree_digest
@@ -54,7 +55,8 @@ def test_validate_ok_and_warnings(capsys, anchors):
     assert out.count(': ok (') == 8
 
 
-@pytest.mark.parametrize('case', ['missing', 'empty', 'truncated', 'same_as_input', 'no_dir', 'inside_input'])
+@pytest.mark.parametrize('case', ['missing', 'empty', 'truncated', 'same_as_input', 'no_dir', 'inside_input',
+                                  'unwritable'])
 def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, anchors, rover_bag, rover_sqlite, case):
     scenario = anchors / 'multi_injector_faults.yaml'
     bag = tmp_path / 'in.mcap'
@@ -70,6 +72,8 @@ def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, anchors, ro
         out = bag
     elif case == 'no_dir':
         out = tmp_path / 'missing_dir' / 'out.mcap'
+    elif case == 'unwritable':
+        out = Path('/proc/bagfault-test.mcap')
     elif case == 'inside_input':
         bag = tmp_path / 'sqlite_bag'
         shutil.copytree(rover_sqlite, bag)
@@ -81,7 +85,7 @@ def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, anchors, ro
     assert code == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('bagfault: error: ')
-    assert str(bag if case != 'no_dir' else out) in lines[0]
+    assert str(out if case in {'no_dir', 'unwritable'} else bag) in lines[0]
     assert 'Traceback' not in err
     assert sorted(os.listdir(tmp_path)) == listing
     if before is not None:

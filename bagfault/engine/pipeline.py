@@ -99,6 +99,7 @@ class RunStats:
     per_topic_out: dict[str, int] = field(default_factory=dict)
     events: list[FaultEvent] = field(default_factory=list)
     replaced_topics: list[str] = field(default_factory=list)
+    max_buffered: int = 0
 
 
 class Pipeline:
@@ -245,6 +246,8 @@ class Pipeline:
             is_sorted = False
         horizon = batch[stop - 1][1]
         self._emit(self._merge.release(records, horizon, is_sorted=is_sorted))
+        if len(self._merge) > self.stats.max_buffered:
+            self.stats.max_buffered = len(self._merge)
 
     def _emit(self, records: Any) -> None:
         write, observers, stats = self.sink.write, self.observers, self.stats
