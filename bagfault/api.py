@@ -13,10 +13,13 @@ from typing import TYPE_CHECKING
 
 from bagfault import __version__
 from bagfault.engine import EngineError
-from bagfault.engine.pipeline import Pipeline, RunStats
+from bagfault.assertions.base import AssertionResult
+from bagfault.assertions.runner import AssertionRunner
+from bagfault.engine.pipeline import Observer, Pipeline, RunStats
 from bagfault.engine.routing import build_routing
 from bagfault.engine.scheduler import Activation
 from bagfault.errors import BagfaultError
+from bagfault.events import DEFINITIONS, AssertionEvent, FaultEvent, ScenarioStatus
 from bagfault.io import OutputError
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.sources import InputSet, fingerprint
@@ -32,14 +35,22 @@ DEFAULT_SEED = 0
 
 @dataclass
 class RunResult:
-    """Everything a run produced besides the output file."""
+    """Everything a run (or a check) produced besides the output file."""
 
     scenario: Scenario
     inputs: list[Path]
-    output: Path
+    output: Path | None
     seed: int
     stats: RunStats
     notes: list[str] = field(default_factory=list)
+    assertions: list[AssertionResult] = field(default_factory=list)
+    assertion_events: list[AssertionEvent | ScenarioStatus] = field(default_factory=list)
+    mode: str = 'run'
+
+    @property
+    def failed(self) -> bool:
+        """True when an assertion failed: exit code 1."""
+        return any(r.state == 'failed' for r in self.assertions)
 
 
 def _scenario(scenario: Scenario | str | Path) -> Scenario:
@@ -98,8 +109,12 @@ def run(
     compression: str = 'zstd',
     batch: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    observers: Sequence[Observer] = (),
 ) -> RunResult:
-    """Inject the scenario's faults into the inputs and write the output MCAP."""
+    """Inject the scenario's faults into the inputs and write the output MCAP.
+
+    `observers` see every output record in time order (report collectors).
+    """
     loaded = _scenario(scenario)
     paths = [Path(p) for p in inputs]
     out = Path(output)
@@ -122,8 +137,13 @@ def run(
             pipeline = Pipeline(
                 input_set, loaded, sink, catalog, routing.routes, routing.copies,
                 seed=used_seed, activations=activations, start_offset=start_offset,
-                batch=batch, progress=progress,
+                batch=batch, progress=progress, observers=observers,
             )
+            runner = _runner(loaded, {**routing.output_types(), **EVENT_TOPICS}, catalog, pipeline.write_event)
+            if runner is not None:
+                pipeline.observers.append(runner)
+                for kind in (AssertionEvent, ScenarioStatus):
+                    pipeline.event_channel(kind)
             stats = pipeline.run()
             stats.replaced_topics = routing.replaced
             sink.finish()
@@ -135,7 +155,80 @@ def run(
     notes = list(loaded.warnings) + routing.notes
     if stats.input_messages == 0:
         notes.append('the input holds no messages; the output has channels only')
-    return RunResult(loaded, paths, out, used_seed, stats, notes)
+    result = RunResult(loaded, paths, out, used_seed, stats, notes)
+    if runner is not None:
+        result.assertions, result.assertion_events = runner.results, runner.events
+    return result
+
+
+EVENT_TOPICS = {kind.topic: kind.msgtype for kind in (FaultEvent, AssertionEvent, ScenarioStatus)}
+
+
+def _runner(scenario: Scenario, topics: dict[str, str], catalog: TypeCatalog, emit: Callable[..., None]
+            ) -> AssertionRunner | None:
+    if not scenario.assertions:
+        return None
+    for msgtype, text in DEFINITIONS.items():
+        catalog.add_definition(msgtype, text)
+    return AssertionRunner(scenario, topics, catalog, emit)
+
+
+def check(
+    scenario: Scenario | str | Path,
+    recording: str | Path,
+    *,
+    start_offset: float = 0.0,
+    observers: Sequence[Observer] = (),
+    progress: Callable[[int, int], None] | None = None,
+) -> RunResult:
+    """Evaluate the scenario's assertions on an existing recording; inject nothing.
+
+    Fault events recorded on /fault_injection/events drive `fault_event` and
+    `during` conditions; bag time zero is the recording's first message.
+    """
+    loaded = _scenario(scenario)
+    path = Path(recording)
+    inputs = InputSet([path])
+    if progress is not None and hasattr(progress, 'begin'):
+        progress.begin(inputs.start_time, inputs.end_time, inputs.message_count)
+    try:
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
+        topics = {c.topic: c.msgtype for c in inputs.channels}
+        collected: list[AssertionEvent | ScenarioStatus] = []
+        runner = _runner(loaded, topics, catalog, collected.append)
+        watchers: list[Observer] = [*([runner] if runner else []), *observers]
+        event_codec = catalog.codec(FaultEvent.msgtype) if FaultEvent.topic in topics else None
+        stats = RunStats()
+        for channel_index, log_time, _, data in inputs.messages():
+            if stats.origin is None:
+                stats.first_time, stats.origin = log_time, log_time + round(start_offset * 1e9)
+                for watcher in watchers:
+                    watcher.start(stats.origin)
+            channel = inputs.channels[channel_index]
+            stats.input_messages += 1
+            stats.last_time = stats.last_output_time = log_time
+            if channel.topic == FaultEvent.topic and event_codec is not None:
+                message = event_codec.decode(data)
+                event = FaultEvent(log_time, message.fault_id, message.injector_id, message.state, message.source,
+                                   message.details)
+                stats.events.append(event)
+                for watcher in watchers:
+                    watcher.on_event(event)
+            for watcher in watchers:
+                watcher.on_message(channel.topic, log_time, data)
+            stats.per_topic_out[channel.topic] = stats.per_topic_out.get(channel.topic, 0) + 1
+            if progress is not None and stats.input_messages % 4096 == 0:
+                progress(stats.input_messages, log_time)
+        for watcher in watchers:
+            watcher.finish(stats.last_time if stats.last_time is not None else 0)
+    finally:
+        inputs.close()
+    result = RunResult(loaded, [path], None, 0, stats, list(loaded.warnings), mode='check')
+    if runner is not None:
+        result.assertions, result.assertion_events = runner.results, collected
+    if stats.input_messages == 0:
+        result.notes.append('the recording holds no messages')
+    return result
 
 
 def validate(paths: Sequence[str | Path]) -> list[Scenario]:
@@ -153,4 +246,4 @@ def validate(paths: Sequence[str | Path]) -> list[Scenario]:
     return scenarios
 
 
-__all__ = ['BagfaultError', 'RunResult', 'run', 'validate']
+__all__ = ['BagfaultError', 'RunResult', 'check', 'run', 'validate']

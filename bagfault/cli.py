@@ -42,6 +42,13 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument('--compression', choices=['none', 'lz4', 'zstd'], default='zstd')
     _report_options(run)
 
+    check = sub.add_parser('check', help="evaluate a scenario's assertions on an existing recording")
+    check.add_argument('scenario', type=Path)
+    check.add_argument('recording', type=Path, metavar='RECORDED.mcap')
+    check.add_argument('--start', type=float, default=0.0, metavar='SECONDS',
+                       help='bag time zero is this many seconds after the first message')
+    _report_options(check)
+
     validate = sub.add_parser('validate', help='check scenario files, report every problem')
     validate.add_argument('scenarios', type=Path, nargs='+', metavar='SCENARIO')
 
@@ -60,15 +67,31 @@ def _parser() -> argparse.ArgumentParser:
 
 def _report_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--report', type=Path, metavar='R.md', help='markdown report')
+    parser.add_argument('--json', type=Path, metavar='R.json', help='machine-readable report (docs/report.md)')
+    parser.add_argument('--junit', type=Path, metavar='R.xml', help='JUnit XML, one testcase per assertion')
+    parser.add_argument('--html', type=Path, metavar='R.html', help='self-contained HTML report with plots')
 
 
-def _write_reports(args: argparse.Namespace, result: object) -> None:
-    from bagfault.report import model  # noqa: PLC0415
-    from bagfault.report import markdown  # noqa: PLC0415
+def _collectors(args: argparse.Namespace) -> list[object]:
+    from bagfault.report.rates import RateTracker  # noqa: PLC0415
+
+    return [RateTracker()] if getattr(args, 'html', None) else []
+
+
+def _write_reports(args: argparse.Namespace, result: object, collectors: list[object]) -> None:
+    from bagfault.report import html, json_report, junit, markdown, model  # noqa: PLC0415
+    from bagfault.report.fields import collect  # noqa: PLC0415
 
     report = model.build(result)  # type: ignore[arg-type]
-    if args.report:
+    if getattr(args, 'report', None):
         _write_text(args.report, markdown.render(report))
+    if getattr(args, 'json', None):
+        _write_text(args.json, json_report.render(report))
+    if getattr(args, 'junit', None):
+        _write_text(args.junit, junit.render(report))
+    if getattr(args, 'html', None):
+        rates = collectors[0] if collectors else None
+        _write_text(args.html, html.render(report, rates, collect(result)))  # type: ignore[arg-type]
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -87,16 +110,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     scenario = api.load_scenario(args.scenario)
     bar = ProgressBar()
+    collectors = _collectors(args)
     try:
         result = api.run(
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
-            start_offset=args.start, compression=args.compression, progress=bar,
+            start_offset=args.start, compression=args.compression, progress=bar, observers=collectors,
         )
     finally:
         bar.close()
-    _write_reports(args, result)
+    _write_reports(args, result, collectors)
     print_run_summary(result)
-    return EXIT_OK
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.progress import ProgressBar  # noqa: PLC0415
+    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+
+    scenario = api.load_scenario(args.scenario)
+    bar = ProgressBar()
+    collectors = _collectors(args)
+    try:
+        result = api.check(scenario, args.recording, start_offset=args.start, observers=collectors, progress=bar)
+    finally:
+        bar.close()
+    _write_reports(args, result, collectors)
+    print_run_summary(result)
+    return EXIT_FAILED if result.failed else EXIT_OK
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -112,15 +153,17 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
         raise OutputError(f'{directory}: cannot write the demo files: {exc.strerror}') from None
     bar = ProgressBar()
+    collectors = _collectors(argparse.Namespace(html=True))
     try:
-        result = api.run(scenario, [bag], directory / 'demo_output.mcap', progress=bar)
+        result = api.run(scenario, [bag], directory / 'demo_output.mcap', progress=bar, observers=collectors)
     finally:
         bar.close()
     args.report = directory / 'demo_report.md'
-    _write_reports(args, result)
+    args.html = directory / 'demo_report.html'
+    _write_reports(args, result, collectors)
     print_run_summary(result)
-    print(f'report    {args.report}')
-    return EXIT_OK
+    print(f'report    {args.report}, {args.html}')
+    return EXIT_FAILED if result.failed else EXIT_OK
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -151,6 +194,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 COMMANDS = {
     'run': _cmd_run,
+    'check': _cmd_check,
     'validate': _cmd_validate,
     'schema': _cmd_schema,
     'info': _cmd_info,

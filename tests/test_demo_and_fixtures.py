@@ -15,7 +15,7 @@ def test_demo_writes_output_and_report(tmp_path, capsys):
     out = capsys.readouterr().out
     assert 'odom_drift' in out and 'report' in out
     files = sorted(p.name for p in (tmp_path / 'demo').iterdir())
-    assert files == ['demo_input.mcap', 'demo_output.mcap', 'demo_report.md', 'demo_scenario.yaml']
+    assert files == ['demo_input.mcap', 'demo_output.mcap', 'demo_report.html', 'demo_report.md', 'demo_scenario.yaml']
     got = counts(tmp_path / 'demo' / 'demo_output.mcap')
     assert got['/odom'] == 1000 and got['/sensors/imu'] == 2000
     report = (tmp_path / 'demo' / 'demo_report.md').read_text()

@@ -1,24 +1,47 @@
-"""Assertion type base: declared keys, semantic checks, and the runtime contract."""
+"""Assertion type base: declared keys, checks before the run, and the runtime contract.
+
+At run time each assertion is an instance fed by the runner, in time
+order, with fault events and output messages of the topics it names. It
+decides once: `passed` or `failed`, at a bag time, with a message that
+names that time and what was observed.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
+    from bagfault.assertions.runner import AssertionRunner
+    from bagfault.events import FaultEvent
     from bagfault.scenario.model import AssertionSpec, Scenario
 
-WITHIN = ConfigField('within', 'double', 'Deadline in seconds from bag time zero.', None, min=0.0)
+PENDING, PASSED, FAILED = 'pending', 'passed', 'failed'
+END_OF_BAG = 'not observed before the end of the bag'
+
+
+@dataclass
+class AssertionResult:
+    """Outcome of one assertion."""
+
+    id: str
+    type: str
+    state: str = PENDING
+    time: int | None = None
+    message: str = ''
 
 
 class AssertionType:
-    """One assertion type: its keys (besides id, type, within) and checks."""
+    """One assertion type: its keys (besides id, type, within), its checks, its runtime."""
 
     type_name: ClassVar[str] = ''
     description: ClassVar[str] = ''
     fields: ClassVar[tuple[ConfigField, ...]] = ()
+    takes_within: ClassVar[bool] = True
 
+    # -- before the run -----------------------------------------------------
     @classmethod
     def check(cls, spec: AssertionSpec, scenario: Scenario) -> list[tuple[str, str]]:
         """Semantic problems as (key, message) pairs; key '' means the assertion itself."""
@@ -28,6 +51,69 @@ class AssertionType:
     def field(cls, key: str) -> ConfigField | None:
         """Schema entry for a key."""
         return next((x for x in cls.fields if x.key == key), None)
+
+    # -- runtime --------------------------------------------------------------
+    def __init__(self, spec: AssertionSpec, runner: AssertionRunner) -> None:
+        self.spec = spec
+        self.runner = runner
+        self.params = spec.params
+        self.result = AssertionResult(spec.id, spec.type)
+
+    @property
+    def pending(self) -> bool:
+        """True until the assertion has decided."""
+        return self.result.state == PENDING
+
+    def topics(self) -> set[str]:
+        """Output topics whose messages this assertion needs."""
+        return set()
+
+    def decoded_topics(self) -> set[str]:
+        """Topics whose messages must be decoded for this assertion."""
+        return set()
+
+    def prepare(self) -> None:
+        """Check against the output's topics and types once they are known; raise EngineError."""
+
+    def deadline(self) -> int | None:
+        """Bag time (ns) after which a pending assertion fails."""
+        if self.spec.within is None or not self.takes_within:
+            return None
+        return self.runner.origin + round(self.spec.within * 1e9)
+
+    def on_event(self, event: FaultEvent) -> None:
+        """A fault event (the runner already updated the active fault set)."""
+
+    def on_message(self, topic: str, time: int, message: Any) -> None:
+        """A message on one of `topics()` (decoded if in `decoded_topics()`, else raw bytes)."""
+
+    def on_deadline(self, time: int) -> None:
+        """The `within` deadline passed while pending."""
+        self.fail(time, f'{self.waiting_for()} within {self.spec.within:g} s (deadline {self.runner.t(time)})')
+
+    def on_result(self, other: AssertionType) -> None:
+        """Another assertion decided (for `sequence`)."""
+
+    def finish(self, time: int) -> None:
+        """End of the bag while still pending."""
+        self.fail(time, f'{self.waiting_for()}: {END_OF_BAG}')
+
+    def waiting_for(self) -> str:
+        """What the assertion waits for, for failure messages."""
+        return f'{self.spec.type} {self.spec.id}'
+
+    # -- decisions ------------------------------------------------------------
+    def passed(self, time: int, message: str) -> None:
+        """Decide: passed at `time`."""
+        if self.pending:
+            self.result.state, self.result.time, self.result.message = PASSED, time, message
+            self.runner.decided(self)
+
+    def fail(self, time: int, message: str) -> None:
+        """Decide: failed at `time`."""
+        if self.pending:
+            self.result.state, self.result.time, self.result.message = FAILED, time, message
+            self.runner.decided(self)
 
 
 def fault_reference_problem(
@@ -41,3 +127,19 @@ def fault_reference_problem(
         return []
     known = ', '.join(dict.fromkeys(f.id for f in scenario.faults)) or 'none'
     return [(key, f'unknown fault {value!r} (faults: {known})')]
+
+
+def window_problems(spec: AssertionSpec, scenario: Scenario) -> list[tuple[str, str]]:
+    """`during` and `outside` must name faults and cannot both be given."""
+    problems = fault_reference_problem(spec, scenario, 'during') + fault_reference_problem(spec, scenario, 'outside')
+    if 'during' in spec.params and 'outside' in spec.params:
+        problems.append(('outside', "give either 'during' or 'outside', not both"))
+    return problems
+
+
+def range_problems(spec: AssertionSpec, low: str = 'min', high: str = 'max') -> list[tuple[str, str]]:
+    """min <= max when both are given."""
+    params = spec.params
+    if low in params and high in params and params[low] > params[high]:
+        return [(high, f'{params[high]} is below {low} {params[low]}')]
+    return []

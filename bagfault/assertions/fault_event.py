@@ -8,6 +8,7 @@ from bagfault.assertions.base import AssertionType, fault_reference_problem
 from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
+    from bagfault.events import FaultEvent
     from bagfault.scenario.model import AssertionSpec, Scenario
 
 
@@ -29,3 +30,13 @@ class FaultEventAssertion(AssertionType):
         if state is not None and state not in {'active', 'inactive'}:
             problems.append(('state', f"{state!r} is not 'active' or 'inactive'"))
         return problems
+
+    def on_event(self, event: FaultEvent) -> None:
+        """Pass when the watched fault reaches the expected state."""
+        if event.fault_id == self.params['fault_id'] and event.state == self.params['state']:
+            self.passed(event.time, f"fault {event.fault_id} reached {event.state} at {self.runner.t(event.time)} "
+                                    f'({event.source})')
+
+    def waiting_for(self) -> str:
+        """Failure text."""
+        return f"fault {self.params['fault_id']} did not reach {self.params['state']}"

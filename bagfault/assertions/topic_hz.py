@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from collections import deque
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from bagfault.assertions.base import AssertionType
 from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
+    from bagfault.assertions.runner import AssertionRunner
     from bagfault.scenario.model import AssertionSpec, Scenario
+
+NS = 1_000_000_000
 
 
 class TopicHzAssertion(AssertionType):
@@ -18,7 +22,8 @@ class TopicHzAssertion(AssertionType):
     description = 'A topic is observed at or above min_hz over a rolling window.'
     fields: ClassVar[tuple[ConfigField, ...]] = (
         ConfigField('topic', 'non_empty_string', 'Topic to measure.', required=True),
-        ConfigField('message_type', 'non_empty_string', 'Expected type of the topic, e.g. nav_msgs/msg/Odometry.', required=True),
+        ConfigField('message_type', 'non_empty_string', 'Expected type of the topic, e.g. nav_msgs/msg/Odometry.',
+                    required=True),
         ConfigField('min_hz', 'double', 'Minimum rate, in Hz (> 0).', required=True),
         ConfigField('window', 'double', 'Rolling window, in seconds (> 0).', required=True),
     )
@@ -31,3 +36,49 @@ class TopicHzAssertion(AssertionType):
             for key in ('min_hz', 'window')
             if isinstance(spec.params.get(key), float) and spec.params[key] <= 0.0
         ]
+
+    def __init__(self, spec: AssertionSpec, runner: AssertionRunner) -> None:
+        super().__init__(spec, runner)
+        self.window = round(self.params['window'] * NS)
+        self.times: deque[int] = deque()
+        self.best = 0.0
+        self.wrong_type: str | None = None
+
+    def topics(self) -> set[str]:
+        """The measured topic."""
+        return {self.params['topic']}
+
+    def prepare(self) -> None:
+        """Remember a type mismatch; it fails the assertion at time zero."""
+        have = self.runner.topic_types.get(self.params['topic'])
+        if have is not None and have != self.params['message_type']:
+            self.wrong_type = have
+
+    def deadline(self) -> int | None:
+        """With a type mismatch the assertion fails at once."""
+        return self.runner.origin - 1 if self.wrong_type else super().deadline()
+
+    def on_deadline(self, time: int) -> None:
+        """Type mismatch, or rate never reached in time."""
+        if self.wrong_type:
+            self.fail(self.runner.origin, f"topic {self.params['topic']} carries {self.wrong_type}, "
+                                          f"not {self.params['message_type']}")
+        else:
+            super().on_deadline(time)
+
+    def on_message(self, topic: str, time: int, message: Any) -> None:
+        """Slide the window; pass when the rate reaches min_hz."""
+        times = self.times
+        times.append(time)
+        while time - times[0] > self.window:
+            times.popleft()
+        rate = len(times) / self.params['window']
+        self.best = max(self.best, rate)
+        if rate >= self.params['min_hz']:
+            self.passed(time, f"{topic} at {rate:.2f} Hz over {self.params['window']:g} s at {self.runner.t(time)} "
+                              f"(min {self.params['min_hz']:g} Hz)")
+
+    def waiting_for(self) -> str:
+        """Failure text with the best rate seen."""
+        return (f"{self.params['topic']} did not reach {self.params['min_hz']:g} Hz "
+                f"(best {self.best:.2f} Hz over {self.params['window']:g} s)")

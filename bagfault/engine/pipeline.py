@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from bagfault.engine.merge import TimeOrderedMerge
 from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
-from bagfault.events import DEFINITIONS, FaultEvent, to_message
+from bagfault.events import DEFINITIONS, Event, FaultEvent, to_message
 from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 
 if TYPE_CHECKING:
@@ -64,14 +64,22 @@ class Sink(Protocol):
 
 
 class Observer(Protocol):
-    """Sees every output record and event in time order (assertions, fault manager)."""
+    """Sees every output record and event in time order, just before it is written."""
 
-    def on_message(self, channel: OutputChannel, log_time: int, data: bytes | memoryview) -> None:
+    def start(self, origin: int) -> None:
+        """Bag time zero is known."""
+        ...
+
+    def on_message(self, topic: str, time: int, data: bytes | memoryview) -> None:
         """An output message."""
         ...
 
     def on_event(self, event: FaultEvent) -> None:
         """A fault event."""
+        ...
+
+    def finish(self, time: int) -> None:
+        """End of the output at bag time `time`."""
         ...
 
 
@@ -100,6 +108,7 @@ class RunStats:
     events: list[FaultEvent] = field(default_factory=list)
     replaced_topics: list[str] = field(default_factory=list)
     max_buffered: int = 0
+    last_output_time: int | None = None
 
 
 class Pipeline:
@@ -137,19 +146,27 @@ class Pipeline:
         self.scheduler: FaultScheduler | None = None
         self._counter = itertools.count()
         self._merge = TimeOrderedMerge()
-        self._event_channel: OutputChannel | None = None
-        self._event_codec: Any = None
+        self._event_channels: dict[str, tuple[OutputChannel, Any]] = {}
         self._runtimes = [runtime for runtimes in routes.values() for runtime in runtimes]
 
     # -- events -----------------------------------------------------------
-    def _event_output(self) -> OutputChannel:
-        if self._event_channel is None:
-            msgtype = FaultEvent.msgtype
-            self.catalog.add_definition(msgtype, DEFINITIONS[msgtype])
-            channel_id = self.sink.add_channel(FaultEvent.topic, msgtype, 'ros2msg', DEFINITIONS[msgtype])
-            self._event_channel = OutputChannel(channel_id, FaultEvent.topic, msgtype)
-            self._event_codec = self.catalog.codec(msgtype)
-        return self._event_channel
+    def event_channel(self, kind: type[Event]) -> tuple[OutputChannel, Any]:
+        """Output channel and codec of an event type, registered on first use."""
+        entry = self._event_channels.get(kind.msgtype)
+        if entry is None:
+            self.catalog.add_definition(kind.msgtype, DEFINITIONS[kind.msgtype])
+            channel_id = self.sink.add_channel(kind.topic, kind.msgtype, 'ros2msg', DEFINITIONS[kind.msgtype])
+            entry = (OutputChannel(channel_id, kind.topic, kind.msgtype), self.catalog.codec(kind.msgtype))
+            self._event_channels[kind.msgtype] = entry
+        return entry
+
+    def write_event(self, event: Event) -> None:
+        """Encode and write an event record at its own time."""
+        channel, codec = self.event_channel(type(event))
+        self.sink.write(channel.id, event.time, event.time, codec.encode(to_message(event, codec.store)))
+        self.stats.output_messages += 1
+        per_topic = self.stats.per_topic_out
+        per_topic[channel.topic] = per_topic.get(channel.topic, 0) + 1
 
     def _refresh_active(self) -> None:
         assert self.scheduler is not None
@@ -164,7 +181,7 @@ class Pipeline:
     def run(self) -> RunStats:
         """Process every input message; return statistics."""
         if self.scenario.faults:
-            self._event_output()
+            self.event_channel(FaultEvent)
         batch: list[tuple[int, int, int, bytes | memoryview]] = []
         order = 0
         for item in self.inputs.messages():
@@ -178,6 +195,9 @@ class Pipeline:
         if batch:
             self._process(batch, order)
         self._emit(self._merge.drain())
+        end = self.stats.last_output_time
+        for observer in self.observers:
+            observer.finish(end if end is not None else 0)
         return self.stats
 
     def _start(self, first_time: int) -> None:
@@ -186,6 +206,8 @@ class Pipeline:
         self.stats.origin = origin
         self.scheduler = FaultScheduler(self.scenario, origin, self.seed, self.activations)
         self._refresh_active()
+        for observer in self.observers:
+            observer.start(origin)
 
     def _process(self, batch: list[tuple[int, int, int, bytes | memoryview]], first_order: int) -> None:
         scheduler = self.scheduler
@@ -252,18 +274,19 @@ class Pipeline:
     def _emit(self, records: Any) -> None:
         write, observers, stats = self.sink.write, self.observers, self.stats
         per_topic = stats.per_topic_out
+        time = None
         for record in records:
+            time = record[0]
             if record[2] == EVENT_RANK:
-                event = record[4]
-                channel = self._event_output()
-                data = self._event_codec.encode(to_message(event, self._event_codec.store))
-                write(channel.id, event.time, event.time, data)
                 for observer in observers:
-                    observer.on_event(event)
-            else:
-                time, _, _, _, channel, publish_time, data = record
-                write(channel.id, time, publish_time, data)
-                for observer in observers:
-                    observer.on_message(channel, time, data)
+                    observer.on_event(record[4])
+                self.write_event(record[4])
+                continue
+            _, _, _, _, channel, publish_time, data = record
+            for observer in observers:
+                observer.on_message(channel.topic, time, data)
+            write(channel.id, time, publish_time, data)
             stats.output_messages += 1
             per_topic[channel.topic] = per_topic.get(channel.topic, 0) + 1
+        if time is not None:
+            stats.last_output_time = time

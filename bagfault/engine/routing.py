@@ -37,6 +37,14 @@ class Routing:
     notes: list[str] = field(default_factory=list)
     replaced: list[str] = field(default_factory=list)
 
+    def output_types(self) -> dict[str, str]:
+        """Type of every topic the output will hold (before event topics)."""
+        types = {c.topic: c.msgtype for c in self.copies.values()}
+        for runtimes in self.routes.values():
+            for runtime in runtimes:
+                types[runtime.channel.topic] = runtime.channel.msgtype
+        return types
+
 
 def _topics_listing(inputs: InputSet) -> str:
     topics = inputs.topics()

@@ -105,6 +105,13 @@ class Injector:
         """Schema entry for a fault config key."""
         return next((x for x in cls.fields if x.key == key), None)
 
+    @classmethod
+    def plot_fields(cls, key: str, config: dict[str, Any]) -> list[str]:
+        """Field paths a config key changes, for before/after plots in reports."""
+        return [path for prefix, path in cls.plotted if key.startswith(prefix)]
+
+    plotted: ClassVar[tuple[tuple[str, str], ...]] = ()
+
     def needs_decoding(self, active: Sequence[ActiveFault]) -> bool:
         """True when an active fault changes message content."""
         return any(key not in self.stream_keys for fault in active for key in fault.config)

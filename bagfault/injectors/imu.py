@@ -23,6 +23,8 @@ class ImuInjector(Injector):
     type_name = 'imu'
     description = 'sensor_msgs/msg/Imu: angular velocity z and linear acceleration bias and noise.'
     message_types = ('sensor_msgs/msg/Imu',)
+    plotted = (('angular_velocity_z', 'angular_velocity.z'), ('linear_acceleration_x', 'linear_acceleration.x'),
+               ('linear_acceleration_y', 'linear_acceleration.y'), ('linear_acceleration_z', 'linear_acceleration.z'))
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,

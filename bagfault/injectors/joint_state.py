@@ -23,6 +23,7 @@ class JointStateInjector(Injector):
     type_name = 'joint_state'
     description = 'sensor_msgs/msg/JointState: velocity bias and noise on every joint.'
     message_types = ('sensor_msgs/msg/JointState',)
+    plotted = (('velocity_', 'velocity[*]'),)
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,

@@ -24,6 +24,7 @@ class ScanInjector(Injector):
     type_name = 'scan'
     description = 'sensor_msgs/msg/LaserScan: range bias and noise, blind angular sector.'
     message_types = ('sensor_msgs/msg/LaserScan',)
+    plotted = (('range_', 'ranges[*]'), ('sector_min', 'ranges[*]'))
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,

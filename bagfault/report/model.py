@@ -1,15 +1,21 @@
-"""One result model for every report: terminal, markdown, JSON, JUnit, HTML."""
+"""One result model for every report: terminal, markdown, JSON, JUnit, HTML.
+
+The keys of `build` are the JSON report's keys; docs/report.md documents
+them and they only ever grow.
+"""
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
+from bagfault.events import AssertionEvent, ScenarioStatus
 
 if TYPE_CHECKING:
     from bagfault.api import RunResult
 
 NS = 1_000_000_000
+SCHEMA_VERSION = 1
 
 
 def seconds(time: int | None, origin: int | None) -> float | None:
@@ -19,17 +25,41 @@ def seconds(time: int | None, origin: int | None) -> float | None:
     return round((time - origin) / NS, 9)
 
 
+def fault_windows(result: RunResult) -> list[dict[str, Any]]:
+    """[{fault_id, start_s, end_s}] from the fault events (end None while still active)."""
+    origin = result.stats.origin
+    open_: dict[str, float | None] = {}
+    windows = []
+    for event in result.stats.events:
+        if event.state == 'active':
+            open_[event.fault_id] = seconds(event.time, origin)
+        elif event.state == 'inactive' and event.fault_id in open_:
+            windows.append({'fault_id': event.fault_id, 'start_s': open_.pop(event.fault_id),
+                            'end_s': seconds(event.time, origin)})
+    windows += [{'fault_id': f, 'start_s': s, 'end_s': None} for f, s in open_.items()]
+    return sorted(windows, key=lambda w: (w['start_s'], w['fault_id']))
+
+
 def build(result: RunResult) -> dict[str, Any]:
-    """Plain, JSON-ready dictionary with stable keys (documented in docs/report.md)."""
+    """Plain, JSON-ready dictionary with stable keys."""
     stats = result.stats
     origin = stats.origin
+    assertions = [
+        {'id': r.id, 'type': r.type, 'state': r.state, 't_s': seconds(r.time, origin), 'stamp_ns': r.time,
+         'message': r.message}
+        for r in result.assertions
+    ]
+    counts = {state: sum(a['state'] == state for a in assertions) for state in ('passed', 'failed', 'pending')}
+    statuses = [e for e in result.assertion_events if isinstance(e, ScenarioStatus)]
     return {
+        'schema_version': SCHEMA_VERSION,
         'tool': {'name': 'bagfault', 'version': __version__},
-        'mode': 'run',
+        'mode': result.mode,
+        'verdict': 'failed' if counts['failed'] else 'passed',
         'scenario': {'file': str(result.scenario.source or result.scenario.name), 'name': result.scenario.name},
         'seed': result.seed,
         'inputs': [str(p) for p in result.inputs],
-        'output': str(result.output),
+        'output': str(result.output) if result.output else None,
         'time': {
             'origin_ns': origin,
             'first_ns': stats.first_time,
@@ -43,5 +73,18 @@ def build(result: RunResult) -> dict[str, Any]:
              'injector_id': e.injector_id, 'state': e.state, 'source': e.source, 'details': e.details}
             for e in stats.events
         ],
+        'fault_windows': fault_windows(result),
+        'injectors': [
+            {'id': i.id, 'type': i.type, 'input_topic': i.input_topic, 'output_topic': i.output_topic,
+             'faults': [f.id for f in result.scenario.faults_of(i.id)]}
+            for i in result.scenario.injectors
+        ],
+        'assertions': assertions,
+        'assertion_counts': counts,
+        'assertion_events': [
+            {'t_s': seconds(e.time, origin), 'assertion_id': e.assertion_id, 'state': e.state, 'message': e.message}
+            for e in result.assertion_events if isinstance(e, AssertionEvent)
+        ],
+        'final_status': statuses[-1].state if statuses else None,
         'notes': list(result.notes),
     }

@@ -1,4 +1,4 @@
-"""Compact terminal summary of a run."""
+"""Compact terminal summary of a run or check, ending with the assertion table."""
 
 from __future__ import annotations
 
@@ -9,17 +9,27 @@ if TYPE_CHECKING:
     from bagfault.api import RunResult
 
 
-def _seconds(time: int, origin: int | None) -> str:
+def _seconds(time: int | None, origin: int | None) -> str:
+    if time is None:
+        return '       -  '
     return f'{(time - (origin or 0)) / 1e9:8.3f} s'
 
 
+def _short(text: str, width: int) -> str:
+    return text if len(text) <= width else text[: width - 1] + '…'
+
+
 def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
-    """Inputs, output, message counts, fault timeline, notes."""
+    """Inputs, output, fault timeline, notes, then one line per assertion and the verdict."""
     out = stream or sys.stdout
     stats = result.stats
     print(f'scenario  {result.scenario.name}  (seed {result.seed})', file=out)
     print(f'inputs    {", ".join(str(p) for p in result.inputs)}', file=out)
-    print(f'output    {result.output}  ({stats.output_messages} messages from {stats.input_messages} read)', file=out)
+    if result.output is not None:
+        print(f'output    {result.output}  ({stats.output_messages} messages from {stats.input_messages} read)',
+              file=out)
+    else:
+        print(f'checked   {stats.input_messages} messages', file=out)
     if stats.events:
         print('fault events (bag time from zero):', file=out)
         for event in stats.events:
@@ -27,3 +37,13 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
                   file=out)
     for note in result.notes:
         print(f'note: {note}', file=out)
+    if not result.assertions:
+        return
+    width = max(len(r.id) for r in result.assertions)
+    print('assertions:', file=out)
+    for r in result.assertions:
+        mark = {'passed': 'PASS', 'failed': 'FAIL'}.get(r.state, r.state.upper())
+        print(f'  {mark:<4}  {r.id:<{width}}  {_seconds(r.time, stats.origin)}  {_short(r.message, 100)}', file=out)
+    failed = sum(r.state == 'failed' for r in result.assertions)
+    passed = sum(r.state == 'passed' for r in result.assertions)
+    print(f'{"FAILED" if failed else "PASSED"}: {passed} passed, {failed} failed', file=out)

@@ -153,6 +153,8 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
         known = ', '.join(sorted(ASSERTION_TYPES))
         out.add((*assertion.path, 'type'), f'unknown assertion type {assertion.type!r} (known: {known})')
         return
+    if assertion.within is not None and not cls.takes_within:
+        out.add((*assertion.path, 'within'), f'{assertion.type} has no deadline; within does not apply')
     keys = [f.key for f in cls.fields]
     for key, value in list(assertion.params.items()):
         field = cls.field(str(key))

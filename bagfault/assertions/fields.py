@@ -1,0 +1,32 @@
+"""Field path resolution against the output's topic types, for assertions."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from bagfault.engine import EngineError
+from bagfault.faults.fieldpath import FieldPath, FieldPathError
+
+if TYPE_CHECKING:
+    from bagfault.assertions.runner import AssertionRunner
+
+
+def resolve_on_topic(runner: AssertionRunner, topic: str, text: str) -> FieldPath | None:
+    """Parse and resolve a numeric path on a topic's type; None if the topic is absent."""
+    try:
+        path = FieldPath.parse(text)
+    except FieldPathError as exc:
+        raise EngineError(str(exc)) from None
+    msgtype = runner.topic_types.get(topic)
+    if msgtype is None:
+        return path
+    codec = runner.catalog.codec(msgtype)
+    if codec is None:
+        raise EngineError(f'cannot decode {msgtype} on {topic}: {runner.catalog.why_not(msgtype)}')
+    try:
+        resolved = path.resolve(msgtype, codec.store)
+    except FieldPathError as exc:
+        raise EngineError(str(exc)) from None
+    if not resolved.numeric:
+        raise EngineError(f'{text!r} on {topic} is a {resolved.leaf}, not a number')
+    return resolved

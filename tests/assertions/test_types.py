@@ -1,0 +1,159 @@
+"""Every assertion type passes where it should and fails with the time and the observed value."""
+
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+from helpers import FIXTURES
+
+from bagfault import api
+from bagfault.engine import EngineError
+from bagfault.scenario import ScenarioError, parse_scenario
+
+BASE = textwrap.dedent("""
+    injectors:
+      - {id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}
+      - {id: scan, type: scan, input_topic: /scan_raw, output_topic: /scan}
+      - {id: imu, type: imu, input_topic: /sensors/imu_raw, output_topic: /sensors/imu}
+    faults:
+      - {id: odom_drift, injector_id: odom, start: 5.0, duration: 10.0, config: {x_bias: 0.5}}
+      - {id: lidar_blind, injector_id: scan, start: 8.0, duration: 2.0,
+         config: {sector_min_deg: -30.5, sector_max_deg: 30.5, sector_value: inf}}
+      - {id: lidar_dead, injector_id: scan, config: {drop_probability: 1.0}}
+      - {id: imu_late, injector_id: imu, start: 12.0, duration: 4.0, config: {delay_ms: 250}}
+    assertions:
+""")
+
+
+def run(tmp_path, assertions: str, **kw):
+    scenario = parse_scenario(BASE + textwrap.indent(textwrap.dedent(assertions), '  '))
+    result = api.run(scenario, [FIXTURES / 'rover_20s.mcap'], tmp_path / 'out.mcap', **kw)
+    return {r.id: r for r in result.assertions}, result
+
+
+def seconds(result, run_result):
+    return round((result.time - run_result.stats.origin) / 1e9, 3)
+
+
+def test_topic_gap(tmp_path):
+    results, out = run(tmp_path, """
+        - {id: ok, type: topic_gap, topic: /scan_raw, max_gap: 0.15}
+        - {id: silent, type: topic_gap, topic: /scan, max_gap: 0.5}
+        - {id: silent_during, type: topic_gap, topic: /scan, max_gap: 0.5, during: lidar_dead}
+        - {id: odom_fine, type: topic_gap, topic: /odom, max_gap: 0.05, during: odom_drift}
+        - {id: not_active, type: topic_gap, topic: /odom, max_gap: 0.05, during: imu_late}
+    """, activate=['lidar_dead@8+2'])
+    assert results['ok'].state == 'passed' and 'longest gap on /scan_raw 0.100 s' in results['ok'].message
+    assert results['silent'].state == 'failed' and seconds(results['silent'], out) == 10.0
+    assert results['silent'].message == ('gap of 2.100 s on /scan from 7.900 s to 10.000 s exceeds max_gap 0.5 s')
+    assert results['silent_during'].state == 'failed' and seconds(results['silent_during'], out) == 10.0
+    assert results['silent_during'].message.startswith('gap of 2.000 s on /scan from 8.000 s to 10.000 s (until lidar_dead')
+    assert results['odom_fine'].state == 'passed'
+    assert results['not_active'].state == 'passed'
+
+
+def test_topic_gap_catches_a_sensor_that_stops(tmp_path):
+    results, out = run(tmp_path, """
+        - {id: end, type: topic_gap, topic: /scan, max_gap: 0.5}
+    """, activate=['lidar_dead@19'])
+    assert results['end'].state == 'failed'
+    assert results['end'].message == 'gap of 1.090 s on /scan from 18.900 s to 19.990 s (end of the bag) exceeds max_gap 0.5 s'
+
+
+def test_field_range(tmp_path):
+    results, out = run(tmp_path, """
+        - {id: ok, type: field_range, topic: /odom, field: pose.pose.position.x, min: -0.001, max: 2.0, outside: odom_drift}
+        - {id: high, type: field_range, topic: /odom, field: pose.pose.position.x, max: 1.0, during: odom_drift}
+        - {id: finite, type: field_range, topic: /scan, field: 'ranges[*]', finite: true, during: lidar_blind}
+        - {id: finite_ok, type: field_range, topic: /sensors/imu, field: linear_acceleration.z, finite: true, min: 9.8, max: 9.82}
+    """)
+    assert results['ok'].state == 'passed' and results['ok'].message.startswith('500 messages on /odom outside odom_drift')
+    assert results['high'].state == 'failed' and seconds(results['high'], out) == 5.02
+    assert results['high'].message == 'at 5.020 s /odom pose.pose.position.x = 1.002 is outside [-inf, 1]'
+    assert results['finite'].state == 'failed' and seconds(results['finite'], out) == 8.0
+    assert results['finite'].message == 'at 8.000 s /scan ranges[*] (element 0) = inf is outside finite values'
+    assert results['finite_ok'].state == 'passed'
+
+
+def test_field_delta(tmp_path):
+    results, out = run(tmp_path, """
+        - {id: applied, type: field_delta, topic: /odom, field: pose.pose.position.x, equals: 0.5, otherwise: 0.0,
+           during: odom_drift, tolerance: 1.0e-12}
+        - {id: wrong, type: field_delta, topic: /odom, field: pose.pose.position.x, equals: 0.4, during: odom_drift}
+        - {id: untouched, type: field_delta, topic: /odom, field: pose.pose.position.y, equals: 0.0}
+        - {id: delayed_same_values, type: field_delta, topic: /sensors/imu, field: angular_velocity.z, equals: 0.0}
+    """)
+    assert results['applied'].state == 'passed'
+    assert results['applied'].message.startswith('1000 message pairs /odom_raw -> /odom')
+    assert results['wrong'].state == 'failed' and seconds(results['wrong'], out) == 5.0
+    assert results['wrong'].message == ('at 5.000 s pose.pose.position.x changed by 0.5, expected 0.4 +- 1e-09 '
+                                        'during odom_drift')
+    assert results['untouched'].state == 'passed'
+    # pairs are matched by header stamp, so the 250 ms delay does not break them
+    assert results['delayed_same_values'].state == 'passed' and '2000 message pairs' in results['delayed_same_values'].message
+
+
+def test_message_count(tmp_path):
+    results, out = run(tmp_path, """
+        - {id: exact, type: message_count, topic: /sensors/imu_raw, min: 400, max: 400, during: imu_late}
+        - {id: too_many, type: message_count, topic: /sensors/imu_raw, max: 399, during: imu_late}
+        - {id: too_few, type: message_count, topic: /scan, min: 200}
+        - {id: all, type: message_count, topic: /odom, min: 1000, max: 1000}
+    """, activate=['lidar_dead@8+2'])
+    assert results['exact'].state == 'passed'
+    assert results['too_many'].state == 'failed' and seconds(results['too_many'], out) == 15.99
+    assert results['too_many'].message == '/sensors/imu_raw during imu_late: message 400 at 15.990 s is more than max 399'
+    assert results['too_few'].state == 'failed'
+    assert results['too_few'].message == '/scan: 180 messages by the end of the bag at 19.990 s, expected at least 200'
+    assert results['all'].state == 'passed'
+
+
+def test_sequence(tmp_path):
+    results, out = run(tmp_path, """
+        - {id: odom_on, type: fault_event, fault_id: odom_drift, state: active}
+        - {id: lidar_on, type: fault_event, fault_id: lidar_blind, state: active}
+        - {id: odom_off, type: fault_event, fault_id: odom_drift, state: inactive}
+        - {id: in_order, type: sequence, steps: [odom_on, lidar_on, odom_off]}
+        - {id: reversed, type: sequence, steps: [lidar_on, odom_on]}
+        - {id: too_slow, type: sequence, steps: [odom_on, odom_off], within: 10.0}
+    """)
+    assert results['in_order'].state == 'passed' and seconds(results['in_order'], out) == 15.0
+    assert results['reversed'].state == 'failed' and seconds(results['reversed'], out) == 5.0
+    assert results['reversed'].message == 'step odom_on passed at 5.000 s before step lidar_on'
+    assert results['too_slow'].state == 'failed' and seconds(results['too_slow'], out) == 10.0
+
+
+def test_topic_hz_type_mismatch_fails_at_time_zero(tmp_path):
+    results, out = run(tmp_path, """
+        - {id: wrong, type: topic_hz, topic: /odom, message_type: sensor_msgs/msg/Imu, min_hz: 1.0, window: 1.0}
+        - {id: missing, type: topic_hz, topic: /nothing, message_type: sensor_msgs/msg/Imu, min_hz: 1.0, window: 1.0}
+    """)
+    assert results['wrong'].state == 'failed' and seconds(results['wrong'], out) == 0.0
+    assert results['wrong'].message == 'topic /odom carries nav_msgs/msg/Odometry, not sensor_msgs/msg/Imu'
+    assert results['missing'].message == ('/nothing did not reach 1 Hz (best 0.00 Hz over 1 s): '
+                                          'not observed before the end of the bag')
+
+
+@pytest.mark.parametrize(('assertion', 'problem'), [
+    ('{id: a, type: field_range, topic: /odom, field: x}', "give 'min', 'max' or 'finite: true'"),
+    ('{id: a, type: field_range, topic: /odom, field: x, min: 2, max: 1}', '1.0 is below min 2.0'),
+    ('{id: a, type: topic_gap, topic: /odom, max_gap: 1, within: 3}', 'within does not apply'),
+    ('{id: a, type: message_count, topic: /odom, during: ghost, min: 1}', "unknown fault 'ghost'"),
+    ('{id: a, type: sequence, steps: [a, b]}', 'a sequence cannot contain itself'),
+    ('{id: a, type: field_delta, topic: /nowhere, field: x, equals: 1}', "no injector writes /nowhere"),
+    ('{id: a, type: topic_gap, topic: /odom, max_gap: 0}', 'must be greater than 0'),
+])
+def test_assertion_fields_are_validated(assertion, problem):
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(BASE + '  - ' + assertion + '\n')
+    assert problem in str(info.value)
+
+
+def test_bad_field_path_stops_the_run_naming_the_closest_path(tmp_path):
+    with pytest.raises(EngineError) as info:
+        run(tmp_path, '- {id: a, type: field_range, topic: /odom, field: pose.pose.postion.x, max: 1}\n')
+    text = str(info.value)
+    assert "'pose.pose.postion.x' is not a field of nav_msgs/msg/Odometry" in text
+    assert 'closest valid path: pose.pose.position.x' in text
+    assert not (tmp_path / 'out.mcap').exists()

@@ -1,0 +1,167 @@
+"""Anchor assertions on bag time, exit codes, and every report format."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import pytest
+import xmlschema
+from helpers import FIXTURES, NS, decoded
+
+from bagfault import api
+from bagfault.cli import main
+from bagfault.demo import synthetic
+
+START = synthetic.DEFAULT_START
+EXPECTED_PASS_TIMES = {
+    'odom_yaw_bias_activates': 5.0,
+    'odom_yaw_bias_deactivates': 15.0,
+    'odom_covariance_activates': 3.0,
+    'odom_covariance_deactivates': 18.0,
+    'odom_stays_above_10hz': 0.58,   # 30th /odom message at 50 Hz: 30 in 3 s = 10 Hz
+    'scan_stays_above_5hz': 1.4,     # 15th /scan message at 10 Hz: 15 in 3 s = 5 Hz
+}
+
+
+@pytest.fixture(scope='module')
+def reports(tmp_path_factory, anchors):
+    folder = tmp_path_factory.mktemp('reports')
+    code = main(['run', str(anchors / 'multi_injector_faults.yaml'), str(FIXTURES / 'rover_20s.mcap'),
+                 '-o', str(folder / 'out.mcap'), '--report', str(folder / 'r.md'), '--json', str(folder / 'r.json'),
+                 '--junit', str(folder / 'r.xml'), '--html', str(folder / 'r.html')])
+    return code, folder
+
+
+def test_anchor_assertions_pass_at_their_times(reports):
+    code, folder = reports
+    assert code == 0
+    data = json.loads((folder / 'r.json').read_text())
+    assert {a['id']: (a['state'], a['t_s']) for a in data['assertions']} == {
+        k: ('passed', v) for k, v in EXPECTED_PASS_TIMES.items()}
+    events = decoded(folder / 'out.mcap', ['/fault_injection/assertion_events', '/fault_injection/scenario_status'])
+    passed = {m.assertion_id: (t - START) / NS for t, m in events['/fault_injection/assertion_events']}
+    assert passed == pytest.approx(EXPECTED_PASS_TIMES)
+    for time, message in events['/fault_injection/assertion_events']:
+        assert message.stamp.sec * NS + message.stamp.nanosec == time and message.state == 'passed'
+    statuses = [(m.state, m.pending_count, m.passed_count) for _, m in events['/fault_injection/scenario_status']]
+    assert statuses[0] == ('running', 5, 1) and statuses[-1] == ('passed', 0, 6)
+    assert len(statuses) == 7  # one per change and one at the end
+
+
+def test_changing_within_to_4_fails_at_4_seconds(tmp_path, anchors, capsys):
+    text = (anchors / 'multi_injector_faults.yaml').read_text()
+    scenario = tmp_path / 'late.yaml'
+    scenario.write_text(text.replace('state: active\n    within: 6.0', 'state: active\n    within: 4.0'))
+    code = main(['run', str(scenario), str(FIXTURES / 'rover_20s.mcap'), '-o', str(tmp_path / 'o.mcap'),
+                 '--json', str(tmp_path / 'r.json')])
+    assert code == 1
+    assert 'FAIL  odom_yaw_bias_activates' in capsys.readouterr().out
+    data = json.loads((tmp_path / 'r.json').read_text())
+    failed = next(a for a in data['assertions'] if a['id'] == 'odom_yaw_bias_activates')
+    assert (failed['state'], failed['t_s'], failed['stamp_ns']) == ('failed', 4.0, START + 4 * NS)
+    assert failed['message'] == 'fault odom_yaw_bias did not reach active within 4 s (deadline 4.000 s)'
+    assert data['verdict'] == 'failed' and data['final_status'] == 'failed'
+    events = decoded(tmp_path / 'o.mcap', ['/fault_injection/assertion_events'])['/fault_injection/assertion_events']
+    assert [(t, m.state) for t, m in events if m.assertion_id == 'odom_yaw_bias_activates'] == [(START + 4 * NS, 'failed')]
+
+
+def test_end_of_bag_fails_what_is_pending(tmp_path):
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text('injector: {id: o, type: odom, input_topic: /odom_raw, output_topic: /odom}\n'
+                        'faults: [{id: never, injector_id: o, config: {x_bias: 1}}]\n'
+                        'assertions: [{id: a, type: fault_event, fault_id: never, state: active}]\n')
+    result = api.run(scenario, [FIXTURES / 'rover_20s.mcap'], tmp_path / 'o.mcap')
+    [a] = result.assertions
+    assert a.state == 'failed' and a.time == START + 19_990_000_000
+    assert a.message == 'fault never did not reach active: not observed before the end of the bag'
+
+
+def test_json_report_has_stable_documented_keys(reports):
+    _, folder = reports
+    data = json.loads((folder / 'r.json').read_text())
+    assert set(data) == {
+        'schema_version', 'tool', 'mode', 'verdict', 'scenario', 'seed', 'inputs', 'output', 'time', 'messages',
+        'fault_events', 'fault_windows', 'injectors', 'assertions', 'assertion_counts', 'assertion_events',
+        'final_status', 'notes'}
+    documented = (FIXTURES.parent.parent / 'docs' / 'report.md').read_text()
+    for key in data:
+        assert f'`{key}`' in documented
+    assert data['fault_windows'][0] == {'fault_id': 'odom_covariance_inflation', 'start_s': 3.0, 'end_s': 18.0}
+    assert data['assertion_counts'] == {'passed': 6, 'failed': 0, 'pending': 0}
+
+
+def test_junit_validates_and_lists_every_assertion(reports, tmp_path, anchors):
+    _, folder = reports
+    schema = xmlschema.XMLSchema(str(FIXTURES / 'junit.xsd'))
+    schema.validate(str(folder / 'r.xml'))
+    text = (folder / 'r.xml').read_text()
+    assert text.count('<testcase ') == 6 and '<failure' not in text
+    scenario = tmp_path / 'late.yaml'
+    scenario.write_text((anchors / 'multi_injector_faults.yaml').read_text().replace('min_hz: 10.0', 'min_hz: 60.0'))
+    assert main(['run', str(scenario), str(FIXTURES / 'rover_20s.mcap'), '-o', str(tmp_path / 'o.mcap'),
+                 '--junit', str(tmp_path / 'r.xml')]) == 1
+    schema.validate(str(tmp_path / 'r.xml'))
+    failed = (tmp_path / 'r.xml').read_text()
+    assert failed.count('<failure ') == 1 and 'failures="1"' in failed
+    assert 'did not reach 60 Hz (best 50.33 Hz over 3 s)' in failed
+
+
+def test_markdown_report(reports):
+    _, folder = reports
+    text = (folder / 'r.md').read_text()
+    assert text.startswith('# bagfault report: multi_injector_faults.yaml')
+    assert '**PASSED**: 6 passed, 0 failed' in text
+    assert '| 5.000 | odom_position_bias | odom | active | scheduled | `config={x_bias=1.0, y_bias=-0.25}` |' in text
+    assert '| PASS | odom_yaw_bias_activates | fault_event | 5.000 |' in text
+
+
+def chromium() -> str:
+    path = shutil.which('chromium') or shutil.which('chromium-browser') or shutil.which('google-chrome')
+    if path is None:
+        pytest.skip('headless Chromium not installed (the README test command installs it where apt is usable)')
+    return path
+
+
+def test_html_renders_in_headless_chromium_with_its_plots(reports, tmp_path):
+    _, folder = reports
+    dom = subprocess.run(
+        [chromium(), '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+         '--disable-background-networking', '--disable-component-update', '--disable-sync',
+         f'--user-data-dir={tmp_path / "profile"}', '--dump-dom', (folder / 'r.html').as_uri()],
+        capture_output=True, text=True, timeout=120, check=True,
+    ).stdout
+    body = dom[dom.index('<body'):dom.index('>', dom.index('<body'))]
+    assert 'data-errors="0"' in body
+    plots = int(body.split('data-plots="')[1].split('"')[0])
+    html = (folder / 'r.html').read_text()
+    assert plots == html.count('<svg class="plot"') and plots >= 12
+    assert html.count('data-kind="timeline"') == 1
+    assert 'pose.pose.position.x on /odom (odom_position_bias)' in html   # before/after of a mutated field
+    assert '/scan rate' in html and 'class="fault-window"' in html       # rates with fault windows shaded
+    assert '<script src' not in html and 'http' not in html.split('<body')[1].replace('http://www.w3.org', '')
+
+
+def test_check_on_the_recording_gives_the_same_results(reports, tmp_path, anchors, capsys):
+    _, folder = reports
+    code = main(['check', str(anchors / 'multi_injector_faults.yaml'), str(folder / 'out.mcap'),
+                 '--json', str(tmp_path / 'c.json'), '--junit', str(tmp_path / 'c.xml')])
+    assert code == 0
+    ran = json.loads((folder / 'r.json').read_text())['assertions']
+    checked = json.loads((tmp_path / 'c.json').read_text())
+    assert checked['mode'] == 'check' and checked['output'] is None
+    assert [(a['id'], a['state'], a['t_s']) for a in checked['assertions']] == [
+        (a['id'], a['state'], a['t_s']) for a in ran]
+
+
+def test_check_without_fault_events_fails_with_exit_1(tmp_path, anchors, capsys):
+    code = main(['check', str(anchors / 'multi_injector_faults.yaml'), str(FIXTURES / 'rover_20s.mcap')])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert 'FAIL  odom_yaw_bias_activates' in out
+    assert 'FAIL  odom_stays_above_10hz' in out  # the raw bag has no /odom topic
+
+
+def test_check_missing_recording_is_exit_2(tmp_path, anchors, capsys):
+    assert main(['check', str(anchors / 'multi_injector_faults.yaml'), str(tmp_path / 'none.mcap')]) == 2
