@@ -73,3 +73,24 @@ def tree_digest(path: Path) -> str:
         digest.update(file.read_bytes())
         digest.update(str(file.stat().st_mtime_ns).encode())
     return digest.hexdigest()
+
+
+def make_bag(path: Path, streams: list[tuple[str, str, float]], duration: float) -> Path:
+    """A synthetic MCAP with (topic, type, rate) streams, values from bagfault.demo.synthetic."""
+    from bagfault.demo import synthetic  # noqa: PLC0415
+
+    specs = [synthetic.Stream(topic, msgtype, rate) for topic, msgtype, rate in streams]
+    synthetic.write_mcap(path, synthetic.messages(specs, duration))
+    return path
+
+
+def run_inline(tmp: Path, scenario_text: str, bag: Path, **kw: Any) -> tuple[Path, Any]:
+    """Run a scenario given as YAML text; return (output path, result)."""
+    import textwrap  # noqa: PLC0415
+
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.scenario import parse_scenario  # noqa: PLC0415
+
+    out = tmp / 'out.mcap'
+    result = api.run(parse_scenario(textwrap.dedent(scenario_text)), [bag], out, **kw)
+    return out, result

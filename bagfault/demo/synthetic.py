@@ -176,6 +176,59 @@ def battery_state(ts: Typestore, time: int, t: float) -> Any:
     )
 
 
+def cloud_points(t: float, count: int) -> np.ndarray:
+    """count x 4 float32 (x, y, z, intensity): a ring of points around the sensor, 1..10 m."""
+    angle = np.linspace(-math.pi, math.pi, count, endpoint=False, dtype=np.float64)
+    distance = 1.0 + (np.arange(count) % 90) / 10.0
+    points = np.empty((count, 4), dtype=np.float32)
+    points[:, 0] = distance * np.cos(angle + 0.01 * t)
+    points[:, 1] = distance * np.sin(angle + 0.01 * t)
+    points[:, 2] = (np.arange(count) % 16) * 0.1 - 0.8
+    points[:, 3] = 100.0
+    return points
+
+
+def point_cloud(ts: Typestore, time: int, t: float, count: int = 2000) -> Any:
+    """Unorganized PointCloud2 with float32 x, y, z, intensity (point_step 16)."""
+    T = ts.types
+    field = T['sensor_msgs/msg/PointField']
+    fields = [field(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate(('x', 'y', 'z', 'intensity'))]
+    data = cloud_points(t, count).tobytes()
+    return T['sensor_msgs/msg/PointCloud2'](
+        header=_header(ts, time, 'lidar'), height=1, width=count, fields=fields, is_bigendian=False,
+        point_step=16, row_step=16 * count, data=np.frombuffer(data, dtype=np.uint8), is_dense=True,
+    )
+
+
+def image_pixels(t: float, width: int, height: int) -> np.ndarray:
+    """height x width x 3 uint8 gradient that moves with time."""
+    x = np.arange(width, dtype=np.uint32)[None, :]
+    y = np.arange(height, dtype=np.uint32)[:, None]
+    shift = int(t * 10)
+    red = ((x + shift) % 256).astype(np.uint8)
+    green = ((y + shift) % 256).astype(np.uint8)
+    blue = ((x + y) % 256).astype(np.uint8)
+    return np.stack(np.broadcast_arrays(red, green, blue), axis=2)
+
+
+def raw_image(ts: Typestore, time: int, t: float, width: int = 64, height: int = 48) -> Any:
+    """rgb8 Image of the moving gradient."""
+    pixels = image_pixels(t, width, height)
+    return ts.types['sensor_msgs/msg/Image'](
+        header=_header(ts, time, 'camera'), height=height, width=width, encoding='rgb8', is_bigendian=0,
+        step=width * 3, data=np.frombuffer(pixels.tobytes(), dtype=np.uint8),
+    )
+
+
+def compressed_image(ts: Typestore, time: int, t: float) -> Any:
+    """CompressedImage with deterministic stand-in bytes (a JPEG start marker and noise)."""
+    body = np.random.default_rng(int(t * 1000)).integers(0, 256, 512, dtype=np.uint8).tobytes()
+    return ts.types['sensor_msgs/msg/CompressedImage'](
+        header=_header(ts, time, 'camera'), format='jpeg',
+        data=np.frombuffer(b'\xff\xd8' + body, dtype=np.uint8),
+    )
+
+
 BUILDERS = {
     'nav_msgs/msg/Odometry': odometry,
     'sensor_msgs/msg/LaserScan': laser_scan,
@@ -183,6 +236,9 @@ BUILDERS = {
     'sensor_msgs/msg/Imu': imu,
     'tf2_msgs/msg/TFMessage': tf_message,
     'sensor_msgs/msg/BatteryState': battery_state,
+    'sensor_msgs/msg/PointCloud2': point_cloud,
+    'sensor_msgs/msg/Image': raw_image,
+    'sensor_msgs/msg/CompressedImage': compressed_image,
 }
 
 ROVER_STREAMS = (

@@ -194,11 +194,24 @@ class Pipeline:
                 batch = []
         if batch:
             self._process(batch, order)
+        self._flush_injectors()
         self._emit(self._merge.drain())
         end = self.stats.last_output_time
         for observer in self.observers:
             observer.finish(end if end is not None else 0)
         return self.stats
+
+    def _flush_injectors(self) -> None:
+        """End of input: injectors release what they hold (reorder windows)."""
+        last = self.stats.last_time
+        if last is None:
+            return
+        records = [
+            (m.log_time, m.order, runtime.rank, next(self._counter), runtime.channel, m.publish_time, m.data)
+            for runtime in self._runtimes for m in runtime.injector.flush(last)
+        ]
+        if records:
+            self._emit(self._merge.release(records, last, is_sorted=False))
 
     def _start(self, first_time: int) -> None:
         origin = first_time + seconds_to_ns(self.start_offset)
@@ -255,12 +268,15 @@ class Pipeline:
                 )
         is_sorted = True
         for runtime, messages in grouped.items():
-            if not runtime.active:
+            injector = runtime.injector
+            if not runtime.active and not injector.busy:
                 outputs = messages
+                if injector.tracks_history:
+                    injector.watch(messages)
             elif self.batch:
-                outputs = runtime.injector.process_batch(messages, runtime.active)
+                outputs = injector.process_batch(messages, runtime.active)
             else:
-                outputs = [out for m in messages for out in runtime.injector.process(m, runtime.active)]
+                outputs = [out for m in messages for out in injector.process(m, runtime.active)]
             out_channel, rank = runtime.channel, runtime.rank
             records.extend(
                 (m.log_time, m.order, rank, next(counter), out_channel, m.publish_time, m.data) for m in outputs

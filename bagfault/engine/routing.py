@@ -132,21 +132,23 @@ def build_routing(
                 continue
             faults = scenario.faults_of(spec.id)
             codec = catalog.codec(channel.msgtype) if channel.msgtype else None
-            decodes = any(
-                key not in cls.stream_keys for fault in faults for key in fault.config
-            )
+            decodes = cls.decodes(faults)
             if decodes and codec is None:
                 raise EngineError(
                     f'{scenario_name}: injector {spec.id!r}: cannot decode {channel.msgtype} on {channel.topic}: '
                     + catalog.why_not(channel.msgtype)
                 )
+            if codec is not None:
+                problems = cls.check_type(channel.msgtype, codec.store, faults)
+                if problems:
+                    raise EngineError(f'{scenario_name}: injector {spec.id!r} on {channel.topic}: ' + '; '.join(problems))
             encoding, text = _schema(channel, catalog)
             channel_id = sink.add_channel(spec.output_topic, channel.msgtype, encoding, text,
                                           channel.message_encoding, dict(channel.metadata))
             rank += 1
             runtime = InjectorRuntime(
                 spec=spec,
-                injector=cls(spec, codec),
+                injector=cls(spec, codec, faults),
                 faults=faults,
                 channel=OutputChannel(channel_id, spec.output_topic, channel.msgtype),
                 rank=rank,

@@ -174,24 +174,28 @@ def _apply(obj: Any, segments: tuple[Segment, ...], func: Any) -> None:
         _apply(value[segment.index], rest, func)
 
 
-def leaf_paths(msgtype: str, store: Typestore, depth: int = 6) -> list[str]:
-    """Every numeric leaf path of a type (arrays as [*]), for suggestions."""
+def leaf_paths(msgtype: str, store: Typestore, depth: int = 6, *, numeric: bool = False) -> list[str]:
+    """Every leaf path of a type (arrays as [*]), for suggestions; only numbers with numeric=True."""
     out: list[str] = []
 
     def walk(typename: str, prefix: str, level: int) -> None:
         if level > depth or typename not in store.fielddefs:
             return
         for name, (kind, args) in store.fielddefs[typename][1]:
+            if name == 'structure_needs_at_least_one_member':  # rosbags' stand-in for empty messages
+                continue
             kind = int(kind)
             path = f'{prefix}{name}'
             if kind == BASE:
-                out.append(path)
+                if not numeric or args[0] in NUMERIC:
+                    out.append(path)
             elif kind == NAME:
                 walk(args, path + '.', level + 1)
             else:
                 sub, _ = args
                 if int(sub[0]) == BASE:
-                    out.append(f'{path}[*]')
+                    if not numeric or sub[1][0] in NUMERIC:
+                        out.append(f'{path}[*]')
                 else:
                     walk(sub[1], f'{path}[*].', level + 1)
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
+from bagfault.errors import BagfaultError
 from bagfault.faults.combine import strongest
 from bagfault.faults.drop import drop_mask, should_drop
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField
@@ -72,6 +73,10 @@ class InjectorConfigError(ValueError):
     """An injector's options or a fault config fail a cross-field check."""
 
 
+class InjectorError(BagfaultError):
+    """A message cannot take a fault (for example a point cloud without x, y, z)."""
+
+
 class Injector:
     """Base of all topic injectors.
 
@@ -88,9 +93,28 @@ class Injector:
     live_only: ClassVar[bool] = False
     stream_keys: ClassVar[frozenset[str]] = frozenset({'drop_probability', 'delay_ms'})
 
-    def __init__(self, spec: InjectorSpec, codec: Codec | None = None) -> None:
+    def __init__(self, spec: InjectorSpec, codec: Codec | None = None, faults: Sequence[FaultSpec] = ()) -> None:
         self.spec = spec
         self.codec = codec
+        self.faults = list(faults)
+        self.tracks_history = False
+
+    @property
+    def busy(self) -> bool:
+        """True while the injector holds messages back (the engine keeps feeding it)."""
+        return False
+
+    def watch(self, messages: list[RawMessage]) -> None:
+        """See messages that pass untouched (only called when `tracks_history` is set)."""
+
+    def flush(self, time: int) -> list[RawMessage]:
+        """End of input: messages still held back."""
+        return []
+
+    @classmethod
+    def check_type(cls, msgtype: str, store: Any, faults: Sequence[FaultSpec]) -> list[str]:
+        """Problems of the faults with the actual message type of the bag (run start)."""
+        return []
 
     @classmethod
     def check_options(cls, options: dict[str, Any]) -> None:
@@ -111,6 +135,11 @@ class Injector:
         return [path for prefix, path in cls.plotted if key.startswith(prefix)]
 
     plotted: ClassVar[tuple[tuple[str, str], ...]] = ()
+
+    @classmethod
+    def decodes(cls, faults: Sequence[FaultSpec]) -> bool:
+        """True when any of these faults changes message content (a codec is needed)."""
+        return any(key not in cls.stream_keys for fault in faults for key in fault.config)
 
     def needs_decoding(self, active: Sequence[ActiveFault]) -> bool:
         """True when an active fault changes message content."""

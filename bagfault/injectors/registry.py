@@ -15,11 +15,15 @@ from functools import lru_cache
 from importlib.metadata import entry_points
 
 from bagfault.injectors.base import Injector, InjectorType, ServiceInjector
+from bagfault.injectors.field import FieldInjector
+from bagfault.injectors.image import ImageInjector
 from bagfault.injectors.imu import ImuInjector
 from bagfault.injectors.joint_state import JointStateInjector
 from bagfault.injectors.odom import OdomInjector
+from bagfault.injectors.pointcloud2 import PointCloud2Injector
 from bagfault.injectors.scan import ScanInjector
 from bagfault.injectors.tf import TfInjector
+from bagfault.injectors.topic import CompressedImageInjector, TopicInjector
 from bagfault.injectors.trigger_service import TriggerServiceInjector
 
 GROUP = 'bagfault.injectors'
@@ -31,6 +35,11 @@ BUILTIN: tuple[InjectorType, ...] = (
     ImuInjector,
     TfInjector,
     TriggerServiceInjector,
+    TopicInjector,
+    FieldInjector,
+    CompressedImageInjector,
+    PointCloud2Injector,
+    ImageInjector,
 )
 
 

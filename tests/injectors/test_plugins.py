@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from helpers import ROOT
 
-EXAMPLE = ROOT / 'examples' / 'bagfault-battery'
+EXAMPLE = ROOT / 'examples' / 'bagfault-rover-plugins'
 
 
 @pytest.fixture(scope='module')
@@ -50,4 +50,4 @@ def test_installed_plugin_is_found_validated_and_runs(plugin_path, tmp_path, anc
         env={**os.environ, 'PYTHONPATH': os.pathsep.join([str(plugin_path), str(ROOT)])},
     )
     assert tests.returncode == 0, tests.stdout + tests.stderr
-    assert '2 passed' in tests.stdout
+    assert '4 passed' in tests.stdout

@@ -1,4 +1,4 @@
-"""battery_state injector: a bagfault plugin in its own package.
+"""battery_state injector (sensor_msgs/msg/BatteryState).
 
 Installing this package makes `type: battery_state` usable in scenarios
 (including the anchor's battery_faults.yaml) through the entry point group

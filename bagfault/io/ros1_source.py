@@ -1,0 +1,108 @@
+"""ROS 1 bags (.bag v2.0, any chunk compression), converted to ROS 2 CDR on the way in.
+
+rosbags reads the bag and its stored definitions; its converter module
+turns each message into the ROS 2 equivalent (Header without seq,
+tf/tfMessage as tf2_msgs/TFMessage), so the rest of bagfault only ever sees
+ROS 2 data and the output MCAP is ROS 2.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import TYPE_CHECKING, Any
+
+from rosbags.convert.converter import STATIC_MSGTYPE_RENAMES, is_same_wireformat, migrate_bytes
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag1 import ReaderError
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.base import TypesysError
+
+from bagfault.io import InputError
+from bagfault.io.channel import Channel
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterator
+    from pathlib import Path
+
+ROS2_DISTRO = 'humble'
+
+
+class Ros1Source:
+    """Messages of a ROS 1 bag as ROS 2 CDR, in time order."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.ros_distro = ROS2_DISTRO
+        self.channels: list[Channel] = []
+        self._converters: list[Callable[[Any], Any]] = []
+        self._ids: dict[int, int] = {}
+        try:
+            self._reader = AnyReader([path])
+            self._reader.open()
+        except (AnyReaderError, ReaderError, TypesysError, ValueError, OSError) as exc:
+            raise InputError(f'{path}: cannot read ROS 1 bag ({exc})') from None
+        try:
+            self._setup()
+        except (TypesysError, KeyError, ValueError) as exc:
+            self._reader.close()
+            raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({exc})') from None
+        connections = self._reader.connections
+        self.message_count = sum(c.msgcount for c in connections)
+        self.start_time = self._reader.start_time if self.message_count else None
+        self.end_time = self._reader.end_time - 1 if self.message_count else None
+
+    def _setup(self) -> None:
+        source = self._reader.typestore
+        header = get_typestore(Stores.ROS2_HUMBLE).fielddefs['std_msgs/msg/Header']
+        target = get_typestore(Stores.EMPTY)
+        target.register({**source.fielddefs, 'std_msgs/msg/Header': header})
+        cache: dict[str, object] = {}
+        by_type: dict[str, tuple[int, str]] = {}
+        for connection in self._reader.connections:
+            msgtype = STATIC_MSGTYPE_RENAMES.get(connection.msgtype, connection.msgtype)
+            if connection.msgtype not in by_type:
+                if msgtype not in target.fielddefs:
+                    types = get_types_from_msg(source.generate_msgdef(connection.msgtype, ros_version=2)[0], msgtype)
+                    types.pop('std_msgs/msg/Header', None)
+                    target.register(types)
+                if is_same_wireformat(source, target, connection.msgtype, msgtype):
+                    convert: Callable[[Any], Any] = partial(target.ros1_to_cdr, typename=msgtype)
+                else:
+                    convert = partial(migrate_bytes, source, target, connection.msgtype, msgtype, cache,
+                                      src_is2=False, dst_is2=True)
+                self._converters.append(convert)
+                by_type[connection.msgtype] = (len(self._converters) - 1, msgtype)
+            key = (connection.topic, by_type[connection.msgtype][1])
+            index = next((i for i, c in enumerate(self.channels) if (c.topic, c.msgtype) == key), None)
+            if index is None:
+                text, _ = target.generate_msgdef(key[1], ros_version=2)
+                latching = getattr(connection.ext, 'latching', 0)
+                metadata = (('offered_qos_profiles', LATCHED_QOS),) if latching else ()
+                self.channels.append(Channel(connection.topic, key[1], 'ros2msg', text, 'cdr', metadata))
+                index = len(self.channels) - 1
+            self._ids[id(connection)] = index
+        self._by_connection = {id(c): by_type[c.msgtype][0] for c in self._reader.connections}
+
+    def messages(self) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
+        """(channel index, log_time, publish_time, CDR data) in time order."""
+        ids, converters, by_connection = self._ids, self._converters, self._by_connection
+        try:
+            for connection, timestamp, raw in self._reader.messages():
+                key = id(connection)
+                yield ids[key], timestamp, timestamp, converters[by_connection[key]](raw)
+        except (AnyReaderError, ReaderError, TypesysError, ValueError) as exc:
+            raise InputError(f'{self.path}: corrupt ROS 1 bag ({exc})') from None
+
+    def close(self) -> None:
+        """Close the bag."""
+        self._reader.close()
+
+
+LATCHED_QOS = (
+    '- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n'
+    '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
+    '  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n'
+    '  liveliness: 1\n'
+    '  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n'
+    '  avoid_ros_namespace_conventions: false\n'
+)
