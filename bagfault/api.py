@@ -9,7 +9,7 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
 from bagfault.engine import EngineError
@@ -19,7 +19,7 @@ from bagfault.engine.pipeline import Observer, Pipeline, RunStats
 from bagfault.engine.routing import build_routing
 from bagfault.engine.scheduler import Activation
 from bagfault.errors import BagfaultError
-from bagfault.events import DEFINITIONS, AssertionEvent, FaultEvent, ScenarioStatus
+from bagfault.events import AssertionEvent, FaultEvent, ScenarioStatus
 from bagfault.io import OutputError
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.sources import InputSet, fingerprint
@@ -46,6 +46,7 @@ class RunResult:
     assertions: list[AssertionResult] = field(default_factory=list)
     assertion_events: list[AssertionEvent | ScenarioStatus] = field(default_factory=list)
     mode: str = 'run'
+    fault_manager: dict[str, Any] | None = None
 
     @property
     def failed(self) -> bool:
@@ -139,16 +140,18 @@ def run(
                 seed=used_seed, activations=activations, start_offset=start_offset,
                 batch=batch, progress=progress, observers=observers,
             )
-            runner = _runner(loaded, {**routing.output_types(), **EVENT_TOPICS}, catalog, pipeline.write_event)
-            if runner is not None:
-                pipeline.observers.append(runner)
-                for kind in (AssertionEvent, ScenarioStatus):
-                    pipeline.event_channel(kind)
+            oracles = Oracles(loaded, routing.schemas, catalog, pipeline.write_event, blackbox_base=out)
+            pipeline.observers[:0] = oracles.observers
+            for kind in oracles.event_kinds:
+                pipeline.event_channel(kind)
             stats = pipeline.run()
             stats.replaced_topics = routing.replaced
             sink.finish()
+            oracles.publish()
         except BaseException:
             sink.abort()
+            if 'oracles' in locals():
+                oracles.discard()
             raise
     finally:
         input_set.close()
@@ -156,21 +159,54 @@ def run(
     if stats.input_messages == 0:
         notes.append('the input holds no messages; the output has channels only')
     result = RunResult(loaded, paths, out, used_seed, stats, notes)
-    if runner is not None:
-        result.assertions, result.assertion_events = runner.results, runner.events
+    oracles.fill(result)
     return result
 
 
-EVENT_TOPICS = {kind.topic: kind.msgtype for kind in (FaultEvent, AssertionEvent, ScenarioStatus)}
+class Oracles:
+    """The observers that judge a run: fault manager first, then the assertion runner."""
 
+    def __init__(self, scenario: Scenario, schemas: dict[str, tuple[str, str, str]], catalog: TypeCatalog,
+                 emit: Callable[..., None], blackbox_base: Path | None = None) -> None:
+        from bagfault.fault_manager.model import FaultManagerEvent  # noqa: PLC0415
+        from bagfault.fault_manager.observer import FaultManagerObserver  # noqa: PLC0415
 
-def _runner(scenario: Scenario, topics: dict[str, str], catalog: TypeCatalog, emit: Callable[..., None]
-            ) -> AssertionRunner | None:
-    if not scenario.assertions:
-        return None
-    for msgtype, text in DEFINITIONS.items():
-        catalog.add_definition(msgtype, text)
-    return AssertionRunner(scenario, topics, catalog, emit)
+        kinds: list[Any] = [FaultEvent]
+        self.fault_manager = None
+        if scenario.fault_manager_config is not None:
+            catalog.add_definition(FaultManagerEvent.msgtype, FaultManagerEvent.definition)
+            self.fault_manager = FaultManagerObserver(scenario.fault_manager_config, scenario, schemas, catalog, emit,
+                                                      blackbox_base)
+            kinds.append(FaultManagerEvent)
+        self.runner = None
+        if scenario.assertions:
+            kinds += [AssertionEvent, ScenarioStatus]
+            for kind in kinds:
+                catalog.add_definition(kind.msgtype, kind.definition)
+            topics = {topic: entry[0] for topic, entry in schemas.items()}
+            topics.update({kind.topic: kind.msgtype for kind in kinds})
+            self.runner = AssertionRunner(scenario, topics, catalog, emit, self.fault_manager)
+            if self.fault_manager is not None:
+                self.fault_manager.status_listeners.append(self.runner.on_fault_status)
+        self.event_kinds = [k for k in kinds if k not in (FaultEvent,)]
+        self.observers: list[Observer] = [o for o in (self.fault_manager, self.runner) if o is not None]
+
+    def publish(self) -> None:
+        """The output is complete: black boxes take their names."""
+        if self.fault_manager is not None:
+            self.fault_manager.snapshots.publish()
+
+    def discard(self) -> None:
+        """The run failed: remove black boxes."""
+        if self.fault_manager is not None:
+            self.fault_manager.snapshots.discard()
+
+    def fill(self, result: RunResult) -> None:
+        """Copy verdicts into the result."""
+        if self.runner is not None:
+            result.assertions, result.assertion_events = self.runner.results, self.runner.events
+        if self.fault_manager is not None:
+            result.fault_manager = self.fault_manager.summary()
 
 
 def check(
@@ -194,9 +230,10 @@ def check(
     try:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
         topics = {c.topic: c.msgtype for c in inputs.channels}
-        collected: list[AssertionEvent | ScenarioStatus] = []
-        runner = _runner(loaded, topics, catalog, collected.append)
-        watchers: list[Observer] = [*([runner] if runner else []), *observers]
+        schemas = {c.topic: (c.msgtype, c.schema_encoding, c.schema_text) for c in inputs.channels}
+        collected: list[Any] = []
+        oracles = Oracles(loaded, schemas, catalog, collected.append)
+        watchers: list[Observer] = [*oracles.observers, *observers]
         event_codec = catalog.codec(FaultEvent.msgtype) if FaultEvent.topic in topics else None
         stats = RunStats()
         for channel_index, log_time, _, data in inputs.messages():
@@ -224,8 +261,7 @@ def check(
     finally:
         inputs.close()
     result = RunResult(loaded, [path], None, 0, stats, list(loaded.warnings), mode='check')
-    if runner is not None:
-        result.assertions, result.assertion_events = runner.results, collected
+    oracles.fill(result)
     if stats.input_messages == 0:
         result.notes.append('the recording holds no messages')
     return result

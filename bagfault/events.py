@@ -7,6 +7,7 @@ and fields, so tools made for ros2_fault_injection read them unchanged.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 TIME_DEFINITION = 'int32 sec\nuint32 nanosec\n'
 SEPARATOR = '=' * 80
@@ -36,11 +37,6 @@ SCENARIO_STATUS_MSG = with_time(
     'uint32 failed_count\nstring[] failed_assertion_ids\nstring[] failed_messages\n'
 )
 
-DEFINITIONS = {
-    FAULT_EVENT_TYPE: FAULT_EVENT_MSG,
-    ASSERTION_EVENT_TYPE: ASSERTION_EVENT_MSG,
-    SCENARIO_STATUS_TYPE: SCENARIO_STATUS_MSG,
-}
 
 
 @dataclass(frozen=True)
@@ -56,6 +52,11 @@ class FaultEvent:
 
     topic = FAULT_EVENT_TOPIC
     msgtype = FAULT_EVENT_TYPE
+    definition = FAULT_EVENT_MSG
+
+    def to_message(self, store: object) -> object:
+        """The ros2_fault_injection/msg/FaultEvent object."""
+        return to_message(self, store)
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,11 @@ class AssertionEvent:
 
     topic = ASSERTION_EVENT_TOPIC
     msgtype = ASSERTION_EVENT_TYPE
+    definition = ASSERTION_EVENT_MSG
+
+    def to_message(self, store: object) -> object:
+        """The ros2_fault_injection/msg/AssertionEvent object."""
+        return to_message(self, store)
 
 
 @dataclass(frozen=True)
@@ -86,13 +92,18 @@ class ScenarioStatus:
 
     topic = SCENARIO_STATUS_TOPIC
     msgtype = SCENARIO_STATUS_TYPE
+    definition = SCENARIO_STATUS_MSG
+
+    def to_message(self, store: object) -> object:
+        """The ros2_fault_injection/msg/ScenarioStatus object."""
+        return to_message(self, store)
 
 
-Event = FaultEvent | AssertionEvent | ScenarioStatus
+Event = Any  # FaultEvent, AssertionEvent, ScenarioStatus, or any record with topic/msgtype/definition/to_message
 
 
-def to_message(event: Event, store: object) -> object:
-    """Build the typestore message object of an event."""
+def to_message(event: FaultEvent | AssertionEvent | ScenarioStatus, store: object) -> object:
+    """Build the typestore message object of a flat event (stamp + fields)."""
     types = store.types  # type: ignore[attr-defined]
     stamp = types['builtin_interfaces/msg/Time'](sec=event.time // 1_000_000_000, nanosec=event.time % 1_000_000_000)
     values = {k: v for k, v in event.__dict__.items() if k != 'time'}

@@ -91,6 +91,9 @@ class AssertionType:
         """The `within` deadline passed while pending."""
         self.fail(time, f'{self.waiting_for()} within {self.spec.within:g} s (deadline {self.runner.t(time)})')
 
+    def on_fault_status(self, code: str, status: str, time: int) -> None:
+        """The fault manager oracle changed a fault's status."""
+
     def on_result(self, other: AssertionType) -> None:
         """Another assertion decided (for `sequence`)."""
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from bagfault.assertions.base import AssertionType
 from bagfault.assertions.fault_event import FaultEventAssertion
+from bagfault.assertions.fault_status import FaultCountAssertion, FaultStatusAssertion
 from bagfault.assertions.field_delta import FieldDeltaAssertion
 from bagfault.assertions.field_range import FieldRangeAssertion
 from bagfault.assertions.message_count import MessageCountAssertion
@@ -21,5 +22,7 @@ ASSERTION_TYPES: dict[str, type[AssertionType]] = {
         FieldDeltaAssertion,
         MessageCountAssertion,
         SequenceAssertion,
+        FaultStatusAssertion,
+        FaultCountAssertion,
     )
 }

@@ -10,6 +10,7 @@ record, so a failure at 4.0 s lands before the first record after 4.0 s.
 from __future__ import annotations
 
 import heapq
+import itertools
 from typing import TYPE_CHECKING, Any
 
 from bagfault.assertions.base import FAILED, PASSED, PENDING, AssertionType
@@ -35,6 +36,7 @@ class AssertionRunner:
         topics: dict[str, str],
         catalog: TypeCatalog,
         emit: Callable[[AssertionEvent | ScenarioStatus], None],
+        fault_manager: Any = None,
     ) -> None:
         self.scenario = scenario
         self.topic_types = topics
@@ -42,11 +44,13 @@ class AssertionRunner:
         self.emit = emit
         self.origin = 0
         self.now = 0
+        self.fault_manager = fault_manager
         self.active: dict[str, int] = {}
         self.checks: list[AssertionType] = [ASSERTION_TYPES[a.type](a, self) for a in scenario.assertions]
         self.by_id = {c.spec.id: c for c in self.checks}
         self.events: list[AssertionEvent | ScenarioStatus] = []
         self._deadlines: list[tuple[int, int, AssertionType]] = []
+        self._sequence = itertools.count()
         self._listeners: dict[str, list[AssertionType]] = {}
         self._codecs: dict[str, Any] = {}
         problems = []
@@ -80,10 +84,10 @@ class AssertionRunner:
     def start(self, origin: int) -> None:
         """Bag time zero is known: arm deadlines."""
         self.origin = self.now = origin
-        for number, check in enumerate(self.checks):
+        for check in self.checks:
             deadline = check.deadline()
             if deadline is not None:
-                heapq.heappush(self._deadlines, (deadline, number, check))
+                heapq.heappush(self._deadlines, (deadline, next(self._sequence), check))
 
     def advance(self, time: int) -> None:
         """Fire every deadline earlier than `time`."""
@@ -94,6 +98,17 @@ class AssertionRunner:
                 self.now = deadline
                 check.on_deadline(deadline)
         self.now = max(self.now, time)
+
+    def schedule(self, check: AssertionType, deadline: int) -> None:
+        """Arm a deadline found during the run (fault_status after a trigger)."""
+        heapq.heappush(self._deadlines, (deadline, next(self._sequence), check))
+
+    def on_fault_status(self, code: str, status: str, time: int) -> None:
+        """The fault manager changed a status."""
+        self.advance(time)
+        for check in self.checks:
+            if check.pending:
+                check.on_fault_status(code, status, time)
 
     def on_event(self, event: FaultEvent) -> None:
         """A fault changed state."""

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from bagfault.engine.merge import TimeOrderedMerge
 from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
-from bagfault.events import DEFINITIONS, Event, FaultEvent, to_message
+from bagfault.events import Event, FaultEvent
 from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 
 if TYPE_CHECKING:
@@ -154,8 +154,8 @@ class Pipeline:
         """Output channel and codec of an event type, registered on first use."""
         entry = self._event_channels.get(kind.msgtype)
         if entry is None:
-            self.catalog.add_definition(kind.msgtype, DEFINITIONS[kind.msgtype])
-            channel_id = self.sink.add_channel(kind.topic, kind.msgtype, 'ros2msg', DEFINITIONS[kind.msgtype])
+            self.catalog.add_definition(kind.msgtype, kind.definition)
+            channel_id = self.sink.add_channel(kind.topic, kind.msgtype, 'ros2msg', kind.definition)
             entry = (OutputChannel(channel_id, kind.topic, kind.msgtype), self.catalog.codec(kind.msgtype))
             self._event_channels[kind.msgtype] = entry
         return entry
@@ -163,7 +163,7 @@ class Pipeline:
     def write_event(self, event: Event) -> None:
         """Encode and write an event record at its own time."""
         channel, codec = self.event_channel(type(event))
-        self.sink.write(channel.id, event.time, event.time, codec.encode(to_message(event, codec.store)))
+        self.sink.write(channel.id, event.time, event.time, codec.encode(event.to_message(codec.store)))
         self.stats.output_messages += 1
         per_topic = self.stats.per_topic_out
         per_topic[channel.topic] = per_topic.get(channel.topic, 0) + 1

@@ -36,14 +36,11 @@ class Routing:
     copies: dict[int, OutputChannel] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     replaced: list[str] = field(default_factory=list)
+    schemas: dict[str, tuple[str, str, str]] = field(default_factory=dict)
 
     def output_types(self) -> dict[str, str]:
         """Type of every topic the output will hold (before event topics)."""
-        types = {c.topic: c.msgtype for c in self.copies.values()}
-        for runtimes in self.routes.values():
-            for runtime in runtimes:
-                types[runtime.channel.topic] = runtime.channel.msgtype
-        return types
+        return {topic: entry[0] for topic, entry in self.schemas.items()}
 
 
 def _topics_listing(inputs: InputSet) -> str:
@@ -127,6 +124,7 @@ def build_routing(
             channel_id = sink.add_channel(channel.topic, channel.msgtype, encoding, text,
                                           channel.message_encoding, dict(channel.metadata))
             routing.copies[number] = OutputChannel(channel_id, channel.topic, channel.msgtype)
+            routing.schemas[channel.topic] = (channel.msgtype, encoding, text)
         for spec, cls, found in injectors:
             if channel not in found:
                 continue
@@ -145,6 +143,7 @@ def build_routing(
             encoding, text = _schema(channel, catalog)
             channel_id = sink.add_channel(spec.output_topic, channel.msgtype, encoding, text,
                                           channel.message_encoding, dict(channel.metadata))
+            routing.schemas[spec.output_topic] = (channel.msgtype, encoding, text)
             rank += 1
             runtime = InjectorRuntime(
                 spec=spec,

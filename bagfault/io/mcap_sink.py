@@ -72,9 +72,21 @@ class McapSink:
 
     def finish(self) -> None:
         """Write the summary and move the file to its final name."""
+        self.close_unpublished()
+        self.publish()
+
+    def close_unpublished(self) -> None:
+        """Complete the file under its temporary name (published later, or aborted)."""
         try:
             self._writer.finish()
             self._stream.close()
+        except OSError as exc:
+            self.abort()
+            raise OutputError(f'{self.path}: cannot write: {exc.strerror}') from None
+
+    def publish(self) -> None:
+        """Move the completed file to its final name."""
+        try:
             os.replace(self._tmp, self.path)
         except OSError as exc:
             self.abort()

@@ -6,6 +6,7 @@ errors (the test renders the page in headless Chromium and reads them).
 
 from __future__ import annotations
 
+import json
 from html import escape
 from typing import TYPE_CHECKING, Any
 
@@ -94,6 +95,26 @@ def _fields(report: dict[str, Any], plots: Sequence[FieldPlot]) -> str:
     return ''.join(charts)
 
 
+def fault_manager_section(summary: dict[str, Any]) -> str:
+    """The fault manager's final table, events and snapshots."""
+    rows = ''.join(
+        f'<tr><td>{escape(f["fault_code"])}</td><td>{escape(f["severity"])}</td><td>{escape(f["status"])}</td>'
+        f'<td>{f["occurrence_count"]}</td><td>{f["first_occurred_s"]:.3f}</td><td>{f["last_occurred_s"]:.3f}</td></tr>'
+        for f in summary['faults'])
+    events = ''.join(f'<tr><td>{e["t_s"]:.3f}</td><td>{escape(e["event_type"])}</td><td>{escape(e["fault_code"])}'
+                     f'</td><td>{escape(e["status"])}</td></tr>' for e in summary['events'][:200])
+    snapshots = ''.join(
+        f'<p>Snapshot of {escape(s["fault_code"])} at {s["t_s"]:.3f} s'
+        f'{", black box " + escape(s["black_box"]) if s["black_box"] else ""}</p>'
+        f'<pre>{escape(json.dumps(s["freeze_frame"], indent=1, sort_keys=True)[:4000])}</pre>'
+        for s in summary['snapshots'])
+    return (f'<p>{len(summary["confirmed"])} confirmed; {summary["muted_count"]} muted; '
+            f'{summary["cluster_count"]} clusters.</p>'
+            '<table><tr><th>code</th><th>severity</th><th>status</th><th>occurrences</th><th>first (s)</th>'
+            f'<th>last (s)</th></tr>{rows}</table>'
+            f'<table><tr><th>t (s)</th><th>event</th><th>code</th><th>status</th></tr>{events}</table>{snapshots}')
+
+
 def render(
     report: dict[str, Any],
     rates: RateTracker | None = None,
@@ -108,6 +129,8 @@ def render(
     counts_table = ''.join(f'<tr><td>{escape(t)}</td><td>{n}</td></tr>'
                            for t, n in report['messages']['per_topic_written'].items())
     inputs = ', '.join(f'<code>{escape(p)}</code>' for p in report['inputs'])
+    if 'fault_manager' in report:
+        extra_sections = [('Fault manager', fault_manager_section(report['fault_manager'])), *extra_sections]
     sections = ''.join(f'<h2>{escape(title)}</h2>{body}' for title, body in extra_sections)
     notes = ''.join(f'<li>{escape(n)}</li>' for n in report['notes'])
     return f"""<!DOCTYPE html>

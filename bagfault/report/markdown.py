@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 
@@ -48,8 +49,42 @@ def render(report: dict[str, Any]) -> str:
         for a in report['assertions']:
             t = '' if a['t_s'] is None else f'{a["t_s"]:.3f}'
             lines.append(f'| {mark[a["state"]]} | {a["id"]} | {a["type"]} | {t} | {_cell(a["message"])} |')
+    if 'fault_manager' in report:
+        lines += fault_manager_section(report['fault_manager'])
     lines += ['', '## Topics written', '', '| topic | messages |', '|---|---:|']
     lines += [f'| {topic} | {count} |' for topic, count in report['messages']['per_topic_written'].items()]
     if report['notes']:
         lines += ['', '## Notes', ''] + [f'- {note}' for note in report['notes']]
     return '\n'.join(lines) + '\n'
+
+
+def fault_manager_section(summary: dict[str, Any]) -> list[str]:
+    """Final fault table, events, clusters and snapshots of the fault manager oracle."""
+    lines = ['', '## Fault manager', '',
+             f'{len(summary["confirmed"])} confirmed; {summary["muted_count"]} muted; '
+             f'{summary["cluster_count"]} clusters.', '',
+             '| code | severity | status | occurrences | first (s) | last (s) | sources |',
+             '|---|---|---|---:|---:|---:|---|']
+    for fault in summary['faults']:
+        lines.append(f'| {fault["fault_code"]} | {fault["severity"]} | {fault["status"]} | '
+                     f'{fault["occurrence_count"]} | {fault["first_occurred_s"]:.3f} | {fault["last_occurred_s"]:.3f} | '
+                     f'{", ".join(fault["reporting_sources"])} |')
+    if summary['events']:
+        lines += ['', '| t (s) | event | code | status | auto-cleared |', '|---:|---|---|---|---|']
+        shown = summary['events'][:200]
+        lines += [f'| {e["t_s"]:.3f} | {e["event_type"]} | {e["fault_code"]} | {e["status"]} | '
+                  f'{", ".join(e["auto_cleared_codes"])} |' for e in shown]
+        if len(summary['events']) > len(shown):
+            lines.append(f'| | ... {len(summary["events"]) - len(shown)} more events | | | |')
+    for cluster in summary['clusters']:
+        lines.append(f'- cluster {cluster["cluster_id"]} ({cluster["rule_name"]}): {cluster["count"]} faults, '
+                     f'shown as {cluster["representative_code"]}')
+    for muted in summary['muted']:
+        lines.append(f'- muted {muted["fault_code"]} (root {muted["root_cause_code"]}, rule {muted["rule_id"]}, '
+                     f'+{muted["delay_ms"]} ms)')
+    for snapshot in summary['snapshots']:
+        box = f', black box `{snapshot["black_box"]}` ({snapshot["black_box_messages"]} messages)' \
+            if snapshot['black_box'] else ''
+        lines += ['', f'### Snapshot of {snapshot["fault_code"]} at {snapshot["t_s"]:.3f} s{box}', '', '```json',
+                  json.dumps(snapshot['freeze_frame'], indent=1, sort_keys=True)[:4000], '```']
+    return lines

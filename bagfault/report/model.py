@@ -51,7 +51,10 @@ def build(result: RunResult) -> dict[str, Any]:
     ]
     counts = {state: sum(a['state'] == state for a in assertions) for state in ('passed', 'failed', 'pending')}
     statuses = [e for e in result.assertion_events if isinstance(e, ScenarioStatus)]
-    return {
+    extra: dict[str, Any] = {}
+    if result.fault_manager is not None:
+        extra['fault_manager'] = result.fault_manager
+    return extra | {
         'schema_version': SCHEMA_VERSION,
         'tool': {'name': 'bagfault', 'version': __version__},
         'mode': result.mode,

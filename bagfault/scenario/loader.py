@@ -17,13 +17,13 @@ from typing import Any
 from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 from bagfault.scenario.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
 
-TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description'}
+TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager'}
 INJECTOR_KEYS = {'id', 'type', 'topic', 'input_topic', 'output_topic', 'qos_depth', 'trigger_service',
                  'proxy_service', 'target_service', 'seed'}
 ENDPOINT_KEYS = {'input_topic', 'output_topic', 'qos_depth'}
 SERVICE_KEYS = {'proxy_service', 'target_service'}
 FAULT_KEYS = {'id', 'injector_id', 'active_on_startup', 'active', 'start', 'duration', 'config',
-              'repeat', 'probability_per_second', 'hold', 'after'}
+              'repeat', 'probability_per_second', 'hold', 'after', 'report'}
 SEED_MAX = 2**64 - 1
 
 
@@ -131,6 +131,12 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
 
     if 'seed' in root:
         scenario.seed = _seed(root['seed'], ('seed',), out)
+    if 'fault_manager' in root:
+        section = root['fault_manager']
+        if section is not None and not isinstance(section, dict):
+            out.add(('fault_manager',), 'must be a mapping')
+        else:
+            scenario.fault_manager = section or {}
     return scenario
 
 
@@ -269,6 +275,8 @@ def _fault(node: object, path: PathKey, out: _Collector, located: LocatedYaml) -
     from bagfault.scenario.schedules import parse_extended_schedule  # noqa: PLC0415
 
     parse_extended_schedule(fault, node, path, out)
+    if 'report' in node:
+        fault.report = node['report']
     return fault
 
 

@@ -70,7 +70,7 @@ class FaultSpec:
     probability_per_second: float | None = None
     hold: float | None = None
     after: After | None = None
-    report: dict[str, Any] | None = None
+    report: Any = None
     path: PathKey = ()
 
     @property
@@ -110,6 +110,7 @@ class Scenario:
     assertions: list[AssertionSpec]
     seed: int | None = None
     fault_manager: dict[str, Any] | None = None
+    fault_manager_config: Any = None
     warnings: list[str] = field(default_factory=list)
     source: Path | None = None
     text: str = ''

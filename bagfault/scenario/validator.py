@@ -31,6 +31,7 @@ def validate_scenario(scenario: Scenario, out: _Collector) -> None:
     for fault in scenario.faults:
         _check_fault(scenario, fault, out)
     _check_chains(scenario, out)
+    _check_fault_manager(scenario, out)
     for assertion in scenario.assertions:
         _check_assertion(scenario, assertion, out)
 
@@ -143,6 +144,21 @@ def _check_chains(scenario: Scenario, out: _Collector) -> None:
             probe = scenario.fault(probe.after.fault)
         if probe is not None and probe.id == fault.id:
             out.add(path, 'a fault cannot be chained after itself')
+
+
+def _check_fault_manager(scenario: Scenario, out: _Collector) -> None:
+    """Parse the fault_manager section and the faults' report blocks into scenario.fault_manager_config."""
+    from bagfault.fault_manager.config import parse_fault_manager, parse_report  # noqa: PLC0415
+
+    config = parse_fault_manager(scenario.fault_manager, out.add)
+    for fault in scenario.faults:
+        if fault.report is not None:
+            report = parse_report(fault.id, fault.injector_id, fault.report, (*fault.path, 'report'), out.add)
+            if report is not None:
+                config.reports.append(report)
+    uses = scenario.fault_manager is not None or config.reports or any(
+        a.type in ('fault_status', 'fault_count') for a in scenario.assertions)
+    scenario.fault_manager_config = config if uses else None
 
 
 def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> None:

@@ -1,0 +1,303 @@
+"""Fault correlation (ros2_medkit semantics): root cause -> symptoms, and auto-clusters.
+
+On every FAILED report, in this order: expired pending roots are dropped;
+the fault is checked as a symptom of a pending root (within window_ms
+after it), then as a root cause, then against cluster rules. Patterns use
+only `*` as wildcard and match the whole code.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from bagfault.fault_manager.model import SEVERITY_NAMES, ClusterInfo, MutedFaultInfo
+
+Problem = Callable[[tuple[Any, ...], str], None]
+REPRESENTATIVES = ('first', 'most_recent', 'highest_severity')
+
+
+def wildcard(pattern: str) -> re.Pattern[str]:
+    """'MOTOR_*' -> ^MOTOR_.*$ (only * is special)."""
+    return re.compile('^' + '.*'.join(re.escape(part) for part in pattern.split('*')) + '$')
+
+
+@dataclass
+class Rule:
+    """One correlation rule."""
+
+    id: str
+    name: str
+    mode: str
+    window_ms: int
+    root_codes: list[re.Pattern[str]] = field(default_factory=list)
+    symptom_codes: list[re.Pattern[str]] = field(default_factory=list)
+    mute_symptoms: bool = True
+    auto_clear_with_root: bool = True
+    match_codes: list[re.Pattern[str]] = field(default_factory=list)
+    min_count: int = 3
+    show_as_single: bool = True
+    representative: str = 'highest_severity'
+
+
+@dataclass
+class CorrelationConfig:
+    """Parsed `correlation:` block."""
+
+    enabled: bool = True
+    default_window_ms: int = 500
+    rules: list[Rule] = field(default_factory=list)
+
+
+def _codes(value: object, path: tuple[Any, ...], problem: Problem) -> list[re.Pattern[str]]:
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        problem(path, 'must be a non-empty list of codes (* is a wildcard)')
+        return []
+    return [wildcard(v) for v in value]
+
+
+def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem) -> CorrelationConfig | None:
+    """Parse and check; every problem reported."""
+    if not isinstance(node, dict):
+        problem(path, 'must be a mapping {enabled, default_window_ms, patterns, rules}')
+        return None
+    config = CorrelationConfig(enabled=bool(node.get('enabled', True)))
+    window = node.get('default_window_ms', 500)
+    if isinstance(window, bool) or not isinstance(window, int) or window <= 0:
+        problem((*path, 'default_window_ms'), f'{window!r} must be a positive integer (ms)')
+    else:
+        config.default_window_ms = window
+    patterns: dict[str, list[re.Pattern[str]]] = {}
+    for pattern_id, pattern in (node.get('patterns') or {}).items():
+        where = (*path, 'patterns', pattern_id)
+        if not isinstance(pattern, dict) or 'codes' not in pattern:
+            problem(where, 'must be {codes: [...]}')
+            continue
+        patterns[str(pattern_id)] = _codes(pattern['codes'], (*where, 'codes'), problem)
+
+    def refs(items: object, where: tuple[Any, ...]) -> list[re.Pattern[str]]:
+        out: list[re.Pattern[str]] = []
+        if not isinstance(items, list) or not items:
+            problem(where, 'must be a non-empty list of {pattern: ID} or {codes: [...]}')
+            return out
+        for number, item in enumerate(items):
+            if isinstance(item, dict) and 'pattern' in item:
+                if item['pattern'] not in patterns:
+                    problem((*where, number, 'pattern'), f"unknown pattern {item['pattern']!r}")
+                else:
+                    out += patterns[item['pattern']]
+            elif isinstance(item, dict) and 'codes' in item:
+                out += _codes(item['codes'], (*where, number, 'codes'), problem)
+            else:
+                problem((*where, number), 'must be {pattern: ID} or {codes: [...]}')
+        return out
+
+    seen: set[str] = set()
+    for number, item in enumerate(node.get('rules') or []):
+        where = (*path, 'rules', number)
+        if not isinstance(item, dict) or not isinstance(item.get('id'), str):
+            problem(where, 'a rule needs an id')
+            continue
+        if item['id'] in seen:
+            problem((*where, 'id'), f"duplicate rule id {item['id']!r}")
+        seen.add(item['id'])
+        mode = item.get('mode', 'hierarchical')
+        if mode not in ('hierarchical', 'auto_cluster'):
+            problem((*where, 'mode'), f"{mode!r} is not 'hierarchical' or 'auto_cluster'")
+            continue
+        window_ms = item.get('window_ms', config.default_window_ms)
+        if isinstance(window_ms, bool) or not isinstance(window_ms, int) or window_ms <= 0:
+            problem((*where, 'window_ms'), f'{window_ms!r} must be a positive integer (ms)')
+            window_ms = config.default_window_ms
+        rule = Rule(item['id'], str(item.get('name', item['id'])), mode, window_ms)
+        if mode == 'hierarchical':
+            root = item.get('root_cause')
+            if not isinstance(root, dict) or 'codes' not in root:
+                problem((*where, 'root_cause'), 'must be {codes: [...]}')
+            else:
+                rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
+            rule.symptom_codes = refs(item.get('symptoms'), (*where, 'symptoms'))
+            rule.mute_symptoms = bool(item.get('mute_symptoms', True))
+            rule.auto_clear_with_root = bool(item.get('auto_clear_with_root', True))
+        else:
+            rule.match_codes = refs(item.get('match'), (*where, 'match'))
+            min_count = item.get('min_count', 3)
+            if isinstance(min_count, bool) or not isinstance(min_count, int) or min_count <= 0:
+                problem((*where, 'min_count'), f'{min_count!r} must be a positive integer')
+            else:
+                rule.min_count = min_count
+            rule.show_as_single = bool(item.get('show_as_single', True))
+            representative = item.get('representative', 'highest_severity')
+            if representative not in REPRESENTATIVES:
+                problem((*where, 'representative'), f'{representative!r} is not one of {", ".join(REPRESENTATIVES)}')
+            else:
+                rule.representative = representative
+        config.rules.append(rule)
+    return config
+
+
+@dataclass
+class _PendingRoot:
+    code: str
+    rule: Rule
+    time: int
+
+
+@dataclass
+class _Cluster:
+    info: ClusterInfo
+    rule: Rule
+    severities: dict[str, int]
+    active: bool = False
+
+
+def _matches(code: str, patterns: list[re.Pattern[str]]) -> bool:
+    return any(p.match(code) for p in patterns)
+
+
+class CorrelationEngine:
+    """Keeps pending roots, symptoms, clusters and the muted set."""
+
+    def __init__(self, config: CorrelationConfig) -> None:
+        self.config = config
+        self.pending_roots: list[_PendingRoot] = []
+        self.symptoms: dict[str, list[str]] = {}
+        self.muted: dict[str, MutedFaultInfo] = {}
+        self.pending_clusters: dict[str, _Cluster] = {}
+        self.active_clusters: dict[str, _Cluster] = {}
+        self.member_of: dict[str, str] = {}
+        self._cluster_counter = 0
+
+    def process_failed(self, code: str, severity: int, time: int) -> bool:
+        """Correlate one FAILED report; return True when the fault is muted."""
+        if not self.config.enabled:
+            return False
+        self.pending_roots = [r for r in self.pending_roots if (time - r.time) // 1_000_000 <= r.rule.window_ms]
+        if self._as_symptom(code, time) or self._as_root(code, time) is not None:
+            return code in self.muted
+        self._as_cluster(code, severity, time)
+        return code in self.muted or self._hidden_by_cluster(code)
+
+    def _as_symptom(self, code: str, time: int) -> bool:
+        for root in self.pending_roots:
+            rule = root.rule
+            if not _matches(code, rule.symptom_codes):
+                continue
+            elapsed = (time - root.time) // 1_000_000
+            if elapsed > rule.window_ms or time < root.time:
+                continue
+            symptoms = self.symptoms.setdefault(root.code, [])
+            if code not in symptoms:
+                symptoms.append(code)
+            if rule.mute_symptoms:
+                self.muted[code] = MutedFaultInfo(code, root.code, rule.id, int(elapsed))
+            return True
+        return False
+
+    def _as_root(self, code: str, time: int) -> Rule | None:
+        for rule in self.config.rules:
+            if rule.mode == 'hierarchical' and _matches(code, rule.root_codes):
+                self.pending_roots.append(_PendingRoot(code, rule, time))
+                self.symptoms[code] = []
+                return rule
+        return None
+
+    def _as_cluster(self, code: str, severity: int, time: int) -> None:
+        for rule in self.config.rules:
+            if rule.mode != 'auto_cluster' or not _matches(code, rule.match_codes):
+                continue
+            cluster = self.pending_clusters.get(rule.id)
+            if cluster is not None and (time - cluster.info.first_at) // 1_000_000 > rule.window_ms:
+                del self.pending_clusters[rule.id]
+                cluster = None
+            if cluster is None:
+                self._cluster_counter += 1
+                info = ClusterInfo(f'{rule.id}_{self._cluster_counter}', rule.id, rule.name, rule.name, code,
+                                   SEVERITY_NAMES[severity], [code], time, time)
+                self.pending_clusters[rule.id] = _Cluster(info, rule, {code: severity})
+                self.member_of[code] = info.cluster_id
+                return
+            info = cluster.info
+            if code in info.fault_codes:
+                return
+            info.fault_codes.append(code)
+            info.last_at = time
+            cluster.severities[code] = severity
+            self.member_of[code] = info.cluster_id
+            if rule.representative == 'most_recent' or (
+                rule.representative == 'highest_severity' and severity > cluster.severities[info.representative_code]
+            ):
+                info.representative_code, info.representative_severity = code, SEVERITY_NAMES[severity]
+            if len(info.fault_codes) >= rule.min_count:
+                cluster.active = True
+                self.active_clusters[info.cluster_id] = cluster
+            return
+
+    def _hidden_by_cluster(self, code: str) -> bool:
+        cluster_id = self.member_of.get(code)
+        cluster = self.active_clusters.get(cluster_id) if cluster_id else None
+        return (cluster is not None and cluster.rule.show_as_single and code != cluster.info.representative_code
+                and code in cluster.info.fault_codes)
+
+    def is_muted(self, code: str) -> bool:
+        """Symptom muted by a rule, or hidden member of an active cluster."""
+        return code in self.muted or self._hidden_by_cluster(code)
+
+    def muted_faults(self) -> list[MutedFaultInfo]:
+        """Muted symptoms and hidden cluster members."""
+        out = dict(self.muted)
+        for cluster in self.active_clusters.values():
+            if not cluster.rule.show_as_single:
+                continue
+            info = cluster.info
+            for code in info.fault_codes:
+                if code != info.representative_code and code not in out:
+                    out[code] = MutedFaultInfo(code, info.representative_code, cluster.rule.id, 0)
+        return sorted(out.values(), key=lambda m: m.fault_code)
+
+    def process_clear(self, code: str) -> list[str]:
+        """Forget a cleared fault; return the symptoms to clear with it (auto_clear_with_root)."""
+        cleared: list[str] = []
+        symptoms = self.symptoms.pop(code, None)
+        if symptoms is not None:
+            rule = next((r for r in self.config.rules if r.mode == 'hierarchical' and _matches(code, r.root_codes)),
+                        None)
+            if rule is not None and rule.auto_clear_with_root:
+                cleared = list(symptoms)
+            for symptom in symptoms:
+                self.muted.pop(symptom, None)
+        self.pending_roots = [r for r in self.pending_roots if r.code != code]
+        cluster_id = self.member_of.pop(code, None)
+        if cluster_id is not None:
+            for table in (self.pending_clusters, self.active_clusters):
+                for key, cluster in list(table.items()):
+                    if cluster.info.cluster_id != cluster_id or code not in cluster.info.fault_codes:
+                        continue
+                    cluster.info.fault_codes.remove(code)
+                    cluster.severities.pop(code, None)
+                    if not cluster.info.fault_codes:
+                        del table[key]
+                    elif cluster.info.representative_code == code:
+                        _promote(cluster)
+        self.muted.pop(code, None)
+        for symptom in cleared:
+            self.muted.pop(symptom, None)
+        return cleared
+
+    def clusters(self) -> list[ClusterInfo]:
+        """Active clusters."""
+        return [c.info for c in self.active_clusters.values()]
+
+
+def _promote(cluster: _Cluster) -> None:
+    info = cluster.info
+    codes = info.fault_codes
+    choice = codes[0]
+    if cluster.rule.representative == 'most_recent':
+        choice = codes[-1]
+    elif cluster.rule.representative == 'highest_severity':
+        choice = max(codes, key=lambda c: cluster.severities.get(c, 0))
+    info.representative_code = choice
+    info.representative_severity = SEVERITY_NAMES[cluster.severities.get(choice, 0)]

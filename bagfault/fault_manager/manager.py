@@ -1,0 +1,232 @@
+"""The fault manager: debounce per fault code, correlation, events, ListFaults.
+
+Semantics are those of ros2_medkit's fault manager (see
+design/fault_manager.md), evaluated on bag time: every report carries its
+bag time, and time-based confirmation fires exactly at
+last_failed + auto_confirm_after_sec.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from bagfault.fault_manager.correlation import CorrelationEngine
+from bagfault.fault_manager.model import (
+    CLEARED,
+    CONFIRMED,
+    CRITICAL,
+    EVENT_CLEARED,
+    EVENT_CONFIRMED,
+    EVENT_UPDATED,
+    FAILED,
+    HEALED,
+    PASSED,
+    PREFAILED,
+    PREPASSED,
+    Fault,
+    FaultManagerEvent,
+    ListFaultsResult,
+    Report,
+    valid_code,
+)
+
+if TYPE_CHECKING:
+    from bagfault.fault_manager.config import FaultManagerConfig, Thresholds
+
+NS = 1_000_000_000
+
+
+def reject_reason(report: Report) -> str | None:
+    """Why a report is invalid, or None."""
+    if not valid_code(report.fault_code):
+        return f'invalid fault code {report.fault_code!r}'
+    if report.event_type not in (FAILED, PASSED):
+        return f'invalid event type {report.event_type}'
+    if report.event_type == FAILED and not 0 <= report.severity <= CRITICAL:
+        return f'invalid severity {report.severity}'
+    if not report.source_id:
+        return 'empty source_id'
+    return None
+
+
+class FaultManager:
+    """Aggregates reports into faults and emits FaultEvents."""
+
+    def __init__(self, config: FaultManagerConfig) -> None:
+        self.config = config
+        self.faults: dict[str, Fault] = {}
+        self.correlation = CorrelationEngine(config.correlation) if config.correlation else None
+        self.events: list[FaultManagerEvent] = []
+        self.rejected: list[tuple[Report, str]] = []
+        self.listeners: list = []
+        self.status_listeners: list = []
+        self._timers: list[tuple[int, int, str, int]] = []
+        self._counter = 0
+
+    # -- time -----------------------------------------------------------------
+    def advance(self, time: int) -> None:
+        """Fire time-based confirmations due before `time`."""
+        timers = self._timers
+        while timers and timers[0][0] < time:
+            due, _, code, wait = heapq.heappop(timers)
+            fault = self.faults.get(code)
+            if fault is None or fault.status != PREFAILED:
+                continue
+            if due - fault.last_occurred >= wait:  # a later FAILED re-armed the timer
+                self._set(fault, CONFIRMED, due)
+                self._emit(due, EVENT_CONFIRMED, fault)
+
+    def next_timer(self) -> int | None:
+        """Bag time of the next pending time-based confirmation."""
+        return self._timers[0][0] if self._timers else None
+
+    # -- reports ----------------------------------------------------------------
+    def report(self, report: Report) -> bool:
+        """Apply a ReportFault; return False when it is rejected."""
+        reason = reject_reason(report)
+        if reason:
+            self.rejected.append((report, reason))
+            return False
+        self.advance(report.time)
+        thresholds = self.config.thresholds_for(report.source_id)
+        fault = self.faults.get(report.fault_code)
+        if report.event_type == PASSED:
+            if fault is None or fault.status == CLEARED:
+                return True
+            self._passed(fault, report, thresholds)
+            return True
+        muted = False
+        if self.correlation is not None:
+            muted = self.correlation.process_failed(report.fault_code, report.severity, report.time)
+        self._failed(fault, report, thresholds, muted)
+        return True
+
+    def _status(self, fault: Fault, thresholds: Thresholds) -> str:
+        conf, heal = thresholds.confirmation_threshold, thresholds.healing_threshold
+        if fault.counter <= conf:
+            return CONFIRMED
+        if thresholds.healing_enabled and fault.counter >= heal:
+            return HEALED
+        if fault.status in (CONFIRMED, HEALED):
+            return fault.status
+        if fault.counter < 0:
+            return PREFAILED
+        if fault.counter > 0:
+            return PREPASSED
+        return fault.status
+
+    def _failed(self, fault: Fault | None, report: Report, thresholds: Thresholds, muted: bool) -> None:
+        time = report.time
+        if fault is None or fault.status == CLEARED:
+            if fault is None:
+                fault = Fault(report.fault_code, report.severity, report.description, time, time, 1, '',
+                              [report.source_id], counter=-1)
+                self.faults[report.fault_code] = fault
+            else:
+                fault.counter, fault.first_occurred, fault.last_occurred = -1, time, time
+                fault.occurrence_count += 1
+                fault.severity = max(fault.severity, report.severity)
+                if report.description:
+                    fault.description = report.description
+                if report.source_id not in fault.reporting_sources:
+                    fault.reporting_sources.append(report.source_id)
+                fault.status = PREFAILED
+            self._set(fault, CONFIRMED if report.severity == CRITICAL else self._status(fault, thresholds), time)
+            if fault.status == CONFIRMED and not muted:
+                self._emit(time, EVENT_CONFIRMED, fault)
+            self._arm(fault, thresholds)
+            return
+        before = fault.status
+        fault.counter = max(thresholds.confirmation_threshold, min(thresholds.healing_threshold, fault.counter))
+        fault.counter -= 1
+        fault.last_occurred = time
+        if report.source_id not in fault.reporting_sources:
+            fault.reporting_sources.append(report.source_id)
+        fault.severity = max(fault.severity, report.severity)
+        if report.description:
+            fault.description = report.description
+        self._set(fault, CONFIRMED if report.severity == CRITICAL else self._status(fault, thresholds), time)
+        if not muted:
+            if fault.status == CONFIRMED and before != CONFIRMED:
+                self._emit(time, EVENT_CONFIRMED, fault)
+            elif fault.status == CONFIRMED:
+                self._emit(time, EVENT_UPDATED, fault)
+        self._arm(fault, thresholds)
+
+    def _passed(self, fault: Fault, report: Report, thresholds: Thresholds) -> None:
+        before = fault.status
+        fault.counter = max(thresholds.confirmation_threshold, min(thresholds.healing_threshold, fault.counter))
+        fault.counter += 1
+        fault.last_passed = report.time
+        self._set(fault, self._status(fault, thresholds), report.time)
+        muted = self.correlation is not None and self.correlation.is_muted(fault.fault_code)
+        if fault.status == HEALED and before != HEALED:
+            self._emit(report.time, EVENT_CLEARED, fault)
+        elif before == CONFIRMED and fault.status == CONFIRMED and not muted:
+            self._emit(report.time, EVENT_UPDATED, fault)
+
+    def _arm(self, fault: Fault, thresholds: Thresholds) -> None:
+        if fault.status == PREFAILED and thresholds.auto_confirm_after_sec > 0:
+            self._counter += 1
+            wait = round(thresholds.auto_confirm_after_sec * NS)
+            heapq.heappush(self._timers, (fault.last_occurred + wait, self._counter, fault.fault_code, wait))
+
+    def clear(self, code: str, time: int, *, skip_correlation_auto_clear: bool = False) -> bool:
+        """ClearFault: status CLEARED, symptoms with it unless skipped; False for an unknown code."""
+        self.advance(time)
+        fault = self.faults.get(code)
+        if fault is None:
+            return False
+        cleared: list[str] = []
+        if self.correlation is not None:
+            symptoms = self.correlation.process_clear(code)
+            if not skip_correlation_auto_clear:
+                cleared = [s for s in symptoms if s in self.faults]
+        self._set(fault, CLEARED, time)
+        for symptom in cleared:
+            self._set(self.faults[symptom], CLEARED, time)
+            if self.correlation is not None:
+                self.correlation.process_clear(symptom)
+        self._emit(time, EVENT_CLEARED, fault, tuple(cleared))
+        return True
+
+    def _set(self, fault: Fault, status: str, time: int) -> None:
+        """Change a status and tell status listeners (assertions see PREFAILED too)."""
+        if fault.status != status:
+            fault.status = status
+            for listener in self.status_listeners:
+                listener(fault.fault_code, status, time)
+
+    def _emit(self, time: int, kind: str, fault: Fault, cleared: Sequence[str] = ()) -> None:
+        event = FaultManagerEvent(time, kind, fault.copy(), tuple(cleared))
+        self.events.append(event)
+        for listener in self.listeners:
+            listener(event)
+
+    # -- queries ------------------------------------------------------------------
+    def list_faults(
+        self,
+        statuses: Sequence[str] = (),
+        *,
+        filter_by_severity: bool = False,
+        severity: int = 0,
+        include_muted: bool = False,
+        include_clusters: bool = False,
+    ) -> ListFaultsResult:
+        """ListFaults: empty statuses means CONFIRMED only; muted faults hidden unless asked for."""
+        wanted = set(statuses) or {CONFIRMED}
+        muted = self.correlation.muted_faults() if self.correlation else []
+        muted_codes = {m.fault_code for m in muted}
+        faults = [
+            f.copy() for f in self.faults.values()
+            if f.status in wanted and (not filter_by_severity or f.severity == severity)
+            and (include_muted or f.fault_code not in muted_codes)
+        ]
+        clusters = self.correlation.clusters() if self.correlation else []
+        return ListFaultsResult(faults, len(muted), muted if include_muted else [], len(clusters),
+                                clusters if include_clusters else [])
+
+
+__all__ = ['PASSED', 'PREPASSED', 'FaultManager', 'reject_reason']

@@ -1,0 +1,281 @@
+"""The oracle cases of design/fault_manager.md, with their exact statuses, counts and events."""
+
+from __future__ import annotations
+
+import pytest
+
+from bagfault.fault_manager.config import FaultManagerConfig, Thresholds, parse_fault_manager
+from bagfault.fault_manager.manager import FaultManager
+from bagfault.fault_manager.model import CRITICAL, ERROR, FAILED, INFO, PASSED, WARN, Report
+
+NS = 1_000_000_000
+
+
+def manager(**thresholds) -> FaultManager:
+    return FaultManager(FaultManagerConfig(thresholds=Thresholds(**thresholds)))
+
+
+def failed(fm, code='F', time=0, severity=ERROR, source='/node', description=''):
+    assert fm.report(Report(code, FAILED, severity, description, source, time))
+
+
+def passed(fm, code='F', time=0, source='/node'):
+    assert fm.report(Report(code, PASSED, 0, '', source, time))
+
+
+def test_1_identical_failed_reports_confirm_once():
+    fm = manager()
+    for i in range(25):
+        failed(fm, time=i)
+    fault = fm.faults['F']
+    assert (fault.status, fault.occurrence_count) == ('CONFIRMED', 1)
+    assert [e.event_type for e in fm.events] == ['fault_confirmed'] + ['fault_updated'] * 24
+
+
+def test_2_threshold_three_any_source():
+    fm = manager(confirmation_threshold=-3)
+    failed(fm, source='/a')
+    failed(fm, source='/b')
+    assert fm.faults['F'].status == 'PREFAILED' and not fm.events
+    failed(fm, source='/c')
+    assert fm.faults['F'].status == 'CONFIRMED'
+    assert fm.faults['F'].reporting_sources == ['/a', '/b', '/c']
+
+
+def test_positive_and_zero_thresholds_are_normalized():
+    seen = []
+    config = parse_fault_manager({'confirmation_threshold': 3, 'healing_threshold': -2}, lambda p, m: seen.append(m))
+    assert (config.thresholds.confirmation_threshold, config.thresholds.healing_threshold) == (-3, 2) and not seen
+    assert parse_fault_manager({'confirmation_threshold': 0}, seen.append).thresholds.confirmation_threshold == -1
+
+
+def test_3_critical_confirms_at_once():
+    fm = manager(confirmation_threshold=-5)
+    failed(fm, severity=CRITICAL)
+    assert fm.faults['F'].status == 'CONFIRMED' and fm.events[0].event_type == 'fault_confirmed'
+
+
+def test_4_clear_then_failed_reactivates():
+    fm = manager()
+    failed(fm, time=1 * NS)
+    assert fm.clear('F', 2 * NS)
+    failed(fm, time=3 * NS)
+    fault = fm.faults['F']
+    assert (fault.status, fault.occurrence_count, fault.first_occurred) == ('CONFIRMED', 2, 3 * NS)
+    assert [e.event_type for e in fm.events] == ['fault_confirmed', 'fault_cleared', 'fault_confirmed']
+
+
+def test_5_passed_on_cleared_fault_is_ignored():
+    fm = manager()
+    failed(fm)
+    fm.clear('F', 1)
+    passed(fm, time=2)
+    assert fm.faults['F'].status == 'CLEARED' and fm.faults['F'].last_passed == 0
+
+
+def test_6_two_failed_three_passed_is_prepassed():
+    fm = manager(confirmation_threshold=-3)
+    failed(fm)
+    failed(fm)
+    for _ in range(3):
+        passed(fm)
+    assert (fm.faults['F'].status, fm.faults['F'].counter) == ('PREPASSED', 1)
+    assert not fm.events
+
+
+def test_7_confirmed_latches_without_healing():
+    fm = manager()
+    failed(fm, time=1000)
+    passed(fm, time=9000)
+    fault = fm.faults['F']
+    assert (fault.status, fault.last_occurred, fault.last_passed) == ('CONFIRMED', 1000, 9000)
+
+
+def test_8_healing_clamps_and_latches():
+    fm = manager(healing_enabled=True, healing_threshold=3)
+    failed(fm)
+    for _ in range(4):
+        passed(fm)
+    assert fm.faults['F'].status == 'HEALED'
+    for _ in range(100):
+        passed(fm)
+    assert (fm.faults['F'].status, fm.faults['F'].counter) == ('HEALED', 4)
+    for _ in range(3):
+        failed(fm)
+    assert fm.faults['F'].status == 'HEALED'
+    failed(fm)
+    assert fm.faults['F'].status == 'CONFIRMED'
+
+
+def test_9_healed_needs_the_full_confirmation_threshold():
+    fm = manager(confirmation_threshold=-3, healing_enabled=True, healing_threshold=3)
+    for _ in range(3):
+        failed(fm)
+    for _ in range(10):
+        passed(fm)
+    assert fm.faults['F'].status == 'HEALED'
+    for _ in range(5):
+        failed(fm)
+    assert fm.faults['F'].status == 'HEALED'
+
+
+def test_10_heal_threshold_zero_heals_on_one_passed():
+    fm = manager(healing_enabled=True, healing_threshold=0)
+    failed(fm)
+    passed(fm)
+    assert fm.faults['F'].status == 'HEALED'
+
+
+def test_11_time_confirmation_on_bag_time():
+    fm = manager(confirmation_threshold=-3, auto_confirm_after_sec=10)
+    failed(fm, time=100 * NS)
+    fm.advance(105 * NS)
+    assert fm.faults['F'].status == 'PREFAILED'
+    fm.advance(115 * NS)
+    assert fm.faults['F'].status == 'CONFIRMED'
+    [event] = fm.events
+    assert (event.event_type, event.time) == ('fault_confirmed', 110 * NS)
+
+
+def test_12_events():
+    fm = manager()
+    failed(fm, 'A', 1, severity=WARN)
+    failed(fm, 'A', 2, severity=ERROR)
+    assert fm.faults['A'].severity == ERROR
+    assert fm.clear('A', 3)
+    assert not fm.clear('UNKNOWN', 4)
+    assert [(e.event_type, e.fault.status) for e in fm.events] == [
+        ('fault_confirmed', 'CONFIRMED'), ('fault_updated', 'CONFIRMED'), ('fault_cleared', 'CLEARED')]
+    heal = manager(confirmation_threshold=-1, healing_enabled=True, healing_threshold=1)
+    failed(heal, 'H')
+    passed(heal, 'H')
+    passed(heal, 'H')
+    assert [(e.event_type, e.fault.status) for e in heal.events] == [
+        ('fault_confirmed', 'CONFIRMED'), ('fault_updated', 'CONFIRMED'), ('fault_cleared', 'HEALED')]
+
+
+def test_reports_are_validated():
+    fm = manager()
+    for report in [Report('bad code', FAILED, ERROR, '', '/n', 0), Report('A..B', FAILED, ERROR, '', '/n', 0),
+                   Report('X' * 129, FAILED, ERROR, '', '/n', 0), Report('OK', FAILED, 7, '', '/n', 0),
+                   Report('OK', FAILED, ERROR, '', '', 0)]:
+        assert not fm.report(report)
+    assert not fm.faults and len(fm.rejected) == 5
+
+
+def test_per_source_overrides_longest_prefix_wins():
+    config = parse_fault_manager({'confirmation_threshold': -3, 'overrides': [
+        {'source': '/powertrain', 'confirmation_threshold': -1},
+        {'source': '/powertrain/motor', 'confirmation_threshold': -2}]}, lambda p, m: pytest.fail(m))
+    assert config.thresholds_for('/powertrain/temp').confirmation_threshold == -1
+    assert config.thresholds_for('/powertrain/motor/left').confirmation_threshold == -2
+    assert config.thresholds_for('/powertrainx').confirmation_threshold == -3
+    fm = FaultManager(config)
+    failed(fm, 'T', source='/powertrain/temp')
+    assert fm.faults['T'].status == 'CONFIRMED'
+
+
+CORRELATION = {
+    'correlation': {
+        'default_window_ms': 500,
+        'patterns': {'motor': {'codes': ['MOTOR_*']}, 'comm': {'codes': ['COMM_*']}},
+        'rules': [
+            {'id': 'estop', 'mode': 'hierarchical', 'root_cause': {'codes': ['ESTOP_001']},
+             'symptoms': [{'pattern': 'motor'}, {'codes': ['DRIVE_FAULT']}]},
+            {'id': 'storm', 'name': 'Communication storm', 'mode': 'auto_cluster', 'match': [{'pattern': 'comm'}],
+             'min_count': 3, 'representative': 'highest_severity'},
+        ],
+    },
+}
+
+
+def correlated() -> FaultManager:
+    return FaultManager(parse_fault_manager(CORRELATION, lambda p, m: pytest.fail(m)))
+
+
+MS = 1_000_000
+
+
+def test_13_symptoms_within_the_window_are_muted_and_cleared_with_root():
+    fm = correlated()
+    failed(fm, 'ESTOP_001', 0, severity=CRITICAL)
+    failed(fm, 'MOTOR_COMM_FL', 100 * MS)
+    failed(fm, 'DRIVE_FAULT', 400 * MS)
+    result = fm.list_faults(include_muted=True)
+    assert result.muted_count == 2
+    assert {(m.fault_code, m.root_cause_code, m.delay_ms) for m in result.muted_faults} == {
+        ('MOTOR_COMM_FL', 'ESTOP_001', 100), ('DRIVE_FAULT', 'ESTOP_001', 400)}
+    assert [f.fault_code for f in fm.list_faults().faults] == ['ESTOP_001']
+    assert [e.fault.fault_code for e in fm.events if e.event_type == 'fault_confirmed'] == ['ESTOP_001']
+    fm.clear('ESTOP_001', 1 * NS)
+    assert fm.events[-1].auto_cleared_codes == ('MOTOR_COMM_FL', 'DRIVE_FAULT')
+    assert {c: f.status for c, f in fm.faults.items()} == {c: 'CLEARED' for c in ('ESTOP_001', 'MOTOR_COMM_FL',
+                                                                                  'DRIVE_FAULT')}
+    assert fm.list_faults().muted_count == 0
+
+
+def test_13_symptom_before_root_or_after_window_is_not_muted():
+    fm = correlated()
+    failed(fm, 'MOTOR_EARLY', 0)
+    failed(fm, 'ESTOP_001', 100 * MS)
+    failed(fm, 'MOTOR_LATE', 700 * MS)
+    assert fm.list_faults().muted_count == 0
+    assert {f.fault_code for f in fm.list_faults().faults} == {'MOTOR_EARLY', 'ESTOP_001', 'MOTOR_LATE'}
+
+
+def test_13_skip_correlation_auto_clear():
+    fm = correlated()
+    failed(fm, 'ESTOP_001', 0)
+    failed(fm, 'MOTOR_X', 10 * MS)
+    fm.clear('ESTOP_001', 1 * NS, skip_correlation_auto_clear=True)
+    assert fm.events[-1].auto_cleared_codes == () and fm.faults['MOTOR_X'].status == 'CONFIRMED'
+
+
+def test_13_cluster_keeps_the_critical_one_as_representative():
+    fm = correlated()
+    failed(fm, 'COMM_A', 0, severity=ERROR)
+    failed(fm, 'COMM_B', 100 * MS, severity=CRITICAL)
+    failed(fm, 'COMM_C', 200 * MS, severity=WARN)
+    result = fm.list_faults(include_clusters=True, include_muted=True)
+    assert result.cluster_count == 1
+    [cluster] = result.clusters
+    assert (cluster.cluster_id, cluster.representative_code, cluster.count) == ('storm_1', 'COMM_B', 3)
+    assert cluster.representative_severity == 'CRITICAL'
+    assert {m.fault_code for m in result.muted_faults} == {'COMM_A', 'COMM_C'}
+    assert [f.fault_code for f in fm.list_faults().faults] == ['COMM_B']
+
+
+def test_13_cluster_window_is_fixed_from_the_first_fault():
+    fm = correlated()
+    failed(fm, 'COMM_A', 0)
+    failed(fm, 'COMM_B', 100 * MS)
+    failed(fm, 'COMM_C', 600 * MS)
+    assert fm.list_faults(include_clusters=True).cluster_count == 0
+
+
+@pytest.mark.parametrize(('section', 'problem'), [
+    ({'correlation': {'rules': [{'id': 'a', 'mode': 'hierarchical', 'root_cause': {'codes': ['X']},
+                                 'symptoms': [{'pattern': 'nope'}]}]}}, "unknown pattern 'nope'"),
+    ({'correlation': {'rules': [{'id': 'a', 'mode': 'auto_cluster', 'match': [{'codes': ['X']}]},
+                                {'id': 'a', 'mode': 'auto_cluster', 'match': [{'codes': ['Y']}]}]}},
+     "duplicate rule id 'a'"),
+    ({'correlation': {'rules': [{'id': 'a', 'mode': 'auto_cluster', 'window_ms': 0, 'match': [{'codes': ['X']}]}]}},
+     'must be a positive integer (ms)'),
+    ({'correlation': {'rules': [{'id': 'a', 'mode': 'auto_cluster', 'min_count': 0, 'match': [{'codes': ['X']}]}]}},
+     '0 must be a positive integer'),
+    ({'correlation': {'rules': [{'id': 'a', 'mode': 'sideways'}]}}, "'sideways' is not"),
+])
+def test_correlation_config_errors(section, problem):
+    seen = []
+    parse_fault_manager(section, lambda path, message: seen.append(message))
+    assert any(problem in message for message in seen), seen
+
+
+def test_list_faults_filters():
+    fm = manager(confirmation_threshold=-2)
+    failed(fm, 'A', severity=INFO)
+    failed(fm, 'B', severity=CRITICAL)
+    assert [f.fault_code for f in fm.list_faults().faults] == ['B']
+    assert {f.fault_code for f in fm.list_faults(['CONFIRMED', 'PREFAILED']).faults} == {'A', 'B'}
+    assert [f.fault_code for f in fm.list_faults(['PREFAILED', 'CONFIRMED'], filter_by_severity=True,
+                                                 severity=INFO).faults] == ['A']
