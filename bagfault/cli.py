@@ -59,6 +59,16 @@ def _parser() -> argparse.ArgumentParser:
     info = sub.add_parser('info', help='what a bag holds')
     info.add_argument('inputs', type=Path, nargs='+', metavar='BAG')
 
+    latency = sub.add_parser('latency', help='path latency of a CARET architecture file on bags',
+                             usage='bagfault latency ARCH.yaml BAG... [--path NAME] [--json F] [--html F]\n'
+                                   '       bagfault latency validate ARCH.yaml')
+    latency.add_argument('items', nargs='+', metavar='ARG', help='ARCH.yaml BAG..., or validate ARCH.yaml')
+    latency.add_argument('--path', metavar='NAME', help='only this named path')
+    latency.add_argument('--json', type=Path, metavar='F')
+    latency.add_argument('--html', type=Path, metavar='F')
+    latency.add_argument('--stamp-origin', action='store_true',
+                         help="measure from the first message's header.stamp instead of its receive time")
+
     demo = sub.add_parser('demo', help='run the embedded demo bag and scenario')
     demo.add_argument('-o', '--output-dir', type=Path, default=Path('bagfault_demo'), metavar='DIR')
 
@@ -185,6 +195,31 @@ def _cmd_schema(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_latency(args: argparse.Namespace) -> int:
+    import json  # noqa: PLC0415
+
+    from bagfault.latency import LatencyError  # noqa: PLC0415
+    from bagfault.latency.architecture import load_architecture  # noqa: PLC0415
+    from bagfault.latency.report import measure, render_html, render_text, render_validation  # noqa: PLC0415
+
+    items = args.items
+    if items[0] == 'validate':
+        if len(items) != 2:
+            raise LatencyError('usage: bagfault latency validate ARCH.yaml')
+        architecture = load_architecture(items[1])
+        print(render_validation(architecture))
+        return EXIT_OK if all(p.usable for p in architecture.paths.values()) else EXIT_ERROR
+    if len(items) < 2:
+        raise LatencyError('usage: bagfault latency ARCH.yaml BAG... (or: bagfault latency validate ARCH.yaml)')
+    report = measure(items[0], items[1:], path=args.path, stamp_origin=args.stamp_origin)
+    print(render_text(report))
+    if args.json:
+        _write_text(args.json, json.dumps(report.to_dict(), indent=1, sort_keys=True) + '\n')
+    if args.html:
+        _write_text(args.html, render_html(report))
+    return EXIT_OK
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     from bagfault.report.info import render_info  # noqa: PLC0415
 
@@ -199,6 +234,7 @@ COMMANDS = {
     'schema': _cmd_schema,
     'info': _cmd_info,
     'demo': _cmd_demo,
+    'latency': _cmd_latency,
 }
 
 

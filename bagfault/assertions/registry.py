@@ -8,6 +8,7 @@ from bagfault.assertions.fault_status import FaultCountAssertion, FaultStatusAss
 from bagfault.assertions.field_delta import FieldDeltaAssertion
 from bagfault.assertions.field_range import FieldRangeAssertion
 from bagfault.assertions.message_count import MessageCountAssertion
+from bagfault.assertions.path_latency import PathLatencyAssertion
 from bagfault.assertions.sequence import SequenceAssertion
 from bagfault.assertions.topic_gap import TopicGapAssertion
 from bagfault.assertions.topic_hz import TopicHzAssertion
@@ -24,5 +25,6 @@ ASSERTION_TYPES: dict[str, type[AssertionType]] = {
         SequenceAssertion,
         FaultStatusAssertion,
         FaultCountAssertion,
+        PathLatencyAssertion,
     )
 }

@@ -1,0 +1,210 @@
+"""CARET architecture files, read the way caret_analyze reads them.
+
+Top level `named_paths`, `executors` and `nodes` are required (an empty
+list is fine); a missing or null required key is an error naming the key.
+`UNDEFINED` or a missing publish/subscribe topic means none. A problem
+inside one node skips that node with a warning, and a path through a
+skipped (or missing) node is reported as unusable rather than dropped.
+caret_analyze reads `callback_type`; `type:` (as in CARET's documentation
+sample) is accepted as an alias with a warning naming the node.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bagfault.latency import LatencyError
+
+UNDEFINED = 'UNDEFINED'
+CONTEXT_TYPES = ('use_latest_message', 'inherit_unique_stamp', 'callback_chain', 'tilde', UNDEFINED)
+CALLBACK_TYPES = ('timer_callback', 'subscription_callback')
+
+
+@dataclass(frozen=True)
+class MessageContext:
+    """How a node's output on publisher_topic relates to its input on subscription_topic."""
+
+    context_type: str
+    subscription_topic: str | None
+    publisher_topic: str | None
+
+
+@dataclass
+class Node:
+    """A node with its callbacks and message contexts."""
+
+    name: str
+    callbacks: list[dict[str, Any]] = field(default_factory=list)
+    publishes: list[str] = field(default_factory=list)
+    subscribes: list[str] = field(default_factory=list)
+    contexts: list[MessageContext] = field(default_factory=list)
+
+    def context(self, subscription: str | None, publisher: str | None) -> MessageContext | None:
+        """The message context for one input/output topic pair."""
+        return next((c for c in self.contexts
+                     if c.subscription_topic == subscription and c.publisher_topic == publisher), None)
+
+
+@dataclass(frozen=True)
+class PathNode:
+    """One element of a node chain."""
+
+    node_name: str
+    subscribe_topic: str | None
+    publish_topic: str | None
+
+
+@dataclass
+class NamedPath:
+    """A named path: its chain, the topics it runs over, and whether it can be measured."""
+
+    name: str
+    chain: list[PathNode]
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def topics(self) -> list[str]:
+        """The path's topics in order (publish topic of each node but the last)."""
+        return [n.publish_topic for n in self.chain[:-1] if n.publish_topic]
+
+    @property
+    def usable(self) -> bool:
+        """True when every node and hop is known."""
+        return not self.problems
+
+
+@dataclass
+class Architecture:
+    """A loaded architecture file."""
+
+    source: Path
+    paths: dict[str, NamedPath]
+    nodes: dict[str, Node]
+    executors: list[dict[str, Any]]
+    warnings: list[str] = field(default_factory=list)
+
+    def hops(self, path: NamedPath) -> list[tuple[str, str, str, MessageContext | None]]:
+        """(node, input topic, output topic, context) for each node between two path topics."""
+        out = []
+        for element in path.chain[1:-1]:
+            node = self.nodes.get(element.node_name)
+            context = node.context(element.subscribe_topic, element.publish_topic) if node else None
+            out.append((element.node_name, element.subscribe_topic or '', element.publish_topic or '', context))
+        return out
+
+
+def _required(obj: object, key: str, where: str) -> Any:
+    if not isinstance(obj, dict) or key not in obj:
+        raise LatencyError(f'{where}: required key {key!r} not found')
+    if obj[key] is None:
+        raise LatencyError(f'{where}: {key!r} value is None')
+    return obj[key]
+
+
+def _topic(value: object) -> str | None:
+    return None if value is None or value == UNDEFINED else str(value)
+
+
+def _node(raw: dict[str, Any], warnings: list[str]) -> Node:
+    """Parse one node; raise LatencyError for anything that makes caret_analyze reject it."""
+    name = str(_required(raw, 'node_name', 'node'))
+    where = f'node {name}'
+    node = Node(name)
+    for number, callback in enumerate(raw.get('callbacks') or []):
+        cb_where = f'{where}: callbacks[{number}]'
+        if isinstance(callback, dict) and 'callback_type' not in callback and 'type' in callback:
+            warnings.append(f"{where}: callback {callback.get('callback_name', number)!r} says 'type:'; "
+                            "caret_analyze reads 'callback_type:' (accepted here as an alias)")
+            callback = {**callback, 'callback_type': callback['type']}
+        kind = _required(callback, 'callback_type', cb_where)
+        if kind not in CALLBACK_TYPES:
+            raise LatencyError(f'{cb_where}: callback_type {kind!r} is not one of {", ".join(CALLBACK_TYPES)}')
+        _required(callback, 'callback_name', cb_where)
+        _required(callback, 'symbol', cb_where)
+        _required(callback, 'period_ns' if kind == 'timer_callback' else 'topic_name', cb_where)
+        node.callbacks.append({**callback, 'construction_order': callback.get('construction_order', 0)})
+    for number, group in enumerate(raw.get('callback_groups') or []):
+        for key in ('callback_group_type', 'callback_group_name', 'callback_names'):
+            _required(group, key, f'{where}: callback_groups[{number}]')
+    for number, passing in enumerate(raw.get('variable_passings') or []):
+        for key in ('callback_name_write', 'callback_name_read'):
+            _required(passing, key, f'{where}: variable_passings[{number}]')
+    for number, publish in enumerate(raw.get('publishes') or []):
+        node.publishes.append(str(_required(publish, 'topic_name', f'{where}: publishes[{number}]')))
+        _required(publish, 'callback_names', f'{where}: publishes[{number}]')
+    for number, subscribe in enumerate(raw.get('subscribes') or []):
+        node.subscribes.append(str(_required(subscribe, 'topic_name', f'{where}: subscribes[{number}]')))
+        _required(subscribe, 'callback_name', f'{where}: subscribes[{number}]')
+    for number, context in enumerate(raw.get('message_contexts') or []):
+        ctx_where = f'{where}: message_contexts[{number}]'
+        kind = _required(context, 'context_type', ctx_where)
+        if kind not in CONTEXT_TYPES:
+            raise LatencyError(f'{ctx_where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)})')
+        node.contexts.append(MessageContext(kind, _topic(_required(context, 'subscription_topic_name', ctx_where)),
+                                            _topic(_required(context, 'publisher_topic_name', ctx_where))))
+    return node
+
+
+def load_architecture(path: str | Path) -> Architecture:
+    """Read and check an architecture file; LatencyError names the file and the problem."""
+    file = Path(path)
+    try:
+        data = yaml.safe_load(file.read_text(encoding='utf-8'))
+    except FileNotFoundError:
+        raise LatencyError(f'{file}: architecture file not found') from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LatencyError(f'{file}: cannot read: {exc}') from None
+    except yaml.YAMLError as exc:
+        raise LatencyError(f'{file}: invalid YAML: {exc}') from None
+    if not isinstance(data, dict):
+        raise LatencyError(f'{file}: Failed to parse yaml: not a mapping')
+    try:
+        named_paths = _required(data, 'named_paths', 'architecture')
+        executors = _required(data, 'executors', 'architecture')
+        raw_nodes = _required(data, 'nodes', 'architecture')
+    except LatencyError as exc:
+        raise LatencyError(f'{file}: {exc}') from None
+    warnings: list[str] = []
+    nodes: dict[str, Node] = {}
+    skipped: dict[str, str] = {}
+    names = [n.get('node_name') for n in raw_nodes if isinstance(n, dict)]
+    for raw in raw_nodes:
+        try:
+            node = _node(raw, warnings)
+        except LatencyError as exc:
+            name = raw.get('node_name') if isinstance(raw, dict) else None
+            skipped[str(name)] = str(exc)
+            warnings.append(f'{exc}; node skipped')
+            continue
+        if names.count(node.name) > 1:
+            skipped[node.name] = f'node {node.name} is defined {names.count(node.name)} times'
+            warnings.append(f'{skipped[node.name]}; node skipped')
+            continue
+        nodes[node.name] = node
+    paths: dict[str, NamedPath] = {}
+    for number, raw in enumerate(named_paths):
+        try:
+            name = str(_required(raw, 'path_name', f'named_paths[{number}]'))
+            chain = [PathNode(str(_required(e, 'node_name', f'path {name}: node_chain[{i}]')),
+                              _topic(e.get('subscribe_topic_name')), _topic(e.get('publish_topic_name')))
+                     for i, e in enumerate(_required(raw, 'node_chain', f'path {name}'))]
+        except LatencyError as exc:
+            raise LatencyError(f'{file}: {exc}') from None
+        path = NamedPath(name, chain)
+        for element in chain:
+            if element.node_name in skipped:
+                path.problems.append(f'node {element.node_name} was skipped ({skipped[element.node_name]})')
+            elif element.node_name not in nodes:
+                path.problems.append(f'path goes through node {element.node_name}, which is not in nodes')
+        if len(chain) < 2:
+            path.problems.append('a path needs at least two nodes')
+        for before, after in zip(chain, chain[1:]):
+            if before.publish_topic is None or before.publish_topic != after.subscribe_topic:
+                path.problems.append(f'{before.node_name} publishes {before.publish_topic} but {after.node_name} '
+                                     f'subscribes {after.subscribe_topic}')
+        paths[name] = path
+    return Architecture(file, paths, nodes, list(executors), warnings)
