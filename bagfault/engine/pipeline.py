@@ -8,6 +8,10 @@ Messages of topics without an active fault are copied as raw bytes. The
 input is cut into segments at every fault change, so within a segment the
 set of active faults is fixed and an injector can treat the segment's
 messages as one batch.
+
+`batch=False` selects the simple reference path that the fast paths are
+tested against: every decodable message is decoded and re-encoded, and
+faults are applied one message at a time.
 """
 
 from __future__ import annotations
@@ -148,6 +152,7 @@ class Pipeline:
         self._merge = TimeOrderedMerge()
         self._event_channels: dict[str, tuple[OutputChannel, Any]] = {}
         self._runtimes = [runtime for runtimes in routes.values() for runtime in runtimes]
+        self._roundtrips: dict[int, Callable[[bytes | memoryview], bytes | memoryview]] = {}
 
     # -- events -----------------------------------------------------------
     def event_channel(self, kind: type[Event]) -> tuple[OutputChannel, Any]:
@@ -259,6 +264,8 @@ class Pipeline:
         grouped: dict[InjectorRuntime, list[RawMessage]] = {}
         for index in range(start, stop):
             channel, log_time, publish_time, data = batch[index]
+            if not self.batch:
+                data = self._roundtrip(channel)(data)
             copy = copies.get(channel)
             if copy is not None:
                 records.append((log_time, first_order + index, COPY_RANK, next(counter), copy, publish_time, data))
@@ -286,6 +293,15 @@ class Pipeline:
         self._emit(self._merge.release(records, horizon, is_sorted=is_sorted))
         if len(self._merge) > self.stats.max_buffered:
             self.stats.max_buffered = len(self._merge)
+
+    def _roundtrip(self, channel: int) -> Callable[[bytes | memoryview], bytes | memoryview]:
+        """Reference path: decode and re-encode a channel's messages (unchanged when undecodable)."""
+        function = self._roundtrips.get(channel)
+        if function is None:
+            codec = self.catalog.codec(self.inputs.channels[channel].msgtype)
+            function = (lambda data: data) if codec is None else (lambda data: codec.encode(codec.decode(data)))
+            self._roundtrips[channel] = function
+        return function
 
     def _emit(self, records: Any) -> None:
         write, observers, stats = self.sink.write, self.observers, self.stats

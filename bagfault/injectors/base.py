@@ -135,6 +135,13 @@ class Injector:
         return [path for prefix, path in cls.plotted if key.startswith(prefix)]
 
     plotted: ClassVar[tuple[tuple[str, str], ...]] = ()
+    # (field path, config key, 'bias' | 'noise') in the order `mutate` applies them; when every active
+    # key is one of these (or drop/delay), batches are patched in the CDR bytes instead of decoded.
+    linear_ops: ClassVar[tuple[tuple[str, str, str], ...]] = ()
+
+    @property
+    def _linear_keys(self) -> frozenset[str]:
+        return frozenset(key for _, key, _ in self.linear_ops) | self.stream_keys
 
     @classmethod
     def decodes(cls, faults: Sequence[FaultSpec]) -> bool:
@@ -185,7 +192,16 @@ class Injector:
         messages: list[RawMessage],
         active: Sequence[ActiveFault],
     ) -> list[RawMessage]:
-        """Mutate many messages; default decodes each one."""
+        """Mutate many messages: patched in the CDR bytes when only `linear_ops` keys are active,
+        decoded one by one otherwise. Both give the same bytes."""
+        if self.linear_ops and all(k in self._linear_keys for f in active for k in f.config):
+            patched = patch_linear(self, messages, active)
+            if patched is not None:
+                return patched
+        return self.decode_batch(messages, active)
+
+    def decode_batch(self, messages: list[RawMessage], active: Sequence[ActiveFault]) -> list[RawMessage]:
+        """Decode, mutate and encode each message."""
         assert self.codec is not None
         out = []
         for message in messages:
@@ -235,3 +251,40 @@ class ServiceInjector:
 
 
 InjectorType = type[Injector] | type[ServiceInjector]
+
+
+def patch_linear(injector: Injector, messages: list[RawMessage], active: Sequence[ActiveFault]) -> list[RawMessage] | None:
+    """Biases and noise on scalar fields of same-layout messages as numpy columns; None if layouts differ."""
+    import numpy as np  # noqa: PLC0415
+
+    from bagfault.faults.cdr import FieldLayout, LayoutError  # noqa: PLC0415
+    from bagfault.faults.combine import total  # noqa: PLC0415
+    from bagfault.faults.noise import gaussian  # noqa: PLC0415
+
+    assert injector.codec is not None
+    length = len(messages[0].data)
+    if any(len(m.data) != length for m in messages):
+        return None
+    paths = list(dict.fromkeys(path for path, _, _ in injector.linear_ops))
+    try:
+        layout = FieldLayout.of(messages[0].data, injector.codec.msgtype, injector.codec.store, paths)
+    except LayoutError:
+        return None
+    rows = np.frombuffer(bytearray(b''.join(m.data for m in messages)), dtype=np.uint8).reshape(len(messages), length)
+    if not layout.rows_matching(rows).all():
+        return None
+    columns = {path: layout.column(rows, path) for path in paths}
+    for path, key, kind in injector.linear_ops:
+        if kind == 'bias':
+            value = total(active, key)
+            if value != 0.0:
+                columns[path] = columns[path] + value
+        else:
+            noise = gaussian(active, key, len(messages))
+            if noise is not None:
+                columns[path] = np.where(noise != 0.0, columns[path] + noise, columns[path])
+    for path in paths:
+        layout.store(rows, path, columns[path])
+    blob = memoryview(rows.reshape(-1))
+    return [RawMessage(m.log_time, m.publish_time, blob[i * length:(i + 1) * length], m.order)
+            for i, m in enumerate(messages)]

@@ -25,6 +25,12 @@ class ImuInjector(Injector):
     message_types = ('sensor_msgs/msg/Imu',)
     plotted = (('angular_velocity_z', 'angular_velocity.z'), ('linear_acceleration_x', 'linear_acceleration.x'),
                ('linear_acceleration_y', 'linear_acceleration.y'), ('linear_acceleration_z', 'linear_acceleration.z'))
+    linear_ops = (
+        ('angular_velocity.z', 'angular_velocity_z_bias', 'bias'),
+        ('angular_velocity.z', 'angular_velocity_z_noise_stddev', 'noise'),
+        *((f'linear_acceleration.{a}', f'linear_acceleration_{a}_bias', 'bias') for a in AXES),
+        *((f'linear_acceleration.{a}', f'linear_acceleration_{a}_noise_stddev', 'noise') for a in AXES),
+    )
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,

@@ -27,6 +27,12 @@ class OdomInjector(Injector):
     message_types = ('nav_msgs/msg/Odometry',)
     plotted = (('x_', 'pose.pose.position.x'), ('y_', 'pose.pose.position.y'), ('yaw_', 'pose.pose.orientation.z'),
                ('pose_covariance', 'pose.covariance[0]'), ('twist_covariance', 'twist.covariance[0]'))
+    linear_ops = (
+        ('pose.pose.position.x', 'x_bias', 'bias'),
+        ('pose.pose.position.y', 'y_bias', 'bias'),
+        ('pose.pose.position.x', 'x_noise_stddev', 'noise'),
+        ('pose.pose.position.y', 'y_noise_stddev', 'noise'),
+    )
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,

@@ -6,11 +6,10 @@ import os
 import tempfile
 from pathlib import Path
 
-from mcap.writer import CompressionType, Writer
-
 from bagfault.io import OutputError
+from bagfault.io.mcap_writer import McapWriter
 
-COMPRESSIONS = {'none': CompressionType.NONE, 'lz4': CompressionType.LZ4, 'zstd': CompressionType.ZSTD}
+COMPRESSIONS = ('none', 'lz4', 'zstd')
 
 
 class McapSink:
@@ -35,10 +34,9 @@ class McapSink:
             raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
         self._tmp = Path(tmp)
         self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
-        self._writer.start(profile='ros2', library=f'bagfault {_version()}')
+        self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
+                                  library=f'bagfault {_version()}')
         self._schemas: dict[tuple[str, str, str], int] = {}
-        self.count = 0
 
     def add_channel(
         self,
@@ -60,7 +58,6 @@ class McapSink:
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Append one message."""
         self._writer.add_message(channel_id, log_time, data, publish_time)
-        self.count += 1
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Append a metadata record."""
@@ -94,6 +91,7 @@ class McapSink:
 
     def abort(self) -> None:
         """Drop the partial output."""
+        self._writer.abandon()
         try:
             self._stream.close()
         except OSError:
@@ -107,7 +105,4 @@ def _version() -> str:
     return __version__
 
 
-def compression_names() -> list[str]:
-    """Accepted --compression values."""
-    return list(COMPRESSIONS)
 

@@ -267,7 +267,7 @@ class McapSource:
             items = self._split(self._read_chunk(chunk))
             horizon = chunks[number + 1].start if number + 1 < len(chunks) else None
             in_order = all(items[i][0] <= items[i + 1][0] for i in range(len(items) - 1))
-            if not pending and in_order and (horizon is None or not items or items[-1][0] < horizon):
+            if not pending and in_order and (horizon is None or not items or items[-1][0] <= horizon):
                 for log_time, publish_time, channel_id, _, data in items:
                     index = ids.get(channel_id)
                     if index is None:

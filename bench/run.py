@@ -1,0 +1,228 @@
+"""bagfault benchmark: bagfault against the MCAP copy limit and a hand-written rosbags loop.
+
+    python bench/run.py [--seconds 60] [--repeat 3] [--long 600] [--json bench/results/out.json]
+
+Generates the deterministic bags (bench/bags.py) into bench/data, then runs
+in one go, alternating the contestants each repetition, every job in its
+own process (peak RSS per job):
+- limit: read every message with the `mcap` library and write it unchanged
+  (same zstd compression);
+- hand-written: what a user writes today with rosbags + mcap (decode every
+  message, bias and noise on the IMU, re-encode, write);
+- bagfault (a) faults defined, none active; (b) IMU bias + noise all along;
+  (c) PointCloud2 noise + point dropout all along; (d) drop 20 % + delay
+  50 ms on every topic.
+Prints median times, throughput, peak RSS and the ratios, and writes JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import textwrap
+import time
+from datetime import date
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+from bench.bags import KINDS, write_bag  # noqa: E402
+
+DATA = HERE / 'data'
+RESULTS = HERE / 'results'
+
+LIMIT = """
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+with open(SRC, 'rb') as src, open(DST, 'wb') as dst:
+    reader = make_reader(src)
+    writer = Writer(dst, compression=CompressionType.ZSTD)
+    writer.start(profile='ros2', library='limit')
+    ids = {}
+    for schema, channel, message in reader.iter_messages(log_time_order=False):
+        if channel.id not in ids:
+            schema_id = writer.register_schema(schema.name, schema.encoding, schema.data)
+            ids[channel.id] = writer.register_channel(channel.topic, channel.message_encoding, schema_id,
+                                                      channel.metadata)
+        writer.add_message(ids[channel.id], message.log_time, message.data, message.publish_time, message.sequence)
+    writer.finish()
+"""
+
+HAND = """
+import numpy as np
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+store = get_typestore(Stores.EMPTY)
+rng = np.random.default_rng(0)
+with open(SRC, 'rb') as src, open(DST, 'wb') as dst:
+    reader = make_reader(src)
+    summary = reader.get_summary()
+    types = {}
+    for schema in summary.schemas.values():
+        types.update(get_types_from_msg(schema.data.decode(), schema.name))
+    store.register(types)
+    writer = Writer(dst, compression=CompressionType.ZSTD)
+    writer.start(profile='ros2', library='hand-written')
+    ids = {}
+    for schema, channel, message in reader.iter_messages(log_time_order=False):
+        if channel.id not in ids:
+            schema_id = writer.register_schema(schema.name, schema.encoding, schema.data)
+            ids[channel.id] = writer.register_channel(channel.topic, channel.message_encoding, schema_id,
+                                                      channel.metadata)
+        decoded = store.deserialize_cdr(message.data, schema.name)
+        if schema.name == 'sensor_msgs/msg/Imu':
+            decoded.angular_velocity.z += 0.05 + rng.normal(0.0, 0.02)
+            decoded.linear_acceleration.z += 0.2 + rng.normal(0.0, 0.05)
+        data = store.serialize_cdr(decoded, schema.name)
+        writer.add_message(ids[channel.id], message.log_time, data, message.publish_time, message.sequence)
+    writer.finish()
+"""
+
+BAGFAULT = """
+from bagfault import api
+from bagfault.scenario import parse_scenario
+api.run(parse_scenario(SCENARIO), [SRC], DST, seed=1)
+"""
+
+
+def scenario(kind: str, case: str) -> str:
+    """The four bagfault scenarios for a bag kind (in-place injectors on its topics)."""
+    topics = KINDS[kind]
+    imus = [t.name for t in topics if t.msgtype == 'sensor_msgs/msg/Imu']
+    lines = ['injectors:']
+    faults = ['faults:']
+    if case in ('a', 'b'):
+        for number, topic in enumerate(imus):
+            lines.append(f'  - {{id: imu{number}, type: imu, input_topic: {topic}, output_topic: {topic}}}')
+            config = ('{angular_velocity_z_bias: 0.05, angular_velocity_z_noise_stddev: 0.02, '
+                      'linear_acceleration_z_bias: 0.2, linear_acceleration_z_noise_stddev: 0.05}')
+            schedule = 'active_on_startup: true' if case == 'b' else 'start: 100000.0'
+            faults.append(f'  - {{id: bias{number}, injector_id: imu{number}, {schedule}, config: {config}}}')
+    if case == 'c':
+        lines.append('  - {id: pc, type: pointcloud2, input_topic: /points, output_topic: /points}')
+        faults.append('  - {id: pc_noise, injector_id: pc, active_on_startup: true, '
+                      'config: {xyz_noise_stddev: 0.02, dropout_probability: 0.1}}')
+    if case == 'd':
+        for number, topic in enumerate(topics):
+            lines.append(f'  - {{id: s{number}, type: topic, input_topic: {topic.name}, output_topic: {topic.name}}}')
+            faults.append(f'  - {{id: f{number}, injector_id: s{number}, active_on_startup: true, '
+                          'config: {drop_probability: 0.2, delay_ms: 50}}')
+    return '\n'.join(lines + faults) + '\n'
+
+
+CASES = {
+    'sensor-heavy': ['a', 'c', 'd'],
+    'message-heavy': ['a', 'b', 'd'],
+}
+
+
+def run_job(code: str, **values: str) -> tuple[float, int]:
+    """Run one job in a fresh process; return (wall seconds, peak RSS bytes)."""
+    prelude = ''.join(f'{k} = {v!r}\n' for k, v in values.items())
+    started = time.perf_counter()
+    process = subprocess.Popen([sys.executable, '-c', prelude + textwrap.dedent(code)])
+    _, status, usage = os.wait4(process.pid, 0)
+    elapsed = time.perf_counter() - started
+    if status != 0:
+        raise SystemExit(f'benchmark job failed ({status}):\n{code}')
+    return elapsed, usage.ru_maxrss * 1024
+
+
+def ensure_bag(kind: str, seconds: float) -> Path:
+    """Generate the bag once per kind and length."""
+    DATA.mkdir(parents=True, exist_ok=True)
+    path = DATA / f'{kind}-{int(seconds)}s.mcap'
+    if not path.exists():
+        started = time.perf_counter()
+        count = write_bag(path, kind, seconds)
+        print(f'generated {path.name}: {count} messages, {path.stat().st_size / 1e6:.0f} MB '
+              f'in {time.perf_counter() - started:.1f} s', flush=True)
+    return path
+
+
+def count_messages(path: Path) -> int:
+    """Message count from the MCAP summary."""
+    from mcap.reader import make_reader  # noqa: PLC0415
+
+    with path.open('rb') as stream:
+        return make_reader(stream).get_summary().statistics.message_count
+
+
+def measure(kind: str, seconds: float, repeat: int, include_baselines: bool = True) -> dict[str, dict]:
+    """Alternate the contestants `repeat` times on one bag; medians."""
+    bag = ensure_bag(kind, seconds)
+    out = DATA / 'out.mcap'
+    jobs: dict[str, tuple[str, dict[str, str]]] = {}
+    if include_baselines:
+        jobs['limit'] = (LIMIT, {})
+        jobs['hand-written'] = (HAND, {})
+    for case in CASES[kind]:
+        jobs[f'bagfault ({case})'] = (BAGFAULT, {'SCENARIO': scenario(kind, case)})
+    samples: dict[str, list[tuple[float, int]]] = {name: [] for name in jobs}
+    for _ in range(repeat):
+        for name, (code, values) in jobs.items():
+            samples[name].append(run_job(code, SRC=str(bag), DST=str(out), **values))
+            out.unlink(missing_ok=True)
+    size, messages = bag.stat().st_size, count_messages(bag)
+    results = {}
+    for name, runs in samples.items():
+        seconds_taken = statistics.median(t for t, _ in runs)
+        results[name] = {'seconds': seconds_taken, 'runs': [t for t, _ in runs],
+                         'mb_per_s': size / 1e6 / seconds_taken, 'messages_per_s': messages / seconds_taken,
+                         'peak_rss_mb': max(r for _, r in runs) / 1e6}
+    for name, entry in results.items():
+        if 'limit' in results:
+            entry['vs_limit'] = results['limit']['seconds'] / entry['seconds']
+        if 'hand-written' in results:
+            entry['vs_hand_written'] = results['hand-written']['seconds'] / entry['seconds']
+    return {'bag': bag.name, 'bytes': size, 'messages': messages, 'results': results}
+
+
+def table(title: str, block: dict) -> str:
+    """Printable table of one bag's results."""
+    lines = [f'{title}: {block["bag"]} ({block["bytes"] / 1e6:.0f} MB, {block["messages"]} messages)',
+             f'  {"job":<16}{"median s":>10}{"MB/s":>9}{"msg/s":>11}{"RSS MB":>8}{"x limit":>9}{"x hand":>8}']
+    for name, entry in block['results'].items():
+        limit = f'{entry["vs_limit"]:.2f}' if 'vs_limit' in entry else '-'
+        hand = f'{entry["vs_hand_written"]:.2f}' if 'vs_hand_written' in entry else '-'
+        lines.append(f'  {name:<16}{entry["seconds"]:>10.2f}{entry["mb_per_s"]:>9.1f}{entry["messages_per_s"]:>11.0f}'
+                     f'{entry["peak_rss_mb"]:>8.0f}{limit:>9}{hand:>8}')
+    return '\n'.join(lines)
+
+
+def main() -> int:
+    """Run everything, print the tables, write JSON."""
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--seconds', type=float, default=60.0, help='bag length for the speed comparison')
+    parser.add_argument('--repeat', type=int, default=3, help='alternating repetitions (medians)')
+    parser.add_argument('--long', type=float, default=600.0, help='bag length for the memory check (0: skip)')
+    parser.add_argument('--json', type=Path, default=None)
+    args = parser.parse_args()
+    report: dict = {'date': date.today().isoformat(), 'machine': platform.platform(), 'cpus': os.cpu_count(),
+                    'python': platform.python_version(), 'seconds': args.seconds, 'repeat': args.repeat,
+                    'speed': {}, 'memory': {}}
+    for kind in KINDS:
+        block = measure(kind, args.seconds, args.repeat)
+        report['speed'][kind] = block
+        print(table(f'{kind}, {args.seconds:g} s', block), flush=True)
+    if args.long:
+        for kind in KINDS:
+            block = measure(kind, args.long, 1, include_baselines=False)
+            report['memory'][kind] = block
+            print(table(f'{kind}, {args.long:g} s (memory)', block), flush=True)
+            (DATA / f'{kind}-{int(args.long)}s.mcap').unlink(missing_ok=True)
+    path = args.json or RESULTS / f'bench-{report["date"]}.json'
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(report, indent=1, sort_keys=True) + '\n')
+    print(f'results written to {path}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,98 @@
+"""The lean MCAP writer produces files that the `mcap` library and rosbags read through every path."""
+
+from __future__ import annotations
+
+import io
+import struct
+import zlib
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader
+import zstandard
+from mcap.records import Chunk, Message, MessageIndex
+
+from bagfault.io.mcap_sink import McapSink
+from bagfault.io.mcap_writer import McapWriter
+
+TEXT = 'float64 data\n'
+TIMES = [1_000 + k * 10 + (0 if k % 5 else 25) for k in range(50)]  # every fifth message is late
+
+
+def write(stream: io.BytesIO | None = None, *, compression: str = 'zstd', chunk_size: int = 200) -> bytes:
+    """Two channels, log times interleaved and not sorted inside chunks, several small chunks."""
+    stream = stream or io.BytesIO()
+    writer = McapWriter(stream, compression=compression, chunk_size=chunk_size, library='test')
+    schema = writer.register_schema('std_msgs/msg/Float64', 'ros2msg', TEXT.encode())
+    first = writer.register_channel('/a', 'cdr', schema, {'offered_qos_profiles': ''})
+    second = writer.register_channel('/b', 'cdr', schema, {})
+    writer.add_metadata('info', {'k': 'v'})
+    for k in range(50):
+        channel = first if k % 3 else second
+        time = TIMES[k]
+        writer.add_message(channel, time, b'\x00\x01\x00\x00' + struct.pack('<d', k), time + 1, sequence=k)
+    writer.add_attachment(5, 6, 'scenario.yaml', 'application/yaml', b'faults: []\n')
+    writer.finish()
+    return stream.getvalue()
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', 'none'])
+def test_indexed_reader_sees_every_message_in_time_order(compression: str) -> None:
+    data = write(compression=compression)
+    reader = make_reader(io.BytesIO(data))
+    summary = reader.get_summary()
+    assert summary is not None
+    assert summary.statistics.message_count == 50
+    assert summary.statistics.channel_message_counts == {1: 33, 2: 17}
+    assert summary.statistics.chunk_count == len(summary.chunk_indexes) > 3
+    assert summary.statistics.message_start_time == min(TIMES) == 1_010
+    assert summary.statistics.message_end_time == max(TIMES) == 1_490
+    times = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
+    assert times == sorted(times) and len(times) == 50
+    only_b = [struct.unpack('<d', m.data[4:])[0] for _, _, m in reader.iter_messages(topics=['/b'])]
+    assert only_b == [k for k in range(50) if k % 3 == 0]
+    window = [m.log_time for _, _, m in reader.iter_messages(starting_at=1_100, ending_before=1_200)]
+    assert sorted(window) == [t for t in sorted(TIMES) if 1_100 <= t < 1_200]
+    assert [m.name for m in reader.iter_metadata()] == ['info']
+    assert [a.data for a in reader.iter_attachments()] == [b'faults: []\n']
+
+
+def test_crcs_validate_and_message_indexes_point_at_their_messages() -> None:
+    data = write()
+    decoded = list(StreamReader(io.BytesIO(data), skip_magic=False, validate_crcs=True).records)
+    assert sum(isinstance(r, Message) for r in decoded) == 50
+    records = list(StreamReader(io.BytesIO(data), skip_magic=False, emit_chunks=True).records)
+    seen = set()
+    body = b''
+    for record in records:
+        if isinstance(record, Chunk):
+            assert record.compression == 'zstd'
+            body = zstandard.ZstdDecompressor().decompress(record.data, max_output_size=record.uncompressed_size)
+            assert zlib.crc32(body) == record.uncompressed_crc
+        elif isinstance(record, MessageIndex):
+            for log_time, offset in record.records:
+                opcode, _, channel_id, _, stamp = struct.unpack_from('<BQHIQ', body, offset)
+                assert (opcode, channel_id, stamp) == (0x05, record.channel_id, log_time)
+                seen.add(stamp)
+    assert seen == set(TIMES)
+
+
+def test_output_is_identical_run_to_run_and_readable_by_rosbags(tmp_path: Path) -> None:
+    from rosbags.highlevel import AnyReader
+
+    assert write() == write()
+    path = tmp_path / 'out.mcap'
+    path.write_bytes(write())
+    with AnyReader([path]) as reader:
+        values = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()]
+    assert sorted(values) == [float(k) for k in range(50)]
+
+
+def test_failed_sink_leaves_nothing_under_the_requested_name(tmp_path: Path) -> None:
+    target = tmp_path / 'out.mcap'
+    sink = McapSink(target)
+    channel = sink.add_channel('/a', 'std_msgs/msg/Float64', 'ros2msg', TEXT)
+    sink.write(channel, 1, 1, b'\x00\x01\x00\x00' + bytes(8))
+    sink.abort()
+    assert list(tmp_path.iterdir()) == []
