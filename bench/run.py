@@ -122,16 +122,27 @@ CASES = {
 }
 
 
+PEAK_RSS = """
+import resource
+try:  # the job's own high-water mark (ru_maxrss would include the forking parent's memory)
+    with open('/proc/self/status') as status:
+        PEAK = int(next(line for line in status if line.startswith('VmHWM')).split()[1]) * 1024
+except (OSError, StopIteration):
+    PEAK = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+print('peak-rss', PEAK)
+"""
+
+
 def run_job(code: str, **values: str) -> tuple[float, int]:
-    """Run one job in a fresh process; return (wall seconds, peak RSS bytes)."""
+    """Run one job in a fresh process; return (wall seconds, its peak RSS in bytes)."""
     prelude = ''.join(f'{k} = {v!r}\n' for k, v in values.items())
     started = time.perf_counter()
-    process = subprocess.Popen([sys.executable, '-c', prelude + textwrap.dedent(code)])
-    _, status, usage = os.wait4(process.pid, 0)
+    done = subprocess.run([sys.executable, '-c', prelude + textwrap.dedent(code) + PEAK_RSS],
+                          stdout=subprocess.PIPE, text=True, check=False)
     elapsed = time.perf_counter() - started
-    if status != 0:
-        raise SystemExit(f'benchmark job failed ({status}):\n{code}')
-    return elapsed, usage.ru_maxrss * 1024
+    if done.returncode != 0:
+        raise SystemExit(f'benchmark job failed ({done.returncode}):\n{code}')
+    return elapsed, int(done.stdout.split()[-1])
 
 
 def ensure_bag(kind: str, seconds: float) -> Path:

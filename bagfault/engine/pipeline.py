@@ -34,7 +34,8 @@ if TYPE_CHECKING:
     from bagfault.io.types import TypeCatalog
     from bagfault.scenario.model import FaultSpec, InjectorSpec, Scenario
 
-BATCH = 4096
+BATCH = 4096  # messages per batch at most ...
+BATCH_BYTES = 4 << 20  # ... and about this many bytes, so writing overlaps the next batch's injection
 EVENT_RANK, COPY_RANK = -1, 0
 
 
@@ -188,15 +189,17 @@ class Pipeline:
         if self.scenario.faults:
             self.event_channel(FaultEvent)
         batch: list[tuple[int, int, int, bytes | memoryview]] = []
-        order = 0
+        order = size = 0
         for item in self.inputs.messages():
             if self.scheduler is None:
                 self._start(item[1])
             batch.append(item)
-            if len(batch) >= BATCH:
+            size += len(item[3])
+            if len(batch) >= BATCH or size >= BATCH_BYTES:
                 self._process(batch, order)
                 order += len(batch)
                 batch = []
+                size = 0
         if batch:
             self._process(batch, order)
         self._flush_injectors()
