@@ -267,6 +267,88 @@ def check(
     return result
 
 
+def _record_path(record: str | Path | None) -> Path | None:
+    if record is None:
+        return None
+    path = Path(record)
+    if not path.parent.is_dir():
+        raise OutputError(f'{path}: folder {path.parent} does not exist')
+    return path
+
+
+def proxy(
+    scenario: Scenario | str | Path,
+    *,
+    record: str | Path | None = None,
+    seed: int | None = None,
+    use_sim_time: bool = False,
+    stop: Any = None,
+) -> RunResult:
+    """Live proxy (`/x_raw` -> faults -> `/x`) until SIGINT/SIGTERM or `stop.set()`; needs rclpy."""
+    from bagfault.live import require_rclpy  # noqa: PLC0415
+
+    require_rclpy()
+    from bagfault.live.proxy import run_proxy  # noqa: PLC0415
+
+    loaded = _scenario(scenario)
+    used_seed = seed if seed is not None else loaded.seed if loaded.seed is not None else DEFAULT_SEED
+    return run_proxy(loaded, seed=used_seed, record=_record_path(record), use_sim_time=use_sim_time, stop=stop)
+
+
+def play(
+    scenario: Scenario | str | Path | None,
+    inputs: Sequence[str | Path],
+    *,
+    rate: float = 1.0,
+    clock: bool = False,
+    loop: bool = False,
+    record: str | Path | None = None,
+    seed: int | None = None,
+    delay: float = 0.5,
+    stop: Any = None,
+) -> RunResult:
+    """Publish bags on their topics through the scenario's faults (a plain player without one); needs rclpy."""
+    from bagfault.live import require_rclpy  # noqa: PLC0415
+
+    require_rclpy()
+    from bagfault.live.player import run_play  # noqa: PLC0415
+
+    loaded = _scenario(scenario) if scenario is not None else Scenario([], [], [])
+    paths = [Path(p) for p in inputs]
+    if not paths:
+        raise EngineError('no input bag given')
+    out = _record_path(record)
+    if out is not None:
+        _check_paths(paths, out)
+    used_seed = seed if seed is not None else loaded.seed if loaded.seed is not None else DEFAULT_SEED
+    return run_play(loaded, paths, seed=used_seed, rate=rate, clock=clock, loop=loop, record=out, delay=delay,
+                    stop=stop)
+
+
+def record(
+    topics: Sequence[str],
+    output: str | Path,
+    *,
+    every: bool = False,
+    duration: float | None = None,
+    use_sim_time: bool = False,
+    stop: Any = None,
+) -> Any:
+    """Record live topics (or all with `every`) into an MCAP; needs rclpy. Returns a RecordResult."""
+    from bagfault.live import require_rclpy  # noqa: PLC0415
+
+    require_rclpy()
+    from bagfault.live.recorder import run_record  # noqa: PLC0415
+
+    out = _record_path(output)
+    assert out is not None
+    if out.is_dir():
+        raise OutputError(f'{out}: is a directory; give a file name such as out.mcap')
+    if duration is not None and duration <= 0:
+        raise EngineError(f'--duration {duration:g}: must be above 0')
+    return run_record(list(topics), out, every=every, duration=duration, use_sim_time=use_sim_time, stop=stop)
+
+
 def validate(paths: Sequence[str | Path]) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     from bagfault.scenario import ScenarioError  # noqa: PLC0415
@@ -282,4 +364,4 @@ def validate(paths: Sequence[str | Path]) -> list[Scenario]:
     return scenarios
 
 
-__all__ = ['BagfaultError', 'RunResult', 'check', 'run', 'validate']
+__all__ = ['BagfaultError', 'RunResult', 'check', 'play', 'proxy', 'record', 'run', 'validate']

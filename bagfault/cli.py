@@ -69,6 +69,34 @@ def _parser() -> argparse.ArgumentParser:
     latency.add_argument('--stamp-origin', action='store_true',
                          help="measure from the first message's header.stamp instead of its receive time")
 
+    proxy = sub.add_parser('proxy', help="run the scenario's injectors on live ROS 2 topics (rclpy)")
+    proxy.add_argument('scenario', type=Path)
+    proxy.add_argument('--record', type=Path, metavar='OUT.mcap', help='record raw and faulty topics and events')
+    proxy.add_argument('--seed', type=int, default=None)
+    proxy.add_argument('--use-sim-time', action='store_true', help='follow /clock (scheduler starts with it)')
+    _report_options(proxy)
+
+    play = sub.add_parser('play', help="publish a bag on its topics, through a scenario's faults",
+                          usage='bagfault play [SCENARIO.yaml] INPUT... [--rate R] [--clock] [--loop] [--record OUT.mcap]')
+    play.add_argument('items', type=Path, nargs='+', metavar='[SCENARIO] INPUT',
+                      help='an optional scenario file (.yaml) followed by bags')
+    play.add_argument('--rate', type=float, default=1.0, help='playback speed factor (default 1.0)')
+    play.add_argument('--clock', action='store_true', help='publish /clock with the bag time')
+    play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
+    play.add_argument('--record', type=Path, metavar='OUT.mcap', help='record what was published and the events')
+    play.add_argument('--seed', type=int, default=None)
+    play.add_argument('--delay', type=float, default=0.5, metavar='SECONDS',
+                      help='wait before the first message so subscribers can connect (default 0.5)')
+    _report_options(play)
+
+    record = sub.add_parser('record', help='record live topics into an MCAP',
+                            usage='bagfault record (TOPIC... | --all) -o OUT.mcap [--duration S]')
+    record.add_argument('topics', nargs='*', metavar='TOPIC')
+    record.add_argument('--all', action='store_true', help='every topic, including ones that appear later')
+    record.add_argument('-o', '--output', type=Path, required=True)
+    record.add_argument('--duration', type=float, default=None, metavar='S', help='stop after S seconds')
+    record.add_argument('--use-sim-time', action='store_true', help='stamp messages with /clock time')
+
     demo = sub.add_parser('demo', help='run the embedded demo bag and scenario')
     demo.add_argument('-o', '--output-dir', type=Path, default=Path('bagfault_demo'), metavar='DIR')
 
@@ -148,6 +176,50 @@ def _cmd_check(args: argparse.Namespace) -> int:
     _write_reports(args, result, collectors)
     print_run_summary(result)
     return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _cmd_proxy(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+
+    scenario = api.load_scenario(args.scenario)
+    result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time)
+    _write_reports(args, result, [])
+    print_run_summary(result)
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _cmd_play(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+
+    items = list(args.items)
+    scenario = None
+    if items[0].suffix in ('.yaml', '.yml') and items[0].is_file():
+        scenario = api.load_scenario(items.pop(0))
+    if not items:
+        raise api.EngineError('play: give at least one bag after the scenario')
+    result = api.play(scenario, items, rate=args.rate, clock=args.clock, loop=args.loop, record=args.record,
+                      seed=args.seed, delay=args.delay)
+    _write_reports(args, result, [])
+    print_run_summary(result)
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+
+    result = api.record(args.topics, args.output, every=args.all, duration=args.duration,
+                        use_sim_time=args.use_sim_time)
+    for topic, count in sorted(result.counts.items()):
+        print(f'  {count:>9}  {topic}')
+    for topic in result.missing:
+        print(f'note: {topic} never appeared; nothing recorded for it')
+    for topic, msgtype in sorted(result.skipped.items()):
+        print(f'note: {topic} ({msgtype}) not recorded: no Python bindings for the type here')
+    print(f'recorded {sum(result.counts.values())} messages on {len(result.counts)} topics to {result.output}'
+          + (f' (stopped by {result.reason})' if result.reason else ''))
+    return EXIT_OK
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -234,6 +306,9 @@ COMMANDS = {
     'schema': _cmd_schema,
     'info': _cmd_info,
     'demo': _cmd_demo,
+    'proxy': _cmd_proxy,
+    'play': _cmd_play,
+    'record': _cmd_record,
     'latency': _cmd_latency,
 }
 

@@ -40,6 +40,7 @@ class ConfigField:
         min: Smallest accepted value (numbers only), inclusive.
         max: Largest accepted value (numbers only), inclusive.
         required: Every fault of this injector type must set the key.
+        choices: The only accepted values (strings), empty when any value goes.
 
     """
 
@@ -50,6 +51,7 @@ class ConfigField:
     min: float | None = None
     max: float | None = None
     required: bool = False
+    choices: tuple[str, ...] = ()
 
     def coerce(self, value: object) -> Any:
         """Return value converted to the field's type, or raise FieldValueError."""
@@ -59,6 +61,8 @@ class ConfigField:
                 raise FieldValueError(f'{_show(value)} is below the minimum {_show(self.min)}')
             if self.max is not None and coerced > self.max:
                 raise FieldValueError(f'{_show(value)} is above the maximum {_show(self.max)}')
+        if self.choices and coerced not in self.choices:
+            raise FieldValueError(f'{_show(value)} is not one of {", ".join(self.choices)}')
         return coerced
 
     def to_dict(self) -> dict[str, Any]:
@@ -74,6 +78,7 @@ class ConfigField:
             'min': self.min,
             'max': self.max,
             'required': self.required,
+            'choices': list(self.choices),
         }
 
 
@@ -202,4 +207,21 @@ DROP_PROBABILITY = probability(
 )
 DELAY_MS = integer(
     'delay_ms', 'Delay added before the message is forwarded, in milliseconds.', 0, min=0
+)
+
+
+def choice(key: str, description: str, choices: tuple[str, ...]) -> ConfigField:
+    """Declare a string field with a fixed set of values; the first is the default."""
+    return ConfigField(key, 'string', description, choices[0], choices=choices)
+
+
+# Injector keys every topic injector accepts.
+LIVE_OPTIONS = (
+    ConfigField('message_type', 'non_empty_string',
+                'Type of input_topic (pkg/msg/Name): checked against the bag, lets `validate` check field paths '
+                'early, and tells live mode the type before any publisher appears.'),
+    choice('reliability', 'QoS reliability of the live subscription and publisher.', ('reliable', 'best_effort')),
+    choice('durability', 'QoS durability of the live subscription and publisher.', ('volatile', 'transient_local')),
+    choice('on_malformed', 'Live mode: what to do with a message that cannot be decoded (it is counted and logged).',
+           ('forward', 'drop')),
 )

@@ -100,6 +100,13 @@ def build_routing(
                     f'{scenario_name}: injector {spec.id!r} ({spec.type}) needs {" or ".join(cls.message_types)} '
                     f'but topic {spec.input_topic} in the bag carries {wrong[0].msgtype or "an unknown type"}'
                 )
+        expected = spec.options.get('message_type')
+        if expected and any(c.msgtype != expected for c in found):
+            actual = next(c.msgtype for c in found if c.msgtype != expected)
+            raise EngineError(
+                f'{scenario_name}: injector {spec.id!r} expects message_type {expected} '
+                f'but topic {spec.input_topic} in the bag carries {actual or "an unknown type"}'
+            )
         injectors.append((spec, cls, found))
 
     in_place = {spec.input_topic for spec, _, _ in injectors if spec.input_topic == spec.output_topic}

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 from bagfault.errors import BagfaultError
 from bagfault.faults.combine import strongest
 from bagfault.faults.drop import drop_mask, should_drop
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, ConfigField
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -89,7 +89,7 @@ class Injector:
     description: ClassVar[str] = ''
     message_types: ClassVar[tuple[str, ...]] = ()
     fields: ClassVar[tuple[ConfigField, ...]] = (DROP_PROBABILITY, DELAY_MS)
-    options: ClassVar[tuple[ConfigField, ...]] = ()
+    options: ClassVar[tuple[ConfigField, ...]] = LIVE_OPTIONS
     live_only: ClassVar[bool] = False
     stream_keys: ClassVar[frozenset[str]] = frozenset({'drop_probability', 'delay_ms'})
 
@@ -119,6 +119,10 @@ class Injector:
     @classmethod
     def check_options(cls, options: dict[str, Any]) -> None:
         """Cross-field checks of injector options; raise InjectorConfigError."""
+        expected = options.get('message_type')
+        if expected and cls.message_types and expected not in cls.message_types:
+            raise InjectorConfigError(f'message_type {expected} does not fit injector type {cls.type_name!r}, '
+                                      f'which takes {" or ".join(cls.message_types)}')
 
     @classmethod
     def check_fault(cls, config: dict[str, Any], options: dict[str, Any]) -> None:

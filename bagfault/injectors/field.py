@@ -91,10 +91,6 @@ class FieldInjector(Injector):
     type_name = 'field'
     description = 'Any message type: operations on field paths (add, scale, set, noise, clamp, drift, ...).'
     message_types = ()
-    options: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('message_type', 'non_empty_string',
-                    'Expected type of input_topic; lets `validate` check paths of standard types early.'),
-    )
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,

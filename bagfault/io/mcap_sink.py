@@ -33,6 +33,7 @@ class McapSink:
         except OSError as exc:
             raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
         self._tmp = Path(tmp)
+        os.chmod(handle, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
         self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
                                   library=f'bagfault {_version()}')
@@ -97,6 +98,12 @@ class McapSink:
         except OSError:
             pass
         self._tmp.unlink(missing_ok=True)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _version() -> str:

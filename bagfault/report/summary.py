@@ -24,12 +24,17 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
     out = stream or sys.stdout
     stats = result.stats
     print(f'scenario  {result.scenario.name}  (seed {result.seed})', file=out)
-    print(f'inputs    {", ".join(str(p) for p in result.inputs)}', file=out)
+    live = ', '.join(sorted({i.input_topic for i in result.scenario.injectors if i.input_topic}))
+    sources = ", ".join(str(p) for p in result.inputs) if result.inputs else f'live topics {live}'.rstrip()
+    print(f'inputs    {sources}', file=out)
     if result.output is not None:
         print(f'output    {result.output}  ({stats.output_messages} messages from {stats.input_messages} read)',
               file=out)
-    else:
+    elif result.mode == 'check':
         print(f'checked   {stats.input_messages} messages', file=out)
+    else:
+        print(f'{result.mode:<9} {stats.output_messages} messages from {stats.input_messages} received (not recorded)',
+              file=out)
     if stats.events:
         print('fault events (bag time from zero):', file=out)
         for event in stats.events:

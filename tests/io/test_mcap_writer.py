@@ -96,3 +96,16 @@ def test_failed_sink_leaves_nothing_under_the_requested_name(tmp_path: Path) -> 
     sink.write(channel, 1, 1, b'\x00\x01\x00\x00' + bytes(8))
     sink.abort()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_sink_output_has_the_usual_file_permissions(tmp_path: Path) -> None:
+    import os
+    import stat
+
+    mask = os.umask(0o022)
+    try:
+        sink = McapSink(tmp_path / 'out.mcap')
+        sink.finish()
+    finally:
+        os.umask(mask)
+    assert stat.S_IMODE((tmp_path / 'out.mcap').stat().st_mode) == 0o644

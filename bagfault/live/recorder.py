@@ -1,0 +1,138 @@
+"""`bagfault record`: live topics into an MCAP with their schemas and QoS, for `bagfault check`.
+
+Topics are matched as they appear (given names, or every topic with --all);
+each is subscribed raw, with a QoS that accepts what its publishers offer
+(best effort if any publisher is best effort, transient local if all are),
+and written with the receive time on the node's clock (sim time with
+use_sim_time). Definitions come from the standard types of the distro.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import partial
+from typing import TYPE_CHECKING, Any
+
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from bagfault import __version__
+from bagfault.io.types import TypeCatalog
+from bagfault.live import LiveError
+from bagfault.live.recording import Recording
+from bagfault.live.ros import has_interface, interface_class, qos_yaml
+from bagfault.live.runtime import StopFlag, ros_context
+
+if TYPE_CHECKING:
+    from pathlib import Path  # noqa: TC003 - dataclass field types are resolved lazily
+
+DISCOVERY_PERIOD = 0.1  # seconds between looks at the graph for new topics
+DEPTH = 100
+
+
+@dataclass
+class RecordResult:
+    """What a recording holds."""
+
+    output: Path
+    counts: dict[str, int] = field(default_factory=dict)
+    missing: list[str] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)
+    reason: str = ''
+
+
+class Recorder:
+    """Subscribes to matching topics as they appear and writes what arrives."""
+
+    def __init__(self, node: Any, topics: list[str], every: bool, recording: Recording) -> None:
+        self.node = node
+        self.wanted = set(topics)
+        self.every = every
+        self.recording = recording
+        self.subscriptions: dict[str, Any] = {}
+        self.skipped: dict[str, str] = {}
+        self.counts: dict[str, int] = {}
+
+    def _profile(self, topic: str) -> QoSProfile:
+        offered = self.node.get_publishers_info_by_topic(topic)
+        reliable = all(info.qos_profile.reliability == ReliabilityPolicy.RELIABLE for info in offered)
+        latched = bool(offered) and all(info.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                                        for info in offered)
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
+                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+    def discover(self) -> None:
+        """Subscribe to matching topics that appeared since the last look."""
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic in self.subscriptions or topic in self.skipped:
+                continue
+            if not (self.every or topic in self.wanted):
+                continue
+            msgtype = types[0]
+            if not has_interface(msgtype):
+                self.skipped[topic] = msgtype
+                self.node.get_logger().warning(f'{topic}: {msgtype} has no Python bindings here; not recorded')
+                continue
+            profile = self._profile(topic)
+            self.recording.channel(topic, msgtype, {'offered_qos_profiles': qos_yaml(profile)})
+            self.subscriptions[topic] = self.node.create_subscription(
+                interface_class(msgtype), topic, partial(self._received, topic, msgtype), profile, raw=True)
+            self.node.get_logger().info(f'recording {topic} ({msgtype})')
+
+    def _received(self, topic: str, msgtype: str, data: bytes) -> None:
+        self.recording.write(topic, msgtype, self.node.get_clock().now().nanoseconds, data)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+
+def run_record(
+    topics: list[str],
+    output: Path,
+    *,
+    every: bool = False,
+    duration: float | None = None,
+    use_sim_time: bool = False,
+    stop: StopFlag | None = None,
+) -> RecordResult:
+    """Record until `duration` seconds (wall clock) have passed or a stop; the file is complete on return."""
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+    from rclpy.node import Node  # noqa: PLC0415
+    from rclpy.parameter import Parameter  # noqa: PLC0415
+
+    if not topics and not every:
+        raise LiveError('record: give topics to record or --all')
+    names = [t if t.startswith('/') else '/' + t for t in topics]
+    stop = stop or StopFlag()
+    with ros_context(stop) as context:
+        overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
+        node = Node('bagfault_recorder', context=context, parameter_overrides=overrides)
+        recording = Recording(output, TypeCatalog([], 'jazzy'))
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        finished = False
+        try:
+            recording.add_metadata('bagfault', {'tool': 'bagfault', 'version': __version__, 'mode': 'record',
+                                                'topics': ' '.join(names) if names else '--all'})
+            recorder = Recorder(node, names, every, recording)
+            node.get_logger().info('bagfault record ready')
+            started = last_look = time.monotonic()
+            recorder.discover()
+            while not stop:
+                now = time.monotonic()
+                if duration is not None and now - started >= duration:
+                    stop.set('duration')
+                    break
+                if now - last_look >= DISCOVERY_PERIOD:
+                    recorder.discover()
+                    last_look = now
+                executor.spin_once(timeout_sec=0.05)
+            finished = True
+        finally:
+            if finished:
+                recording.finish()
+            else:
+                recording.abort()
+            executor.shutdown()
+            node.destroy_node()
+    return RecordResult(output, dict(recorder.counts), sorted(set(names) - set(recorder.subscriptions)),
+                        dict(recorder.skipped), stop.reason)

@@ -1,0 +1,99 @@
+"""rclpy helpers: message classes by type name, QoS profiles, time conversions.
+
+Imported only by the live modules that talk to rclpy, so the rest of
+bagfault runs without ROS installed.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+import yaml
+from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from bagfault.live import LiveError
+
+RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 'best_effort': ReliabilityPolicy.BEST_EFFORT}
+DURABILITY = {'volatile': DurabilityPolicy.VOLATILE, 'transient_local': DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+def interface_class(name: str) -> Any:
+    """The Python class of a ROS interface ('sensor_msgs/msg/Imu', 'std_srvs/srv/Trigger')."""
+    parts = name.split('/')
+    if len(parts) != 3:
+        raise LiveError(f'{name}: not a full ROS 2 type name (package/msg/Name)')
+    package, kind, type_name = parts
+    try:
+        return getattr(importlib.import_module(f'{package}.{kind}'), type_name)
+    except (ImportError, AttributeError):
+        raise LiveError(
+            f'{name}: type not installed for rclpy (pip install ros-jazzy-{package.replace("_", "-")} '
+            'or source the workspace that builds it)'
+        ) from None
+
+
+def has_interface(name: str) -> bool:
+    """True when the type can be used with rclpy here."""
+    try:
+        interface_class(name)
+    except LiveError:
+        return False
+    return True
+
+
+def qos(depth: int, reliability: str = 'reliable', durability: str = 'volatile') -> QoSProfile:
+    """A keep-last profile from an injector's qos_depth, reliability and durability."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=RELIABILITY[reliability],
+                      durability=DURABILITY[durability])
+
+
+def recorded_qos(text: str, depth: int = 10) -> QoSProfile | None:
+    """The first profile of rosbag2's `offered_qos_profiles` YAML, None when absent or unreadable.
+
+    rosbag2 writes the policies as numbers (rmw enums; 1 = reliable or
+    transient_local) in older releases and as names in newer ones.
+    """
+    if not text:
+        return None
+    try:
+        profiles = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return None
+    if not isinstance(profiles, list) or not profiles or not isinstance(profiles[0], dict):
+        return None
+    first = profiles[0]
+
+    def policy(key: str, names: dict[str, Any], numbers: dict[int, Any], default: Any) -> Any:
+        value = first.get(key)
+        if isinstance(value, int) and value in numbers:
+            return numbers[value]
+        if isinstance(value, str) and value.lower() in names:
+            return names[value.lower()]
+        return default
+
+    reliability = policy('reliability', RELIABILITY, {1: ReliabilityPolicy.RELIABLE, 2: ReliabilityPolicy.BEST_EFFORT},
+                         ReliabilityPolicy.RELIABLE)
+    durability = policy('durability', DURABILITY, {1: DurabilityPolicy.TRANSIENT_LOCAL, 2: DurabilityPolicy.VOLATILE},
+                        DurabilityPolicy.VOLATILE)
+    recorded_depth = first.get('depth')
+    if not isinstance(recorded_depth, int) or recorded_depth <= 0:
+        recorded_depth = depth
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=recorded_depth, reliability=reliability,
+                      durability=durability)
+
+
+def qos_yaml(profile: QoSProfile) -> str:
+    """rosbag2-style `offered_qos_profiles` text (names) for a recorded channel."""
+    entry = {
+        'history': 'keep_last', 'depth': int(profile.depth),
+        'reliability': 'reliable' if profile.reliability == ReliabilityPolicy.RELIABLE else 'best_effort',
+        'durability': 'transient_local' if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL else 'volatile',
+    }
+    return yaml.safe_dump([entry], sort_keys=False)
+
+
+def sleep_duration(seconds: float) -> Duration:
+    """An rclpy Duration."""
+    return Duration(nanoseconds=round(seconds * 1e9))

@@ -1,0 +1,68 @@
+"""rclpy start-up and shut-down shared by proxy, play and record: a private context, clean stops.
+
+SIGINT and SIGTERM set a flag instead of raising inside a callback, so every
+command leaves its spin loop normally and finalises its recording.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+import traceback
+from typing import TYPE_CHECKING, Any
+
+from bagfault.live import require_rclpy
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+
+class StopFlag:
+    """Set by SIGINT/SIGTERM (or by the command itself when it is done)."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.reason = ''
+
+    def set(self, reason: str) -> None:
+        """Ask the spin loop to stop."""
+        if not self.event.is_set():
+            self.reason = reason
+            self.event.set()
+
+    def __bool__(self) -> bool:
+        return self.event.is_set()
+
+
+@contextlib.contextmanager
+def ros_context(stop: StopFlag) -> Iterator[Any]:
+    """An initialised rclpy context; signals set `stop` while it is open."""
+    require_rclpy()
+    import rclpy  # noqa: PLC0415
+    from rclpy.signals import SignalHandlerOptions  # noqa: PLC0415
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for number in (signal.SIGINT, signal.SIGTERM):
+            previous[number] = signal.signal(number, lambda n, _f: stop.set(signal.Signals(n).name))
+    try:
+        yield context
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        with contextlib.suppress(Exception):
+            rclpy.shutdown(context=context)
+
+
+def spin_until(executor: Any, stop: StopFlag, period: float = 0.05) -> None:
+    """Run callbacks until `stop` is set; a failing callback is reported and the node keeps running."""
+    while not stop:
+        try:
+            executor.spin_once(timeout_sec=period)
+        except Exception:  # noqa: BLE001 - one bad callback must not take the proxy down
+            print('bagfault: error in a callback (the proxy keeps running):', file=sys.stderr)
+            traceback.print_exc()

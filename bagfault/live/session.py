@@ -1,0 +1,375 @@
+"""A live session: the offline scheduler, injectors, oracles and MCAP sink on a live clock.
+
+No rclpy here. The proxy node hands each received message (serialized
+bytes) with the ROS time to `receive`, publishes what comes back (now, or
+later for delayed messages) and reports every publication to `sent`. Fault
+switches, config changes and reloads come from parameters and services.
+Everything runs under one lock, with the time read inside it, so the
+recording and the oracles see one time-ordered stream, as offline.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
+
+from bagfault.engine.pipeline import RunStats
+from bagfault.engine.scheduler import FaultScheduler
+from bagfault.events import FaultEvent
+from bagfault.injectors.base import ActiveFault, Injector, InjectorConfigError, RawMessage
+from bagfault.injectors.registry import get_injector_type
+from bagfault.live import LiveError
+from bagfault.schema import FieldValueError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from bagfault.io.types import TypeCatalog
+    from bagfault.live.recording import Recording
+    from bagfault.scenario.model import FaultSpec, InjectorSpec, Scenario
+
+
+class ReloadError(LiveError):
+    """A reloaded scenario is invalid or changes the injector layout; the running one stays."""
+
+
+@dataclass(eq=False)
+class LiveTopic:
+    """A topic injector wired for live mode, with its counters."""
+
+    spec: InjectorSpec
+    msgtype: str
+    injector: Injector
+    active: list[ActiveFault] = field(default_factory=list)
+    received: int = 0
+    forwarded: int = 0
+    malformed: int = 0
+    last_error: str = ''
+
+    @property
+    def input_topic(self) -> str:
+        """Topic the proxy subscribes to."""
+        assert self.spec.input_topic is not None
+        return self.spec.input_topic
+
+    @property
+    def output_topic(self) -> str:
+        """Topic the proxy publishes on."""
+        assert self.spec.output_topic is not None
+        return self.spec.output_topic
+
+
+@dataclass(frozen=True)
+class FaultState:
+    """What /diagnostics and the parameters show of one fault."""
+
+    fault_id: str
+    injector_id: str
+    active: bool
+    config: dict[str, Any]
+
+
+def _layout(scenario: Scenario) -> list[tuple[Any, ...]]:
+    """What a reload may not change: injector ids, types, endpoints, QoS."""
+    return [
+        (i.id, i.type, i.input_topic, i.output_topic, i.qos_depth, i.proxy_service, i.target_service,
+         sorted((k, repr(v)) for k, v in i.options.items()))
+        for i in scenario.injectors
+    ]
+
+
+class LiveSession:
+    """Owns the fault state of a proxy; thread-safe."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        catalog: TypeCatalog,
+        types: dict[str, str],
+        clock: Callable[[], int],
+        *,
+        seed: int,
+        recording: Recording | None = None,
+        blackbox_base: Any = None,
+    ) -> None:
+        from bagfault.api import Oracles  # noqa: PLC0415
+
+        self.scenario = scenario
+        self.catalog = catalog
+        self.clock = clock
+        self.seed = seed
+        self.recording = recording
+        self.lock = threading.RLock()
+        self.listeners: list[Callable[[list[FaultEvent]], None]] = []
+        self.stats = RunStats()
+        self.topics: list[LiveTopic] = []
+        catalog.add_definition(FaultEvent.msgtype, FaultEvent.definition)
+        for spec in scenario.injectors:
+            if spec.is_service:
+                continue
+            msgtype = types[spec.id]
+            self.topics.append(LiveTopic(spec, msgtype, self._build(spec, msgtype)))
+        schemas = {}
+        for topic in self.topics:
+            encoding, text = catalog.schema(topic.msgtype)
+            schemas[topic.input_topic] = schemas[topic.output_topic] = (topic.msgtype, encoding, text)
+        self.oracles = Oracles(scenario, schemas, catalog, self._oracle_event, blackbox_base)
+        self.scheduler: FaultScheduler | None = None
+        self.origin: int | None = None
+
+    # -- wiring -------------------------------------------------------------------
+    def _build(self, spec: InjectorSpec, msgtype: str) -> Injector:
+        cls = get_injector_type(spec.type)
+        assert cls is not None and issubclass(cls, Injector)
+        faults = self.scenario.faults_of(spec.id)
+        codec = self.catalog.codec(msgtype)
+        if codec is None and cls.decodes(faults):
+            raise LiveError(f'injector {spec.id!r}: cannot decode {msgtype}: {self.catalog.why_not(msgtype)}')
+        if codec is not None:
+            problems = cls.check_type(msgtype, codec.store, faults)
+            if problems:
+                raise LiveError(f'injector {spec.id!r} on {spec.input_topic}: ' + '; '.join(problems))
+        return cls(spec, codec, faults)
+
+    def _refresh_active(self) -> None:
+        assert self.scheduler is not None
+        for topic in self.topics:
+            topic.active = [
+                ActiveFault(f, self.scheduler.active[f.id], self.scheduler.random[f.id])
+                for f in self.scenario.faults_of(topic.spec.id)
+                if f.id in self.scheduler.active
+            ]
+
+    def _publish_events(self, events: list[FaultEvent]) -> None:
+        if not events:
+            return
+        self._refresh_active()
+        for event in events:
+            self.stats.events.append(event)
+            for observer in self.oracles.observers:
+                observer.on_event(event)
+            self._record_event(event)
+        for listener in self.listeners:
+            listener(events)
+
+    def _record_event(self, event: Any) -> None:
+        if self.recording is not None:
+            self.recording.write_event(event)
+        self.stats.output_messages += 1
+        self.stats.per_topic_out[event.topic] = self.stats.per_topic_out.get(event.topic, 0) + 1
+
+    def _oracle_event(self, event: Any) -> None:
+        """Assertion, scenario status and fault manager events: into the recording."""
+        self._record_event(event)
+
+    # -- clock ------------------------------------------------------------------------
+    def start(self) -> None:
+        """Bag time zero is now: scheduler origin, startup faults, oracles."""
+        with self.lock:
+            now = self.clock()
+            self.origin = now
+            self.stats.first_time = self.stats.origin = now
+            for kind in self.oracles.event_kinds:
+                self.catalog.add_definition(kind.msgtype, kind.definition)
+            if self.recording is not None:
+                self.recording.channel(FaultEvent.topic, FaultEvent.msgtype)
+                for kind in self.oracles.event_kinds:
+                    self.recording.channel(kind.topic, kind.msgtype)
+                for topic in self.topics:
+                    self.recording.channel(topic.input_topic, topic.msgtype)
+                    self.recording.channel(topic.output_topic, topic.msgtype)
+            self.scheduler = FaultScheduler(self.scenario, now, self.seed)
+            for observer in self.oracles.observers:
+                observer.start(now)
+            self._publish_events(self.scheduler.advance(now))
+            self._refresh_active()
+
+    @property
+    def started(self) -> bool:
+        """True after `start`."""
+        return self.scheduler is not None
+
+    def advance(self) -> None:
+        """Apply scheduled changes due by now."""
+        with self.lock:
+            if self.scheduler is None:
+                return
+            now = self.clock()
+            due = self.scheduler.next_time()
+            if due is not None and due <= now:
+                self._publish_events(self.scheduler.advance(now))
+
+    # -- messages ---------------------------------------------------------------------
+    def receive(self, topic: LiveTopic, data: bytes) -> list[RawMessage]:
+        """A message arrived on the input topic: record it and return what to publish, with due times."""
+        with self.lock:
+            now = self.clock()
+            if self.scheduler is not None:
+                due = self.scheduler.next_time()
+                if due is not None and due <= now:
+                    self._publish_events(self.scheduler.advance(now))
+            topic.received += 1
+            self.stats.input_messages += 1
+            self.stats.last_time = now
+            if self.recording is not None:
+                self.recording.write(topic.input_topic, topic.msgtype, now, data)
+            for observer in self.oracles.observers:
+                observer.on_message(topic.input_topic, now, data)
+            message = RawMessage(now, now, data, topic.received)
+            injector = topic.injector
+            if not topic.active and not injector.busy:
+                if injector.tracks_history:
+                    injector.watch([message])
+                return [message]
+            try:
+                return injector.process(message, topic.active)
+            except Exception as exc:  # noqa: BLE001 - a malformed message must never stop the proxy
+                topic.malformed += 1
+                topic.last_error = f'{type(exc).__name__}: {exc}'
+                if topic.spec.options.get('on_malformed', 'forward') == 'drop':
+                    return []
+                return [message]
+
+    def sent(self, topic: LiveTopic, data: bytes | memoryview) -> int:
+        """A message was published on the output topic: record and observe it; return its time."""
+        with self.lock:
+            now = self.clock()
+            topic.forwarded += 1
+            self.stats.output_messages += 1
+            self.stats.last_output_time = now
+            out = topic.output_topic
+            self.stats.per_topic_out[out] = self.stats.per_topic_out.get(out, 0) + 1
+            if self.recording is not None:
+                self.recording.write(out, topic.msgtype, now, data)
+            for observer in self.oracles.observers:
+                observer.on_message(out, now, data)
+            return now
+
+    # -- runtime control --------------------------------------------------------------
+    def set_active(self, fault_id: str, active: bool, source: str = 'manual') -> None:
+        """Switch a fault on or off now (a parameter or service call)."""
+        with self.lock:
+            if self.scheduler is None:
+                raise LiveError('the proxy has not started yet')
+            if self.scenario.fault(fault_id) is None:
+                raise LiveError(f'no fault {fault_id!r}')
+            event = self.scheduler.set_state(fault_id, active, self.clock(), source)
+            self._publish_events([event] if event is not None else [])
+
+    def check_config(self, fault_id: str, key: str, value: object) -> Any:
+        """The value as the schema accepts it; FieldValueError with the schema's reason otherwise."""
+        fault = self.scenario.fault(fault_id)
+        if fault is None:
+            raise FieldValueError(f'no fault {fault_id!r}')
+        spec = self.scenario.injector(fault.injector_id)
+        assert spec is not None
+        cls = get_injector_type(spec.type)
+        assert cls is not None
+        schema_field = cls.field(key)
+        if schema_field is None:
+            raise FieldValueError(f'{key!r} is not a config key of injector type {spec.type!r}')
+        coerced = schema_field.coerce(value)
+        config = {**fault.config, key: coerced}
+        try:
+            cls.check_fault(config, spec.options)
+        except InjectorConfigError as exc:
+            raise FieldValueError(str(exc)) from None
+        return coerced
+
+    def set_config(self, fault_id: str, key: str, value: object) -> list[tuple[LiveTopic, RawMessage]]:
+        """Change one config value now; a `config_updated` event; returns messages the old injector held."""
+        with self.lock:
+            coerced = self.check_config(fault_id, key, value)
+            fault = self.scenario.fault(fault_id)
+            assert fault is not None
+            fault.config = {**fault.config, key: coerced}
+            text = ('true' if coerced else 'false') if isinstance(coerced, bool) else str(coerced)
+            fault.config_text = {**fault.config_text, key: text}
+            held = self._rebuild(fault.injector_id)
+            event = FaultEvent(self.clock(), fault.id, fault.injector_id, 'config_updated', 'manual',
+                               fault.describe_config())
+            self._publish_events([event])
+            return held
+
+    def _rebuild(self, injector_id: str) -> list[tuple[LiveTopic, RawMessage]]:
+        """New injector instance for changed faults (injectors compile their faults); flush the old one."""
+        held: list[tuple[LiveTopic, RawMessage]] = []
+        for topic in self.topics:
+            if topic.spec.id == injector_id:
+                held += [(topic, m) for m in topic.injector.flush(self.clock())]
+                topic.injector = self._build(topic.spec, topic.msgtype)
+        return held
+
+    def reload(self, scenario: Scenario) -> list[tuple[LiveTopic, RawMessage]]:
+        """Take new fault definitions; the injector layout must stay as it is (anchor's rules)."""
+        with self.lock:
+            if _layout(scenario) != _layout(self.scenario):
+                raise ReloadError('reload rejected: injector ids, types, endpoints, QoS and count must stay the same')
+            if self.scheduler is None:
+                raise ReloadError('reload rejected: the proxy has not started yet')
+            now = self.clock()
+            old_active = set(self.scheduler.active)
+            previous = self.scenario
+            scheduler = FaultScheduler(scenario, self.scheduler.origin, self.seed)
+            scheduler.advance(now)
+            self.scenario = scenario
+            try:
+                held = [item for topic in self.topics for item in self._rebuild(topic.spec.id)]
+            except LiveError as exc:
+                self.scenario = previous
+                for topic in self.topics:
+                    topic.injector = self._build(topic.spec, topic.msgtype)
+                raise ReloadError(f'reload rejected: {exc}') from None
+            self.scheduler = scheduler
+            before = {f.id: f for f in previous.faults}
+            events = []
+            for fault in previous.faults:
+                if fault.id in old_active and fault.id not in scheduler.active:
+                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'inactive', 'reload',
+                                             fault.describe_config()))
+            for fault in scenario.faults:
+                old = before.get(fault.id)
+                if old is None or old.config != fault.config:
+                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'config_updated', 'reload',
+                                             fault.describe_config()))
+                if fault.id in scheduler.active and fault.id not in old_active:
+                    scheduler.active[fault.id] = now
+                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'active', 'reload',
+                                             fault.describe_config()))
+            self._publish_events(events)
+            return held
+
+    def active_faults(self, injector_id: str) -> list[ActiveFault]:
+        """Faults of one injector active now (service injectors ask per call)."""
+        with self.lock:
+            if self.scheduler is None:
+                return []
+            return [ActiveFault(f, self.scheduler.active[f.id], self.scheduler.random[f.id])
+                    for f in self.scenario.faults_of(injector_id) if f.id in self.scheduler.active]
+
+    # -- status ---------------------------------------------------------------------------
+    def faults(self) -> list[FaultState]:
+        """Every fault with its state and config, in file order."""
+        with self.lock:
+            active = self.scheduler.active if self.scheduler is not None else {}
+            return [FaultState(f.id, f.injector_id, f.id in active, copy.deepcopy(f.config)) for f in self.scenario.faults]
+
+    def flush(self) -> list[tuple[LiveTopic, RawMessage]]:
+        """Messages injectors still hold (reorder windows), to publish before stopping."""
+        with self.lock:
+            now = self.clock()
+            return [(topic, m) for topic in self.topics for m in topic.injector.flush(now)]
+
+    def finish(self) -> RunStats:
+        """End of the session: pending assertions fail, recording completed."""
+        with self.lock:
+            now = self.clock()
+            for observer in self.oracles.observers:
+                observer.finish(now)
+            self.stats.last_time = now
+            if self.recording is not None:
+                self.recording.finish()
+            self.oracles.publish()
+            return replace(self.stats)

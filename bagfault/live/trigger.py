@@ -1,0 +1,91 @@
+"""Live half of the `trigger_service` injector: a std_srvs/srv/Trigger proxy with the anchor's meaning.
+
+Clients call `proxy_service`; the request goes to `target_service` unless an
+active fault says otherwise. `delay_ms` (longest active) delays the answer,
+`force_failure` answers success=false with `failure_message` without calling
+the target. A target that is not there, or does not answer within
+TARGET_TIMEOUT, gives success=false with a message that says so instead of
+a client that hangs.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.task import Future
+
+from bagfault.faults.combine import strongest
+from bagfault.live.ros import interface_class
+
+if TYPE_CHECKING:
+    from bagfault.live.session import LiveSession
+    from bagfault.scenario.model import InjectorSpec
+
+TARGET_WAIT = 0.1  # seconds to wait for the target to be discovered
+TARGET_TIMEOUT = 2.0  # seconds to wait for the target's answer
+
+
+class TriggerProxy:
+    """Serves proxy_service and forwards to target_service."""
+
+    def __init__(self, node: Any, spec: InjectorSpec, session: LiveSession) -> None:
+        self.node = node
+        self.spec = spec
+        self.session = session
+        self.calls = 0
+        trigger = interface_class('std_srvs/srv/Trigger')
+        group = ReentrantCallbackGroup()
+        assert spec.proxy_service and spec.target_service
+        self.client = node.create_client(trigger, spec.target_service, callback_group=group)
+        self.service = node.create_service(trigger, spec.proxy_service, self.handle, callback_group=group)
+
+    def _after(self, seconds: float) -> Future:
+        """A future done after `seconds` of the node's clock."""
+        future = Future()
+
+        def fire() -> None:
+            if not (future.done() or future.cancelled()):
+                future.set_result(True)
+
+        def release(_future: Future) -> None:
+            timer.cancel()
+            if timer in self.node.timers:
+                self.node.destroy_timer(timer)
+
+        timer = self.node.create_timer(seconds, fire)
+        future.add_done_callback(release)
+        return future
+
+    async def handle(self, request: Any, response: Any) -> Any:
+        """One call: delay, forced failure, or forward."""
+        self.calls += 1
+        active = self.session.active_faults(self.spec.id)
+        delay_ms, _ = strongest(active, 'delay_ms')
+        if delay_ms > 0:
+            await self._after(delay_ms / 1000.0)
+        failing = next((f for f in active if f.config.get('force_failure')), None)
+        if failing is not None:
+            response.success = False
+            response.message = str(failing.config.get('failure_message', 'Injected failure'))
+            return response
+        if not self.client.service_is_ready():
+            await self._after(TARGET_WAIT)
+        if not self.client.service_is_ready():
+            response.success = False
+            response.message = f'target service {self.spec.target_service} is not available'
+            return response
+        answer = self.client.call_async(request)
+        done = Future()
+        answer.add_done_callback(lambda _f: done.done() or done.set_result('answer'))
+        timeout = self._after(TARGET_TIMEOUT)
+        timeout.add_done_callback(lambda _f: done.done() or done.set_result('timeout'))
+        if await done == 'timeout':
+            response.success = False
+            response.message = f'target service {self.spec.target_service} did not answer within {TARGET_TIMEOUT:g} s'
+            return response
+        timeout.cancel()
+        reply = answer.result()
+        response.success = reply.success
+        response.message = reply.message
+        return response

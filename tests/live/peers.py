@@ -1,0 +1,226 @@
+"""Separate ROS 2 processes the live tests talk to: publishers, subscribers, parameter and service clients.
+
+    python peers.py publish-imu TOPIC --rate 200 --seconds 5
+    python peers.py echo TOPIC TYPE --seconds 5 [--fields a.b c.d]   (JSON lines: receive time, fields)
+    python peers.py clock-check TOPIC TYPE --seconds 10                (JSON: order of /clock and stamps)
+    python peers.py set-param NODE NAME VALUE                          (prints the result)
+    python peers.py trigger-server SERVICE --message TEXT
+    python peers.py trigger-call SERVICE [--timeout S]                 (prints JSON: success, message, seconds)
+
+Each prints 'ready' on stderr once its endpoints exist.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+
+def interface(name: str):
+    package, kind, type_name = name.split('/')
+    return getattr(importlib.import_module(f'{package}.{kind}'), type_name)
+
+
+def field(message, path: str):
+    value = message
+    for part in path.split('.'):
+        value = getattr(value, part)
+    return value
+
+
+def publish_imu(args) -> None:
+    node = rclpy.create_node('imu_publisher')
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT if args.best_effort else ReliabilityPolicy.RELIABLE)
+    publisher = node.create_publisher(interface('sensor_msgs/msg/Imu'), args.topic, qos)
+    Imu = interface('sensor_msgs/msg/Imu')
+    print('ready', file=sys.stderr, flush=True)
+    period = 1.0 / args.rate
+    start = time.monotonic()
+    k = 0
+    while time.monotonic() - start < args.seconds:
+        message = Imu()
+        message.header.stamp = node.get_clock().now().to_msg()
+        message.header.frame_id = 'imu'
+        message.angular_velocity.z = 0.001 * (k % 100)
+        message.linear_acceleration.z = 9.81
+        message.orientation_covariance[0] = float(k)  # sequence number travels in the message
+        if args.malformed_every and k % args.malformed_every == args.malformed_every - 1:
+            publisher.publish(b'\x00\x01\x00\x00\xff\xff')  # truncated CDR
+        else:
+            publisher.publish(message)
+        k += 1
+        rclpy.spin_once(node, timeout_sec=0)
+        delay = start + k * period - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+    print(json.dumps({'published': k}), flush=True)
+
+
+def echo(args) -> None:
+    node = rclpy.create_node('echo_' + args.topic.strip('/').replace('/', '_'))
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT if args.best_effort else ReliabilityPolicy.RELIABLE)
+
+    def received(message) -> None:
+        row = {'t': time.time(), 'ros': node.get_clock().now().nanoseconds}
+        for path in args.fields:
+            value = field(message, path)
+            row[path] = value if isinstance(value, (int, float, str)) else repr(value)
+        print(json.dumps(row), flush=True)
+
+    node.create_subscription(interface(args.type), args.topic, received, qos)
+    print('ready', file=sys.stderr, flush=True)
+    end = time.monotonic() + args.seconds
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+
+def clock_check(args) -> None:
+    """Receive /clock and a topic; report order and how stamps relate to the clock."""
+    node = rclpy.create_node('clock_check')
+    state = {'clock': None, 'clock_first': None, 'clock_monotonic': True, 'messages': 0, 'in_order': True,
+             'last_stamp': None, 'stamp_after_clock': 0, 'first_wall': None, 'span': 0.0}
+
+    def on_clock(message) -> None:
+        value = message.clock.sec * 1_000_000_000 + message.clock.nanosec
+        if state['clock'] is not None and value < state['clock']:
+            state['clock_monotonic'] = False
+        if state['clock_first'] is None:
+            state['clock_first'] = value
+        state['clock'] = value
+
+    def on_message(message) -> None:
+        stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+        if state['last_stamp'] is not None and stamp <= state['last_stamp']:
+            state['in_order'] = False
+        state['last_stamp'] = stamp
+        state['messages'] += 1
+        if state['first_wall'] is None:
+            state['first_wall'] = time.monotonic()
+        state['span'] = time.monotonic() - state['first_wall']
+        if state['clock'] is None or stamp > state['clock'] + 50_000_000:
+            state['stamp_after_clock'] += 1
+
+    node.create_subscription(interface('rosgraph_msgs/msg/Clock'), '/clock', on_clock, 10)
+    node.create_subscription(interface(args.type), args.topic, on_message, QoSProfile(depth=1000))
+    print('ready', file=sys.stderr, flush=True)
+    end = time.monotonic() + args.seconds
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    for key in ('clock', 'last_stamp', 'first_wall'):
+        state.pop(key)
+    print(json.dumps(state), flush=True)
+
+
+def set_param(args) -> None:
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    node = rclpy.create_node('param_client')
+    client = node.create_client(SetParameters, f'{args.node}/set_parameters')
+    if not client.wait_for_service(timeout_sec=20.0):
+        print(json.dumps({'error': 'no parameter service'}), flush=True)
+        return
+    value = ParameterValue()
+    raw = args.value
+    if raw in ('true', 'false'):
+        value.type, value.bool_value = ParameterType.PARAMETER_BOOL, raw == 'true'
+    else:
+        try:
+            value.type, value.integer_value = ParameterType.PARAMETER_INTEGER, int(raw)
+        except ValueError:
+            try:
+                value.type, value.double_value = ParameterType.PARAMETER_DOUBLE, float(raw)
+            except ValueError:
+                value.type, value.string_value = ParameterType.PARAMETER_STRING, raw
+    request = SetParameters.Request(parameters=[Parameter(name=args.name, value=value)])
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(node, future, timeout_sec=20.0)
+    result = future.result().results[0]
+    print(json.dumps({'successful': result.successful, 'reason': result.reason, 't': time.time()}), flush=True)
+
+
+def trigger_server(args) -> None:
+    Trigger = interface('std_srvs/srv/Trigger')
+    node = rclpy.create_node('trigger_server')
+    calls = []
+
+    def serve(request, response):
+        calls.append(time.time())
+        response.success = True
+        response.message = args.message
+        print(json.dumps({'served': len(calls), 't': calls[-1]}), flush=True)
+        return response
+
+    node.create_service(Trigger, args.service, serve)
+    print('ready', file=sys.stderr, flush=True)
+    end = time.monotonic() + args.seconds
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+
+def trigger_call(args) -> None:
+    Trigger = interface('std_srvs/srv/Trigger')
+    node = rclpy.create_node('trigger_client')
+    client = node.create_client(Trigger, args.service)
+    if not client.wait_for_service(timeout_sec=20.0):
+        print(json.dumps({'error': 'service not available'}), flush=True)
+        return
+    started = time.monotonic()
+    future = client.call_async(Trigger.Request())
+    rclpy.spin_until_future_complete(node, future, timeout_sec=args.timeout)
+    seconds = time.monotonic() - started
+    if not future.done():
+        print(json.dumps({'error': 'no answer', 'seconds': seconds}), flush=True)
+        return
+    response = future.result()
+    print(json.dumps({'success': response.success, 'message': response.message, 'seconds': seconds}), flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest='command', required=True)
+    p = sub.add_parser('publish-imu')
+    p.add_argument('topic')
+    p.add_argument('--rate', type=float, default=200.0)
+    p.add_argument('--seconds', type=float, default=5.0)
+    p.add_argument('--best-effort', action='store_true')
+    p.add_argument('--malformed-every', type=int, default=0)
+    p = sub.add_parser('echo')
+    p.add_argument('topic')
+    p.add_argument('type')
+    p.add_argument('--seconds', type=float, default=5.0)
+    p.add_argument('--fields', nargs='*', default=[])
+    p.add_argument('--best-effort', action='store_true')
+    p = sub.add_parser('clock-check')
+    p.add_argument('topic')
+    p.add_argument('type')
+    p.add_argument('--seconds', type=float, default=10.0)
+    p = sub.add_parser('set-param')
+    p.add_argument('node')
+    p.add_argument('name')
+    p.add_argument('value')
+    p = sub.add_parser('trigger-server')
+    p.add_argument('service')
+    p.add_argument('--message', default='motors enabled')
+    p.add_argument('--seconds', type=float, default=30.0)
+    p = sub.add_parser('trigger-call')
+    p.add_argument('service')
+    p.add_argument('--timeout', type=float, default=10.0)
+    args = parser.parse_args()
+    rclpy.init()
+    try:
+        {'publish-imu': publish_imu, 'echo': echo, 'clock-check': clock_check, 'set-param': set_param, 'trigger-server': trigger_server,
+         'trigger-call': trigger_call}[args.command](args)
+    finally:
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

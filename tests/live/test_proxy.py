@@ -1,0 +1,187 @@
+"""`bagfault proxy` between real processes: parameters switch faults, the recording holds what happened."""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from helpers import NS, decoded
+
+BASE_Z = 0.001  # the publisher sends angular_velocity.z = 0.001 * (k % 100), k in orientation_covariance[0]
+
+
+def delta_z(message) -> float:
+    k = int(message.orientation_covariance[0])
+    return message.angular_velocity.z - BASE_Z * (k % 100)
+
+
+def test_imu_bias_switched_on_through_a_parameter(graph, anchors: Path, tmp_path: Path) -> None:
+    record = tmp_path / 'proxy.mcap'
+    proxy = graph.bagfault('proxy', str(anchors / 'imu_faults.yaml'), '--record', str(record), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    echo = graph.peer('echo', '/sensors/imu', 'sensor_msgs/msg/Imu', '--seconds', '9',
+                      '--fields', 'angular_velocity.z', 'orientation_covariance', name='echo')
+    diagnostics = graph.peer('echo', '/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', '--seconds', '9',
+                             '--fields', 'status', name='diagnostics')
+    graph.wait_for(echo, 'ready')
+    publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '200', '--seconds', '6', name='imu')
+    time.sleep(3.0)
+    rejected = graph.call('set-param', '/bagfault', 'imu_dropout.drop_probability', '1.5')
+    assert rejected['successful'] is False and '1.0' in rejected['reason']
+    switched = graph.call('set-param', '/bagfault', 'imu_yaw_rate_bias.active', 'true')
+    assert switched['successful'] is True
+    publisher.wait(timeout=30)
+    echo.wait(timeout=30)
+    assert graph.stop(proxy, signal.SIGINT) == 0
+
+    # the subscriber saw the bias only after the switch, and then on every message
+    received = graph.lines(echo)
+    assert len(received) > 600
+    deltas = []
+    for row in received:
+        k = int(row['orientation_covariance'].split('[')[1].split(',')[0].split('.')[0])
+        deltas.append(round(row['angular_velocity.z'] - BASE_Z * (k % 100), 9))
+    assert set(deltas) == {0.0, 0.05}
+    first = deltas.index(0.05)
+    assert all(d == 0.0 for d in deltas[:first]) and all(d == 0.05 for d in deltas[first:])
+    assert abs(received[first]['t'] - switched['t']) < 0.5
+
+    # /diagnostics: the fault went from OK inactive to WARN active
+    states = [row['status'] for row in graph.lines(diagnostics)]
+    assert any("name='bagfault: fault imu_yaw_rate_bias', message='inactive'" in s for s in states)
+    assert any("name='bagfault: fault imu_yaw_rate_bias', message='active'" in s for s in states)
+
+    # the recording: raw and mutated topics and the event, the bias exactly from the event on
+    topics = decoded(record, ['/sensors/imu_raw', '/sensors/imu', '/fault_injection/events'])
+    (event_time, event), = topics['/fault_injection/events']
+    assert (event.fault_id, event.state, event.source) == ('imu_yaw_rate_bias', 'active', 'manual')
+    assert all(delta_z(m) == 0.0 for _, m in topics['/sensors/imu_raw'])
+    outputs = topics['/sensors/imu']
+    assert len(outputs) == len(topics['/sensors/imu_raw']) > 600
+    assert all(round(delta_z(m), 9) == (0.05 if t >= event_time else 0.0) for t, m in outputs)
+    assert any(t < event_time for t, _ in outputs) and any(t >= event_time for t, _ in outputs)
+
+
+def test_stop_by_sigterm_finalises_the_recording_and_bagfault_check_reads_it(graph, anchors: Path,
+                                                                              tmp_path: Path) -> None:
+    scenario = tmp_path / 'imu.yaml'
+    scenario.write_text((anchors / 'imu_faults.yaml').read_text() + """
+assertions:
+  - {id: bias_seen, type: fault_event, fault_id: imu_yaw_rate_bias, state: active}
+""")
+    record = tmp_path / 'proxy.mcap'
+    proxy = graph.bagfault('proxy', str(scenario), '--record', str(record), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '100', '--seconds', '3', name='imu')
+    time.sleep(2.0)
+    assert not record.exists()
+    assert graph.stop(proxy, signal.SIGTERM) == 1  # the assertion never saw its event: failed, exit 1
+    assert 'FAIL  bias_seen' in proxy.out_path.read_text()
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith('.partial')] == []
+    counts = {topic: len(messages) for topic, messages in decoded(record).items()}
+    assert counts['/sensors/imu_raw'] == counts['/sensors/imu'] > 50
+    check = graph.bagfault('check', str(scenario), str(record), name='check')
+    assert check.wait(timeout=60) == 1
+    assert 'not observed before the end of the bag' in check.out_path.read_text()
+
+
+def test_reload_service_applies_new_faults_and_refuses_layout_changes(graph, anchors: Path, tmp_path: Path) -> None:
+    scenario = tmp_path / 'imu.yaml'
+    shutil.copy(anchors / 'imu_faults.yaml', scenario)
+    proxy = graph.bagfault('proxy', str(scenario), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    text = scenario.read_text()
+    scenario.write_text(text.replace('angular_velocity_z_bias: 0.05', 'angular_velocity_z_bias: 0.25'))
+    answer = graph.call('trigger-call', '/bagfault/reload_scenario')
+    assert answer['success'] is True and 'reloaded imu.yaml' in answer['message']
+    scenario.write_text(text.replace('output_topic: /sensors/imu', 'output_topic: /sensors/imu_other'))
+    answer = graph.call('trigger-call', '/bagfault/reload_scenario')
+    assert answer['success'] is False and 'endpoints' in answer['message']
+    scenario.write_text(text.replace('drop_probability: 0.2', 'drop_probability: 2.0'))
+    answer = graph.call('trigger-call', '/bagfault/reload_scenario')
+    assert answer['success'] is False and 'drop_probability' in answer['message']
+    assert graph.stop(proxy) == 0
+    log = proxy.err_path.read_text()
+    assert 'imu_yaw_rate_bias: config_updated (reload) config={angular_velocity_z_bias=0.25}' in log
+
+
+@pytest.mark.parametrize('case', ['late_publisher_and_restart', 'qos_mismatch', 'malformed'])
+def test_robust_against_publishers_that_come_go_mismatch_or_send_garbage(graph, tmp_path: Path, case: str) -> None:
+    scenario = tmp_path / 'imu.yaml'
+    options = ', on_malformed: drop' if case == 'malformed' else ''
+    scenario.write_text(f"""
+injector: {{id: imu, type: imu, input_topic: /imu_raw, output_topic: /imu{options}}}
+faults:
+  - {{id: bias, injector_id: imu, active_on_startup: true, config: {{angular_velocity_z_bias: 1.0}}}}
+""")
+    proxy = graph.bagfault('proxy', str(scenario), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    echo = graph.peer('echo', '/imu', 'sensor_msgs/msg/Imu', '--seconds', '12', '--fields', 'angular_velocity.z',
+                      name='echo')
+    graph.wait_for(echo, 'ready')
+    time.sleep(1.0)
+    if case == 'late_publisher_and_restart':
+        for _ in range(2):  # a publisher appears late, stops, and a new one starts
+            graph.peer('publish-imu', '/imu_raw', '--rate', '100', '--seconds', '2', name='imu').wait(timeout=30)
+    elif case == 'qos_mismatch':
+        graph.peer('publish-imu', '/imu_raw', '--rate', '100', '--seconds', '2', '--best-effort',
+                   name='best_effort').wait(timeout=30)
+        graph.peer('publish-imu', '/imu_raw', '--rate', '100', '--seconds', '2', name='imu').wait(timeout=30)
+    else:
+        graph.peer('publish-imu', '/imu_raw', '--rate', '100', '--seconds', '3', '--malformed-every', '10',
+                   name='imu').wait(timeout=30)
+    time.sleep(0.5)
+    assert proxy.poll() is None  # still running
+    assert graph.stop(proxy) == 0
+    received = graph.lines(echo)
+    assert received and all(row['angular_velocity.z'] >= 1.0 for row in received)
+    log = proxy.err_path.read_text()
+    summary = proxy.out_path.read_text()
+    if case == 'late_publisher_and_restart':
+        assert len(received) > 250  # both publishers got through (2 x 200 sent, discovery eats some)
+    elif case == 'qos_mismatch':
+        assert log.count('incompatible QoS') == 1 and 'Still running' in log
+        assert len(received) > 100
+    else:
+        assert 'malformed message #1' in log and 'dropped' in log
+        malformed = int(summary.split(' malformed')[0].rsplit(', ', 1)[1])
+        assert malformed >= 20
+        assert len(received) > 150
+
+
+def test_use_sim_time_follows_clock_from_a_played_bag(graph, tmp_path: Path) -> None:
+    from helpers import make_bag
+
+    bag = make_bag(tmp_path / 'imu.mcap', [('/sensors/imu_raw', 'sensor_msgs/msg/Imu', 100.0)], 6.0)
+    scenario = tmp_path / 'imu.yaml'
+    scenario.write_text("""
+injector: {id: imu, type: imu, input_topic: /sensors/imu_raw, output_topic: /sensors/imu}
+faults:
+  - {id: bias, injector_id: imu, start: 2.0, duration: 2.0, config: {linear_acceleration_x_bias: 1.0}}
+""")
+    record = tmp_path / 'proxy.mcap'
+    proxy = graph.bagfault('proxy', str(scenario), '--use-sim-time', '--record', str(record), name='proxy')
+    graph.wait_for(proxy, "proxy /sensors/imu_raw")
+    play = graph.bagfault('play', str(bag), '--clock', '--rate', '2', '--delay', '1.5', name='play')
+    assert play.wait(timeout=60) == 0
+    time.sleep(0.5)
+    assert graph.stop(proxy) == 0
+    topics = decoded(record, ['/sensors/imu_raw', '/sensors/imu', '/fault_injection/events'])
+    events = [(t, e.state) for t, e in topics['/fault_injection/events']]
+    assert [state for _, state in events] == ['active', 'inactive']
+    start, end = events[0][0], events[1][0]
+    assert end - start == 2 * NS  # scheduled on sim time: exactly the duration apart
+    raw = {m.header.stamp.sec * NS + m.header.stamp.nanosec: m for _, m in topics['/sensors/imu_raw']}
+    biased = 0
+    for time_ns, message in topics['/sensors/imu']:
+        stamp = message.header.stamp.sec * NS + message.header.stamp.nanosec
+        bias = 1.0 if start <= time_ns < end else 0.0
+        assert message.linear_acceleration.x == raw[stamp].linear_acceleration.x + bias
+        biased += bias == 1.0
+    assert 150 <= biased <= 250  # about 2 s of a 100 Hz stream
+    # sim time: the recording's clock is the bag's clock
+    assert abs(min(t for t, _ in topics['/sensors/imu_raw']) - min(raw)) < NS

@@ -1,0 +1,35 @@
+"""QoS from rosbag2's recorded offered_qos_profiles (numbers in older releases, names in newer)."""
+
+from __future__ import annotations
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy  # noqa: E402
+
+from bagfault.live.ros import qos, qos_yaml, recorded_qos  # noqa: E402
+
+HUMBLE_TF_STATIC = ('- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n  deadline:\n    sec: 9223372036\n'
+                    '    nsec: 854775807\n  liveliness: 1\n  avoid_ros_namespace_conventions: false')
+HUMBLE_CLOCK = '- history: 3\n  depth: 0\n  reliability: 2\n  durability: 2\n'
+NAMED = '- history: keep_last\n  depth: 5\n  reliability: best_effort\n  durability: transient_local\n'
+
+
+def test_numbers_and_names_of_rosbag2_profiles() -> None:
+    latched = recorded_qos(HUMBLE_TF_STATIC)
+    assert (latched.reliability, latched.durability, latched.depth) == (
+        ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 10)  # depth 0 recorded: default depth
+    clock = recorded_qos(HUMBLE_CLOCK)
+    assert (clock.reliability, clock.durability) == (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE)
+    named = recorded_qos(NAMED)
+    assert (named.reliability, named.durability, named.depth) == (
+        ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.TRANSIENT_LOCAL, 5)
+
+
+def test_unknown_profiles_give_none_and_written_profiles_read_back() -> None:
+    assert recorded_qos('') is None and recorded_qos(': not yaml [') is None and recorded_qos('{}') is None
+    profile = qos(7, 'best_effort', 'transient_local')
+    again = recorded_qos(qos_yaml(profile))
+    assert (again.reliability, again.durability, again.depth) == (
+        ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.TRANSIENT_LOCAL, 7)
