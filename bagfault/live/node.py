@@ -46,6 +46,9 @@ if TYPE_CHECKING:
     from bagfault.scenario.model import Scenario
 
 NODE_NAME = 'bagfault'
+OBSERVE_WAIT = 5.0  # seconds to wait for publishers of watched topics whose type is not known
+DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+OWN_PREFIXES = ('/fault_injection/', '/fault_manager/')
 TICK = 0.01  # scheduler resolution in live mode, seconds
 DIAGNOSTICS_PERIOD = 1.0
 MALFORMED_LOG_EVERY = 100
@@ -172,12 +175,46 @@ class ProxyNode:
             executor.spin_once(timeout_sec=0.1)
         return types
 
+    def watched_topics(self, executor: Any, types: dict[str, str]) -> dict[str, str]:
+        """Topics the oracles need besides the proxy's own: FM diagnostics and conditions, asserted topics."""
+        own = {t for spec in self.scenario.injectors for t in (spec.input_topic, spec.output_topic) if t}
+        wanted: dict[str, str | None] = {}
+        config = self.scenario.fault_manager_config
+        if config is not None:
+            if config.diagnostics_topic:
+                wanted[config.diagnostics_topic] = DIAGNOSTICS_TYPE
+            for condition in config.conditions:
+                wanted.setdefault(condition.topic, None)
+        for assertion in self.scenario.assertions:
+            for key in ('topic', 'input_topic'):
+                name = assertion.params.get(key)
+                if isinstance(name, str) and name:
+                    known = assertion.params.get('message_type') if key == 'topic' else None
+                    wanted[name] = wanted.get(name) or known
+        wanted = {t: m for t, m in wanted.items() if t not in own and not t.startswith(OWN_PREFIXES)}
+        deadline = time.monotonic() + OBSERVE_WAIT
+        while any(m is None for m in wanted.values()) and time.monotonic() < deadline and not self.stop:
+            graph = dict(self.node.get_topic_names_and_types())
+            for name in [t for t, m in wanted.items() if m is None]:
+                if graph.get(name):
+                    wanted[name] = graph[name][0]
+            executor.spin_once(timeout_sec=0.1)
+        watched = {}
+        for name, msgtype in wanted.items():
+            if msgtype is None:
+                self.logger.warning(f'{name}: no publisher within {OBSERVE_WAIT:g} s, type unknown; not watched')
+            else:
+                watched[name] = msgtype
+        return watched
+
     def setup(self, executor: Any) -> None:
         """Types, session, recording, endpoints, parameters, services, timers."""
         types = self.resolve_types(executor)
         if self.stop:
             return
         classes = {injector_id: interface_class(msgtype) for injector_id, msgtype in types.items()}
+        watched = self.watched_topics(executor, types)
+        watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
             self.recording = Recording(self.record_path, catalog)
@@ -186,7 +223,7 @@ class ProxyNode:
                 'scenario': self.scenario.name})
             self.recording.add_attachment(self.scenario.name, 'application/yaml', self.scenario.text.encode())
         self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, recording=self.recording,
-                                   blackbox_base=self.record_path)
+                                   blackbox_base=self.record_path, observed=watched)
         self.session.listeners.append(self._on_events)
         self.delay = DelayLine(self.now, self._publish)
         for topic in self.session.topics:
@@ -200,6 +237,10 @@ class ProxyNode:
                 cls, topic.input_topic, partial(self._on_message, topic), profile, raw=True,
                 event_callbacks=SubscriptionEventCallbacks(incompatible_qos=partial(self._incompatible, topic, 'publisher'))))
             self.logger.info(f'proxy {topic.input_topic} -> {topic.output_topic} ({topic.spec.type}, {topic.msgtype})')
+        for name, cls in watched_classes.items():
+            self.subscriptions.append(self.node.create_subscription(
+                cls, name, partial(self._on_watched, name, cls), qos(100, 'best_effort'), raw=True))
+            self.logger.info(f'watching {name} ({watched[name]}) for the oracles')
         for spec in self.scenario.injectors:
             if spec.is_service:
                 self.services.append(TriggerProxy(self.node, spec, self.session))
@@ -229,6 +270,19 @@ class ProxyNode:
                 self._publish(topic, message.data)
             else:
                 self.delay.put(message.log_time, topic, bytes(message.data))
+
+    def _on_watched(self, name: str, cls: Any, data: bytes) -> None:
+        assert self.session is not None
+        if self.session.observed[name] == DIAGNOSTICS_TYPE:
+            from rclpy.serialization import deserialize_message  # noqa: PLC0415
+
+            try:
+                statuses = deserialize_message(data, cls).status
+            except Exception:  # noqa: BLE001 - malformed: let the oracle see and judge it
+                statuses = []
+            if statuses and all(s.name.startswith('bagfault: ') for s in statuses):
+                return  # the proxy's own status, not the system under test's
+        self.session.observe(name, data)
 
     def _publish(self, topic: LiveTopic, data: bytes | memoryview) -> None:
         assert self.session is not None

@@ -93,6 +93,7 @@ class LiveSession:
         seed: int,
         recording: Recording | None = None,
         blackbox_base: Any = None,
+        observed: dict[str, str] | None = None,
     ) -> None:
         from bagfault.api import Oracles  # noqa: PLC0415
 
@@ -111,7 +112,11 @@ class LiveSession:
                 continue
             msgtype = types[spec.id]
             self.topics.append(LiveTopic(spec, msgtype, self._build(spec, msgtype)))
+        self.observed = dict(observed or {})
         schemas = {}
+        for name, msgtype in self.observed.items():
+            encoding, text = catalog.schema(msgtype)
+            schemas[name] = (msgtype, encoding, text)
         for topic in self.topics:
             encoding, text = catalog.schema(topic.msgtype)
             schemas[topic.input_topic] = schemas[topic.output_topic] = (topic.msgtype, encoding, text)
@@ -180,6 +185,8 @@ class LiveSession:
                 for topic in self.topics:
                     self.recording.channel(topic.input_topic, topic.msgtype)
                     self.recording.channel(topic.output_topic, topic.msgtype)
+                for name, msgtype in self.observed.items():
+                    self.recording.channel(name, msgtype)
             self.scheduler = FaultScheduler(self.scenario, now, self.seed)
             for observer in self.oracles.observers:
                 observer.start(now)
@@ -246,6 +253,16 @@ class LiveSession:
             for observer in self.oracles.observers:
                 observer.on_message(out, now, data)
             return now
+
+    def observe(self, name: str, data: bytes) -> None:
+        """A message on a topic the oracles watch (the system under test's /diagnostics, an asserted topic)."""
+        with self.lock:
+            now = self.clock()
+            self.stats.input_messages += 1
+            if self.recording is not None:
+                self.recording.write(name, self.observed[name], now, data)
+            for observer in self.oracles.observers:
+                observer.on_message(name, now, data)
 
     # -- runtime control --------------------------------------------------------------
     def set_active(self, fault_id: str, active: bool, source: str = 'manual') -> None:

@@ -3,6 +3,7 @@
     python peers.py publish-imu TOPIC --rate 200 --seconds 5
     python peers.py echo TOPIC TYPE --seconds 5 [--fields a.b c.d]   (JSON lines: receive time, fields)
     python peers.py clock-check TOPIC TYPE --seconds 10                (JSON: order of /clock and stamps)
+    python peers.py imu-monitor TOPIC [--limit 0.5]                   (a system under test publishing /diagnostics)
     python peers.py set-param NODE NAME VALUE                          (prints the result)
     python peers.py trigger-server SERVICE --message TEXT
     python peers.py trigger-call SERVICE [--timeout S]                 (prints JSON: success, message, seconds)
@@ -118,6 +119,32 @@ def clock_check(args) -> None:
     print(json.dumps(state), flush=True)
 
 
+def imu_monitor(args) -> None:
+    """A system under test: ERROR on /diagnostics while |angular_velocity.z| on TOPIC exceeds a limit."""
+    node = rclpy.create_node('imu_monitor')
+    Array, Status = interface('diagnostic_msgs/msg/DiagnosticArray'), interface('diagnostic_msgs/msg/DiagnosticStatus')
+    publisher = node.create_publisher(Array, '/diagnostics', 10)
+    last = [0.0]
+
+    def received(message) -> None:
+        if time.monotonic() - last[0] < 0.1:
+            return
+        last[0] = time.monotonic()
+        status = Status(name='imu_monitor: drift', hardware_id='imu')
+        high = abs(message.angular_velocity.z) > args.limit
+        status.level = Status.ERROR if high else Status.OK
+        status.message = 'yaw rate implausible' if high else 'ok'
+        array = Array(status=[status])
+        array.header.stamp = node.get_clock().now().to_msg()
+        publisher.publish(array)
+
+    node.create_subscription(interface('sensor_msgs/msg/Imu'), args.topic, received, 10)
+    print('ready', file=sys.stderr, flush=True)
+    end = time.monotonic() + args.seconds
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+
 def set_param(args) -> None:
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
@@ -202,6 +229,10 @@ def main() -> None:
     p.add_argument('topic')
     p.add_argument('type')
     p.add_argument('--seconds', type=float, default=10.0)
+    p = sub.add_parser('imu-monitor')
+    p.add_argument('topic')
+    p.add_argument('--limit', type=float, default=0.5)
+    p.add_argument('--seconds', type=float, default=20.0)
     p = sub.add_parser('set-param')
     p.add_argument('node')
     p.add_argument('name')
@@ -216,7 +247,7 @@ def main() -> None:
     args = parser.parse_args()
     rclpy.init()
     try:
-        {'publish-imu': publish_imu, 'echo': echo, 'clock-check': clock_check, 'set-param': set_param, 'trigger-server': trigger_server,
+        {'publish-imu': publish_imu, 'echo': echo, 'clock-check': clock_check, 'imu-monitor': imu_monitor, 'set-param': set_param, 'trigger-server': trigger_server,
          'trigger-call': trigger_call}[args.command](args)
     finally:
         rclpy.try_shutdown()
