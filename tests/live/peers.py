@@ -5,6 +5,7 @@
     python peers.py clock-check TOPIC TYPE --seconds 10                (JSON: order of /clock and stamps)
     python peers.py imu-monitor TOPIC [--limit 0.5]                   (a system under test publishing /diagnostics)
     python peers.py set-param NODE NAME VALUE                          (prints the result)
+    python peers.py describe-params NODE PREFIX                        (JSON: descriptors and values)
     python peers.py trigger-server SERVICE --message TEXT
     python peers.py trigger-call SERVICE [--timeout S]                 (prints JSON: success, message, seconds)
 
@@ -173,6 +174,35 @@ def set_param(args) -> None:
     print(json.dumps({'successful': result.successful, 'reason': result.reason, 't': time.time()}), flush=True)
 
 
+def describe_params(args) -> None:
+    """List a node's parameters under a prefix and describe them (what rqt_reconfigure does)."""
+    from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
+
+    node = rclpy.create_node('param_lister')
+    clients = {name: node.create_client(kind, f'{args.node}/{name}') for name, kind in
+               (('list_parameters', ListParameters), ('describe_parameters', DescribeParameters),
+                ('get_parameters', GetParameters))}
+    for client in clients.values():
+        client.wait_for_service(timeout_sec=20.0)
+
+    def call(name, request):
+        future = clients[name].call_async(request)
+        rclpy.spin_until_future_complete(node, future, timeout_sec=20.0)
+        return future.result()
+
+    names = [n for n in call('list_parameters', ListParameters.Request()).result.names if n.startswith(args.prefix)]
+    described = call('describe_parameters', DescribeParameters.Request(names=names)).descriptors
+    values = call('get_parameters', GetParameters.Request(names=names)).values
+    out = {}
+    for name, descriptor, value in zip(names, described, values):
+        ranges = [[r.from_value, r.to_value] for r in descriptor.floating_point_range]
+        ranges += [[r.from_value, r.to_value] for r in descriptor.integer_range]
+        current = {1: value.bool_value, 2: value.integer_value, 3: value.double_value, 4: value.string_value}.get(value.type)
+        out[name] = {'type': descriptor.type, 'description': descriptor.description, 'ranges': ranges,
+                     'read_only': descriptor.read_only, 'value': current}
+    print(json.dumps(out), flush=True)
+
+
 def trigger_server(args) -> None:
     Trigger = interface('std_srvs/srv/Trigger')
     node = rclpy.create_node('trigger_server')
@@ -237,6 +267,9 @@ def main() -> None:
     p.add_argument('node')
     p.add_argument('name')
     p.add_argument('value')
+    p = sub.add_parser('describe-params')
+    p.add_argument('node')
+    p.add_argument('prefix')
     p = sub.add_parser('trigger-server')
     p.add_argument('service')
     p.add_argument('--message', default='motors enabled')
@@ -248,7 +281,7 @@ def main() -> None:
     rclpy.init()
     try:
         {'publish-imu': publish_imu, 'echo': echo, 'clock-check': clock_check, 'imu-monitor': imu_monitor, 'set-param': set_param, 'trigger-server': trigger_server,
-         'trigger-call': trigger_call}[args.command](args)
+         'trigger-call': trigger_call, 'describe-params': describe_params}[args.command](args)
     finally:
         rclpy.try_shutdown()
 

@@ -94,10 +94,18 @@ def test_reload_service_applies_new_faults_and_refuses_layout_changes(graph, anc
     shutil.copy(anchors / 'imu_faults.yaml', scenario)
     proxy = graph.bagfault('proxy', str(scenario), name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
+    described = graph.call('describe-params', '/bagfault', 'imu_')
+    drop = described['imu_dropout.drop_probability']
+    assert drop['ranges'] == [[0.0, 1.0]] and drop['value'] == 0.2 and 'dropped' in drop['description']
+    assert described['imu_dropout.active']['value'] is False
+    assert described['imu_delay.delay_ms']['value'] == 100 and described['imu_delay.delay_ms']['ranges'][0][0] == 0
+    assert described['imu_yaw_rate_bias.linear_acceleration_x_bias']['value'] == 0.0  # unset key: schema default
     text = scenario.read_text()
     scenario.write_text(text.replace('angular_velocity_z_bias: 0.05', 'angular_velocity_z_bias: 0.25'))
     answer = graph.call('trigger-call', '/bagfault/reload_scenario')
     assert answer['success'] is True and 'reloaded imu.yaml' in answer['message']
+    assert graph.call('describe-params', '/bagfault', 'imu_yaw')['imu_yaw_rate_bias.angular_velocity_z_bias'][
+        'value'] == 0.25  # the parameter follows the reloaded file
     scenario.write_text(text.replace('output_topic: /sensors/imu', 'output_topic: /sensors/imu_other'))
     answer = graph.call('trigger-call', '/bagfault/reload_scenario')
     assert answer['success'] is False and 'endpoints' in answer['message']
