@@ -134,16 +134,10 @@ def run(
         try:
             sink.add_metadata('bagfault', provenance(loaded, paths, used_seed, activations, start_offset))
             sink.add_attachment(loaded.name, 'application/yaml', loaded.text.encode())
-            routing = build_routing(input_set, loaded, catalog, sink, loaded.name)
-            pipeline = Pipeline(
-                input_set, loaded, sink, catalog, routing.routes, routing.copies,
-                seed=used_seed, activations=activations, start_offset=start_offset,
-                batch=batch, progress=progress, observers=observers,
+            routing, pipeline, oracles = wire(
+                input_set, loaded, catalog, sink, seed=used_seed, blackbox_base=out, activations=activations,
+                start_offset=start_offset, batch=batch, progress=progress, observers=observers,
             )
-            oracles = Oracles(loaded, routing.schemas, catalog, pipeline.write_event, blackbox_base=out)
-            pipeline.observers[:0] = oracles.observers
-            for kind in oracles.event_kinds:
-                pipeline.event_channel(kind)
             stats = pipeline.run()
             stats.replaced_topics = routing.replaced
             sink.finish()
@@ -161,6 +155,26 @@ def run(
     result = RunResult(loaded, paths, out, used_seed, stats, notes)
     oracles.fill(result)
     return result
+
+
+def wire(
+    inputs: InputSet,
+    scenario: Scenario,
+    catalog: TypeCatalog,
+    sink: Any,
+    *,
+    seed: int,
+    blackbox_base: Path | None,
+    **options: Any,
+) -> tuple[Any, Pipeline, Oracles]:
+    """Routing, pipeline and oracles of one pass over the inputs into a sink (a file, or live topics)."""
+    routing = build_routing(inputs, scenario, catalog, sink, scenario.name)
+    pipeline = Pipeline(inputs, scenario, sink, catalog, routing.routes, routing.copies, seed=seed, **options)
+    oracles = Oracles(scenario, routing.schemas, catalog, pipeline.write_event, blackbox_base=blackbox_base)
+    pipeline.observers[:0] = oracles.observers
+    for kind in oracles.event_kinds:
+        pipeline.event_channel(kind)
+    return routing, pipeline, oracles
 
 
 class Oracles:

@@ -29,7 +29,6 @@ from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
-    from bagfault.io.channel import Channel
     from bagfault.io.sources import InputSet
     from bagfault.io.types import TypeCatalog
     from bagfault.scenario.model import FaultSpec, InjectorSpec, Scenario
@@ -177,11 +176,7 @@ class Pipeline:
     def _refresh_active(self) -> None:
         assert self.scheduler is not None
         for runtime in self._runtimes:
-            runtime.active = [
-                ActiveFault(f, self.scheduler.active[f.id], self.scheduler.random[f.id])
-                for f in runtime.faults
-                if f.id in self.scheduler.active
-            ]
+            runtime.active = self.scheduler.active_of(runtime.faults)
 
     # -- main loop --------------------------------------------------------
     def run(self) -> RunStats:

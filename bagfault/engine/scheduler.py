@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from bagfault.engine.rng import FaultRandom
 from bagfault.events import FaultEvent
+from bagfault.injectors.base import ActiveFault
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -210,6 +211,10 @@ class FaultScheduler:
     def is_active(self, fault_id: str) -> bool:
         """True while the fault is active."""
         return fault_id in self.active
+
+    def active_of(self, faults: Sequence[FaultSpec]) -> list[ActiveFault]:
+        """Those of `faults` active now, with their start time and random streams, in the given order."""
+        return [ActiveFault(f, self.active[f.id], self.random[f.id]) for f in faults if f.id in self.active]
 
 
 def _fault_seed(scenario: Scenario, fault: FaultSpec, seed: int) -> int:

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from bagfault.faults.combine import add
 from bagfault.faults.rotation import add_rpy
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double
+from bagfault.schema import DELAY_MS, ConfigField, double
 
 if TYPE_CHECKING:
     from collections.abc import Sequence

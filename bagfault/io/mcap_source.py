@@ -28,7 +28,6 @@ from bagfault.io.channel import Channel, normalize_msgtype
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-    from mcap.records import ChunkIndex
 
 MAGIC = b'\x89MCAP0\r\n'
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x03, 0x04, 0x05

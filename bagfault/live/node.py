@@ -356,7 +356,6 @@ class ProxyNode:
         """Parameters show the session's state (after scheduled changes, events, reloads)."""
         if self.session is None or self._syncing:
             return
-        self._declare_parameters()
         updates = []
         for state in self.session.faults():
             name = f'{state.fault_id}.active'
@@ -424,6 +423,7 @@ class ProxyNode:
             response.success, response.message = True, f'reloaded {source.name}: {len(scenario.faults)} faults'
             for topic, message in held:
                 self._publish(topic, message.data)
+            self._declare_parameters()  # faults may have come or gone
             self._sync_parameters()
         if response.success:
             self.logger.info(response.message)

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from bagfault.engine.pipeline import Pipeline, RunStats
-from bagfault.engine.routing import build_routing
+from bagfault.engine.pipeline import RunStats
 from bagfault.io.live_sink import LiveSink, PlaybackStopped
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
@@ -46,7 +45,7 @@ def run_play(
 
     from rclpy.node import Node  # noqa: PLC0415
 
-    from bagfault.api import Oracles, RunResult, provenance  # noqa: PLC0415
+    from bagfault.api import RunResult, provenance, wire  # noqa: PLC0415
 
     if rate <= 0:
         raise LiveError(f'--rate {rate:g}: must be above 0')
@@ -68,12 +67,7 @@ def run_play(
             input_set: InputSet | None = first
             while True:
                 assert input_set is not None
-                routing = build_routing(input_set, scenario, catalog, sink, scenario.name)
-                pipeline = Pipeline(input_set, scenario, sink, catalog, routing.routes, routing.copies, seed=seed)
-                oracles = Oracles(scenario, routing.schemas, catalog, pipeline.write_event, blackbox_base=record)
-                pipeline.observers[:0] = oracles.observers
-                for kind in oracles.event_kinds:
-                    pipeline.event_channel(kind)
+                routing, pipeline, oracles = wire(input_set, scenario, catalog, sink, seed=seed, blackbox_base=record)
                 if passes == 0:
                     time.sleep(delay)
                 stopped = False

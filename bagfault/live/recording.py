@@ -54,8 +54,10 @@ class Recording:
 
     def write_event(self, event: Event) -> None:
         """Encode an event record with its ros2msg definition and append it."""
-        self.catalog.add_definition(event.msgtype, event.definition)
         codec = self.catalog.codec(event.msgtype)
+        if codec is None:  # adding a definition rebuilds the type store: only when it is missing
+            self.catalog.add_definition(event.msgtype, event.definition)
+            codec = self.catalog.codec(event.msgtype)
         assert codec is not None
         self.write(event.topic, event.msgtype, event.time, codec.encode(event.to_message(codec.store)))
 

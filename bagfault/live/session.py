@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
     from bagfault.io.types import TypeCatalog
     from bagfault.live.recording import Recording
-    from bagfault.scenario.model import FaultSpec, InjectorSpec, Scenario
+    from bagfault.scenario.model import InjectorSpec, Scenario
 
 
 class ReloadError(LiveError):
@@ -141,11 +141,7 @@ class LiveSession:
     def _refresh_active(self) -> None:
         assert self.scheduler is not None
         for topic in self.topics:
-            topic.active = [
-                ActiveFault(f, self.scheduler.active[f.id], self.scheduler.random[f.id])
-                for f in self.scenario.faults_of(topic.spec.id)
-                if f.id in self.scheduler.active
-            ]
+            topic.active = self.scheduler.active_of(self.scenario.faults_of(topic.spec.id))
 
     def _publish_events(self, events: list[FaultEvent]) -> None:
         if not events:
@@ -176,8 +172,6 @@ class LiveSession:
             now = self.clock()
             self.origin = now
             self.stats.first_time = self.stats.origin = now
-            for kind in self.oracles.event_kinds:
-                self.catalog.add_definition(kind.msgtype, kind.definition)
             if self.recording is not None:
                 self.recording.channel(FaultEvent.topic, FaultEvent.msgtype)
                 for kind in self.oracles.event_kinds:
@@ -363,8 +357,7 @@ class LiveSession:
         with self.lock:
             if self.scheduler is None:
                 return []
-            return [ActiveFault(f, self.scheduler.active[f.id], self.scheduler.random[f.id])
-                    for f in self.scenario.faults_of(injector_id) if f.id in self.scheduler.active]
+            return self.scheduler.active_of(self.scenario.faults_of(injector_id))
 
     # -- status ---------------------------------------------------------------------------
     def faults(self) -> list[FaultState]:
