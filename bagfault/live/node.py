@@ -175,7 +175,7 @@ class ProxyNode:
             executor.spin_once(timeout_sec=0.1)
         return types
 
-    def watched_topics(self, executor: Any, types: dict[str, str]) -> dict[str, str]:
+    def watched_topics(self, executor: Any) -> dict[str, str]:
         """Topics the oracles need besides the proxy's own: FM diagnostics and conditions, asserted topics."""
         own = {t for spec in self.scenario.injectors for t in (spec.input_topic, spec.output_topic) if t}
         wanted: dict[str, str | None] = {}
@@ -213,7 +213,7 @@ class ProxyNode:
         if self.stop:
             return
         classes = {injector_id: interface_class(msgtype) for injector_id, msgtype in types.items()}
-        watched = self.watched_topics(executor, types)
+        watched = self.watched_topics(executor)
         watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
