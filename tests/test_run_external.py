@@ -177,6 +177,11 @@ def test_missing_topic_and_wrong_type_name_what_the_bag_has(tmp_path, external):
     wrong = parse_scenario('injector: {id: imu, type: imu, input_topic: /odom, output_topic: /imu_out}\n')
     with pytest.raises(EngineError, match='needs sensor_msgs/msg/Imu but topic /odom in the bag carries nav_msgs/msg/Odometry'):
         api.run(wrong, [bag], tmp_path / 'o.mcap')
+    expected = parse_scenario('injector: {id: any, type: topic, input_topic: /odom, output_topic: /odom_out, '
+                              'message_type: sensor_msgs/msg/Imu}\n')
+    with pytest.raises(EngineError, match='expects message_type sensor_msgs/msg/Imu but topic /odom in the bag '
+                                          'carries nav_msgs/msg/Odometry'):
+        api.run(expected, [bag], tmp_path / 'o.mcap')
     assert not list(tmp_path.iterdir())
 
 

@@ -48,6 +48,8 @@ def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str
                     limits.append(f'min {field["min"]}')
                 if field['max'] is not None:
                     limits.append(f'max {field["max"]}')
+                if field['choices']:
+                    limits.append('one of ' + ' | '.join(field['choices']))
                 if field['required']:
                     limits.append('required')
                 extra = f' [{", ".join(limits)}]' if limits else ''

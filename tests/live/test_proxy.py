@@ -226,3 +226,25 @@ assertions:
     confirmed = [t for t, e in topics['/fault_manager/events'] if e.fault.fault_code == 'IMU_DRIFT'
                  and e.fault.status == 'CONFIRMED']
     assert confirmed and 0 < confirmed[0] - switched < 2 * NS
+
+
+def test_delayed_messages_leave_the_proxy_when_due(graph, tmp_path: Path) -> None:
+    scenario = tmp_path / 'late.yaml'
+    scenario.write_text("""
+injector: {id: imu, type: imu, input_topic: /imu_raw, output_topic: /imu}
+faults:
+  - {id: late, injector_id: imu, active_on_startup: true, config: {delay_ms: 200}}
+""")
+    record = tmp_path / 'proxy.mcap'
+    proxy = graph.bagfault('proxy', str(scenario), '--record', str(record), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    graph.peer('publish-imu', '/imu_raw', '--rate', '100', '--seconds', '3', name='imu').wait(timeout=30)
+    time.sleep(0.5)
+    assert graph.stop(proxy) == 0
+    topics = decoded(record, ['/imu_raw', '/imu'])
+    received = {int(m.orientation_covariance[0]): t for t, m in topics['/imu_raw']}
+    sent = {int(m.orientation_covariance[0]): t for t, m in topics['/imu']}
+    assert len(sent) == len(received) > 100
+    lags = sorted(sent[k] - received[k] for k in sent)
+    assert lags[0] >= 200_000_000  # never early
+    assert lags[len(lags) // 2] < 220_000_000  # and on time: the delay line wakes at the due time

@@ -227,3 +227,25 @@ def test_extended_schedules_parse_and_validate():
     assert any(p == 'faults[1].probability_per_second' and "needs 'hold'" in m for p, m in messages)
     assert ('faults[2].after.fault', 'a fault cannot be chained after itself') in messages
     assert ('faults[3].after.fault', "unknown fault 'ghost'") in messages
+
+
+def test_live_injector_keys_are_checked_like_the_rest():
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(textwrap.dedent("""
+            injectors:
+              - {id: imu, type: imu, input_topic: /a, output_topic: /b, reliability: fast, durability: volatile}
+              - {id: odom, type: odom, input_topic: /c, output_topic: /d, message_type: sensor_msgs/msg/Imu}
+              - {id: any, type: topic, input_topic: /e, output_topic: /f, on_malformed: ignore}
+            faults: []
+        """))
+    found = {(p.path, p.message) for p in info.value.problems}
+    assert ('injectors[0].reliability', "'fast' is not one of reliable, best_effort") in found
+    assert ('injectors[1]', "message_type sensor_msgs/msg/Imu does not fit injector type 'odom', "
+                            'which takes nav_msgs/msg/Odometry') in found
+    assert ('injectors[2].on_malformed', "'ignore' is not one of forward, drop") in found
+    assert len(found) == 3
+    ok = parse_scenario('injector: {id: s, type: topic, input_topic: /e, output_topic: /f, '
+                        'reliability: best_effort, durability: transient_local, message_type: std_msgs/msg/String}\n'
+                        'faults: []\n')
+    assert ok.injectors[0].options == {'reliability': 'best_effort', 'durability': 'transient_local',
+                                       'message_type': 'std_msgs/msg/String'}
