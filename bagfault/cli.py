@@ -7,7 +7,7 @@ import os
 import sys
 import traceback
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
 from bagfault.errors import BagfaultError
@@ -133,6 +133,15 @@ def _write_reports(args: argparse.Namespace, result: object, collectors: list[ob
         _write_text(args.html, html.render(report, rates, collect(result)))  # type: ignore[arg-type]
 
 
+def _finish(args: argparse.Namespace, result: Any, collectors: Sequence[object] = ()) -> int:
+    """Reports, terminal summary, exit code: the end of every command that runs a scenario."""
+    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+
+    _write_reports(args, result, list(collectors))
+    print_run_summary(result)
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
 def _write_text(path: Path, text: str) -> None:
     from bagfault.io import OutputError  # noqa: PLC0415
 
@@ -145,7 +154,6 @@ def _write_text(path: Path, text: str) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
     from bagfault.progress import ProgressBar  # noqa: PLC0415
-    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
 
     scenario = api.load_scenario(args.scenario)
     bar = ProgressBar()
@@ -157,15 +165,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         )
     finally:
         bar.close()
-    _write_reports(args, result, collectors)
-    print_run_summary(result)
-    return EXIT_FAILED if result.failed else EXIT_OK
+    return _finish(args, result, collectors)
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
     from bagfault.progress import ProgressBar  # noqa: PLC0415
-    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
 
     scenario = api.load_scenario(args.scenario)
     bar = ProgressBar()
@@ -174,25 +179,19 @@ def _cmd_check(args: argparse.Namespace) -> int:
         result = api.check(scenario, args.recording, start_offset=args.start, observers=collectors, progress=bar)
     finally:
         bar.close()
-    _write_reports(args, result, collectors)
-    print_run_summary(result)
-    return EXIT_FAILED if result.failed else EXIT_OK
+    return _finish(args, result, collectors)
 
 
 def _cmd_proxy(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
-    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
 
     scenario = api.load_scenario(args.scenario)
     result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time)
-    _write_reports(args, result, [])
-    print_run_summary(result)
-    return EXIT_FAILED if result.failed else EXIT_OK
+    return _finish(args, result)
 
 
 def _cmd_play(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
-    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
 
     items = list(args.items)
     scenario = None
@@ -202,9 +201,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
         raise api.EngineError('play: give at least one bag after the scenario')
     result = api.play(scenario, items, rate=args.rate, clock=args.clock, loop=args.loop, record=args.record,
                       seed=args.seed, delay=args.delay)
-    _write_reports(args, result, [])
-    print_run_summary(result)
-    return EXIT_FAILED if result.failed else EXIT_OK
+    return _finish(args, result)
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
