@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,33 +20,25 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from bagfault.demo import synthetic
+from bagfault.demo.synthetic import Stream
 
 NS = 1_000_000_000
 
 
-@dataclass(frozen=True)
-class Topic:
-    """A benchmark stream."""
-
-    name: str
-    msgtype: str
-    rate: float
-
-
 SENSOR_HEAVY = (
-    Topic('/imu', 'sensor_msgs/msg/Imu', 200.0),
-    Topic('/odom', 'nav_msgs/msg/Odometry', 50.0),
-    Topic('/tf', 'tf2_msgs/msg/TFMessage', 100.0),
-    Topic('/joint_states', 'sensor_msgs/msg/JointState', 100.0),
-    Topic('/scan', 'sensor_msgs/msg/LaserScan', 20.0),
-    Topic('/points', 'sensor_msgs/msg/PointCloud2', 10.0),
-    Topic('/camera/image_raw', 'sensor_msgs/msg/Image', 10.0),
+    Stream('/imu', 'sensor_msgs/msg/Imu', 200.0),
+    Stream('/odom', 'nav_msgs/msg/Odometry', 50.0),
+    Stream('/tf', 'tf2_msgs/msg/TFMessage', 100.0),
+    Stream('/joint_states', 'sensor_msgs/msg/JointState', 100.0),
+    Stream('/scan', 'sensor_msgs/msg/LaserScan', 20.0),
+    Stream('/points', 'sensor_msgs/msg/PointCloud2', 10.0),
+    Stream('/camera/image_raw', 'sensor_msgs/msg/Image', 10.0),
 )
-MESSAGE_HEAVY = tuple(Topic(f'/imu{i}', 'sensor_msgs/msg/Imu', 1000.0) for i in range(4))
+MESSAGE_HEAVY = tuple(Stream(f'/imu{i}', 'sensor_msgs/msg/Imu', 1000.0) for i in range(4))
 KINDS = {'sensor-heavy': SENSOR_HEAVY, 'message-heavy': MESSAGE_HEAVY}
 
 
-def _template(ts: Any, topic: Topic) -> bytes:
+def _template(ts: Any, topic: Stream) -> bytes:
     """One serialized message of the topic (stamp patched per message later)."""
     builders = {
         'sensor_msgs/msg/LaserScan': lambda: synthetic.laser_scan(ts, 0, 0.0, beams=1081),
@@ -58,7 +49,7 @@ def _template(ts: Any, topic: Topic) -> bytes:
     return bytes(ts.serialize_cdr(message, topic.msgtype))
 
 
-def _vary(template: bytearray, topic: Topic, k: int, time: int) -> bytes:
+def _vary(template: bytearray, topic: Stream, k: int, time: int) -> bytes:
     """Patch the header stamp (bytes 4..12 when the type has a header) and a changing value."""
     if topic.msgtype != 'tf2_msgs/msg/TFMessage':
         struct.pack_into('<iI', template, 4, time // NS, time % NS)
@@ -72,14 +63,14 @@ def write_bag(path: Path, kind: str, seconds: float) -> int:
     """Write one benchmark bag; return its message count."""
     ts = synthetic.store()
     topics = KINDS[kind]
-    templates = {t.name: bytearray(_template(ts, t)) for t in topics}
-    periods = {t.name: round(NS / t.rate) for t in topics}
-    counts = {t.name: math.ceil(seconds * t.rate - 1e-9) for t in topics}
+    templates = {t.topic: bytearray(_template(ts, t)) for t in topics}
+    periods = {t.topic: round(NS / t.rate_hz) for t in topics}
+    counts = {t.topic: math.ceil(seconds * t.rate_hz - 1e-9) for t in topics}
     start = synthetic.DEFAULT_START
     # merge the per-topic time grids in time order (topic order on ties)
-    times = np.concatenate([start + np.arange(counts[t.name], dtype=np.int64) * periods[t.name] for t in topics])
-    owners = np.concatenate([np.full(counts[t.name], i, dtype=np.int64) for i, t in enumerate(topics)])
-    indexes = np.concatenate([np.arange(counts[t.name], dtype=np.int64) for t in topics])
+    times = np.concatenate([start + np.arange(counts[t.topic], dtype=np.int64) * periods[t.topic] for t in topics])
+    owners = np.concatenate([np.full(counts[t.topic], i, dtype=np.int64) for i, t in enumerate(topics)])
+    indexes = np.concatenate([np.arange(counts[t.topic], dtype=np.int64) for t in topics])
     order = np.lexsort((owners, times))
     with path.open('wb') as stream:
         writer = Writer(stream, compression=CompressionType.ZSTD)
@@ -88,10 +79,10 @@ def write_bag(path: Path, kind: str, seconds: float) -> int:
         for topic in topics:
             text, _ = ts.generate_msgdef(topic.msgtype, ros_version=2)
             schema = writer.register_schema(topic.msgtype, 'ros2msg', text.encode())
-            channels.append(writer.register_channel(topic.name, 'cdr', schema, {}))
+            channels.append(writer.register_channel(topic.topic, 'cdr', schema, {}))
         for position in order.tolist():
             time, owner, k = int(times[position]), int(owners[position]), int(indexes[position])
             topic = topics[owner]
-            writer.add_message(channels[owner], time, _vary(templates[topic.name], topic, k, time), time)
+            writer.add_message(channels[owner], time, _vary(templates[topic.topic], topic, k, time), time)
         writer.finish()
     return len(order)

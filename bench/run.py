@@ -94,7 +94,7 @@ api.run(parse_scenario(SCENARIO), [SRC], DST, seed=1)
 def scenario(kind: str, case: str) -> str:
     """The four bagfault scenarios for a bag kind (in-place injectors on its topics)."""
     topics = KINDS[kind]
-    imus = [t.name for t in topics if t.msgtype == 'sensor_msgs/msg/Imu']
+    imus = [t.topic for t in topics if t.msgtype == 'sensor_msgs/msg/Imu']
     lines = ['injectors:']
     faults = ['faults:']
     if case in ('a', 'b'):
@@ -110,7 +110,7 @@ def scenario(kind: str, case: str) -> str:
                       'config: {xyz_noise_stddev: 0.02, dropout_probability: 0.1}}')
     if case == 'd':
         for number, topic in enumerate(topics):
-            lines.append(f'  - {{id: s{number}, type: topic, input_topic: {topic.name}, output_topic: {topic.name}}}')
+            lines.append(f'  - {{id: s{number}, type: topic, input_topic: {topic.topic}, output_topic: {topic.topic}}}')
             faults.append(f'  - {{id: f{number}, injector_id: s{number}, active_on_startup: true, '
                           'config: {drop_probability: 0.2, delay_ms: 50}}')
     return '\n'.join(lines + faults) + '\n'
