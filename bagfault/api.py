@@ -58,6 +58,13 @@ def _scenario(scenario: Scenario | str | Path) -> Scenario:
     return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
 
 
+def _seed(scenario: Scenario, seed: int | None) -> int:
+    """The --seed given, else the scenario's `seed`, else DEFAULT_SEED."""
+    if seed is not None:
+        return seed
+    return scenario.seed if scenario.seed is not None else DEFAULT_SEED
+
+
 def _check_paths(inputs: Sequence[Path], output: Path) -> None:
     out = output.resolve()
     for path in inputs:
@@ -123,7 +130,7 @@ def run(
         raise EngineError('no input bag given')
     _check_paths(paths, out)
     activations = _activations(loaded, activate)
-    used_seed = seed if seed is not None else loaded.seed if loaded.seed is not None else DEFAULT_SEED
+    used_seed = _seed(loaded, seed)
 
     input_set = InputSet(paths)
     if progress is not None and hasattr(progress, 'begin'):
@@ -305,7 +312,7 @@ def proxy(
     from bagfault.live.proxy import run_proxy  # noqa: PLC0415
 
     loaded = _scenario(scenario)
-    used_seed = seed if seed is not None else loaded.seed if loaded.seed is not None else DEFAULT_SEED
+    used_seed = _seed(loaded, seed)
     return run_proxy(loaded, seed=used_seed, record=_record_path(record), use_sim_time=use_sim_time, stop=stop)
 
 
@@ -334,7 +341,7 @@ def play(
     out = _record_path(record)
     if out is not None:
         _check_paths(paths, out)
-    used_seed = seed if seed is not None else loaded.seed if loaded.seed is not None else DEFAULT_SEED
+    used_seed = _seed(loaded, seed)
     return run_play(loaded, paths, seed=used_seed, rate=rate, clock=clock, loop=loop, record=out, delay=delay,
                     stop=stop)
 

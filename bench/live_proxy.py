@@ -146,10 +146,9 @@ def main() -> int:
         print(f'  {name:<14} latency p50 {entry["p50"]:.3f} ms  p95 {entry["p95"]:.3f} ms  p99 {entry["p99"]:.3f} ms')
     added = report['added_latency_ms']
     print(f'  added by the proxy: p50 {added["p50"]:.3f} ms  p95 {added["p95"]:.3f} ms  p99 {added["p99"]:.3f} ms')
-    path = args.json or HERE / 'results' / f'live-proxy-{report["date"]}.json'
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(report, indent=1, sort_keys=True) + '\n')
-    print(f'results written to {path}')
+    from bench.run import RESULTS, save  # noqa: PLC0415
+
+    save(report, args.json or RESULTS / f'live-proxy-{report["date"]}.json')
     return 0
 
 

@@ -228,11 +228,15 @@ def main() -> int:
             report['memory'][kind] = block
             print(table(f'{kind}, {args.long:g} s (memory)', block), flush=True)
             (DATA / f'{kind}-{int(args.long)}s.mcap').unlink(missing_ok=True)
-    path = args.json or RESULTS / f'bench-{report["date"]}.json'
+    save(report, args.json or RESULTS / f'bench-{report["date"]}.json')
+    return 0
+
+
+def save(report: dict, path: Path) -> None:
+    """Write a results JSON (stable key order) and say where."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(report, indent=1, sort_keys=True) + '\n')
     print(f'results written to {path}')
-    return 0
 
 
 if __name__ == '__main__':

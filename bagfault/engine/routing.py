@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from bagfault.io.channel import Channel
     from bagfault.io.sources import InputSet
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import Scenario
+    from bagfault.scenario.model import FaultSpec, InjectorSpec, Scenario
 
 ROS_SCHEMA_ENCODINGS = {'', 'ros2msg', 'ros2idl'}
 
@@ -136,17 +136,7 @@ def build_routing(
             if channel not in found:
                 continue
             faults = scenario.faults_of(spec.id)
-            codec = catalog.codec(channel.msgtype) if channel.msgtype else None
-            decodes = cls.decodes(faults)
-            if decodes and codec is None:
-                raise EngineError(
-                    f'{scenario_name}: injector {spec.id!r}: cannot decode {channel.msgtype} on {channel.topic}: '
-                    + catalog.why_not(channel.msgtype)
-                )
-            if codec is not None:
-                problems = cls.check_type(channel.msgtype, codec.store, faults)
-                if problems:
-                    raise EngineError(f'{scenario_name}: injector {spec.id!r} on {channel.topic}: ' + '; '.join(problems))
+            injector = build_injector(spec, channel.msgtype, faults, catalog, scenario_name)
             encoding, text = _schema(channel, catalog)
             channel_id = sink.add_channel(spec.output_topic, channel.msgtype, encoding, text,
                                           channel.message_encoding, dict(channel.metadata))
@@ -154,10 +144,26 @@ def build_routing(
             rank += 1
             runtime = InjectorRuntime(
                 spec=spec,
-                injector=cls(spec, codec, faults),
+                injector=injector,
                 faults=faults,
                 channel=OutputChannel(channel_id, spec.output_topic, channel.msgtype),
                 rank=rank,
             )
             routing.routes.setdefault(number, []).append(runtime)
     return routing
+
+
+def build_injector(spec: InjectorSpec, msgtype: str, faults: list[FaultSpec], catalog: TypeCatalog,
+                   scenario_name: str) -> Injector:
+    """An injector for messages of `msgtype`, with a codec when its faults need one; EngineError if it cannot work."""
+    cls = get_injector_type(spec.type)
+    assert cls is not None and issubclass(cls, Injector)
+    codec = catalog.codec(msgtype) if msgtype else None
+    if codec is None and cls.decodes(faults):
+        raise EngineError(f'{scenario_name}: injector {spec.id!r}: cannot decode {msgtype} on {spec.input_topic}: '
+                          + catalog.why_not(msgtype))
+    if codec is not None:
+        problems = cls.check_type(msgtype, codec.store, faults)
+        if problems:
+            raise EngineError(f'{scenario_name}: injector {spec.id!r} on {spec.input_topic}: ' + '; '.join(problems))
+    return cls(spec, codec, faults)

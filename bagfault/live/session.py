@@ -15,7 +15,9 @@ import threading
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
+from bagfault.engine import EngineError
 from bagfault.engine.pipeline import RunStats
+from bagfault.engine.routing import build_injector
 from bagfault.engine.scheduler import FaultScheduler
 from bagfault.events import FaultEvent
 from bagfault.injectors.base import ActiveFault, Injector, InjectorConfigError, RawMessage
@@ -126,17 +128,7 @@ class LiveSession:
 
     # -- wiring -------------------------------------------------------------------
     def _build(self, spec: InjectorSpec, msgtype: str) -> Injector:
-        cls = get_injector_type(spec.type)
-        assert cls is not None and issubclass(cls, Injector)
-        faults = self.scenario.faults_of(spec.id)
-        codec = self.catalog.codec(msgtype)
-        if codec is None and cls.decodes(faults):
-            raise LiveError(f'injector {spec.id!r}: cannot decode {msgtype}: {self.catalog.why_not(msgtype)}')
-        if codec is not None:
-            problems = cls.check_type(msgtype, codec.store, faults)
-            if problems:
-                raise LiveError(f'injector {spec.id!r} on {spec.input_topic}: ' + '; '.join(problems))
-        return cls(spec, codec, faults)
+        return build_injector(spec, msgtype, self.scenario.faults_of(spec.id), self.catalog, self.scenario.name)
 
     def _refresh_active(self) -> None:
         assert self.scheduler is not None
@@ -328,7 +320,7 @@ class LiveSession:
             self.scenario = scenario
             try:
                 held = [item for topic in self.topics for item in self._rebuild(topic.spec.id)]
-            except LiveError as exc:
+            except EngineError as exc:
                 self.scenario = previous
                 for topic in self.topics:
                     topic.injector = self._build(topic.spec, topic.msgtype)
