@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
-from bagfault.errors import BagfaultError
+from bagfault.errors import BagfaultError, UsageError
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -143,7 +143,7 @@ def _finish(args: argparse.Namespace, result: Any, collectors: Sequence[object] 
 
 
 def _write_text(path: Path, text: str) -> None:
-    from bagfault.io import OutputError  # noqa: PLC0415
+    from bagfault.errors import OutputError  # noqa: PLC0415
 
     try:
         path.write_text(text, encoding='utf-8')
@@ -198,7 +198,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
     if items[0].suffix in ('.yaml', '.yml') and items[0].is_file():
         scenario = api.load_scenario(items.pop(0))
     if not items:
-        raise api.EngineError('play: give at least one bag after the scenario')
+        raise UsageError('play: give at least one bag after the scenario')
     result = api.play(scenario, items, rate=args.rate, clock=args.clock, loop=args.loop, record=args.record,
                       seed=args.seed, delay=args.delay)
     return _finish(args, result)
@@ -229,7 +229,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     try:
         bag, scenario = demo.prepare(directory)
     except OSError as exc:
-        from bagfault.io import OutputError  # noqa: PLC0415
+        from bagfault.errors import OutputError  # noqa: PLC0415
 
         raise OutputError(f'{directory}: cannot write the demo files: {exc.strerror}') from None
     bar = ProgressBar()
@@ -268,7 +268,7 @@ def _cmd_schema(args: argparse.Namespace) -> int:
 def _cmd_latency(args: argparse.Namespace) -> int:
     import json  # noqa: PLC0415
 
-    from bagfault.latency import LatencyError  # noqa: PLC0415
+    from bagfault.errors import LatencyError  # noqa: PLC0415
     from bagfault.latency.architecture import load_architecture  # noqa: PLC0415
     from bagfault.latency.report import measure, render_html, render_text, render_validation  # noqa: PLC0415
 

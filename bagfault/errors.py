@@ -1,11 +1,131 @@
-"""Error base class: every error bagfault raises on purpose derives from it."""
+"""Every error bagfault raises on purpose, in one tree: catch `BagfaultError` for all of them.
+
+Each package raises its own subclass. The command line prints any of them
+as one line and exits with code 2 ("could not run"); anything else that
+escapes is a bug. Control-flow signals (`bagfault.engine.stop.Stopped`) are
+not part of this tree.
+
+    BagfaultError
+    ├── UsageError            api/cli: a bad argument or option value
+    ├── ScenarioError         scenario/: a scenario file cannot be used (every problem listed)
+    ├── FieldValueError       schema.py: a config value does not fit its field
+    ├── InjectorError         injectors/, faults/
+    │   ├── InjectorConfigError   a cross-field check of options or a fault config failed
+    │   ├── FieldPathError        a field path does not exist in a message type
+    │   └── MalformedMessageError a message cannot take a fault (truncated CDR, inconsistent sizes)
+    ├── EngineError           engine/: the scenario does not fit these inputs
+    ├── IoError               io/
+    │   ├── InputError            an input bag is missing, unreadable, corrupt or unsupported
+    │   └── OutputError           an output cannot be written
+    ├── AssertionSetupError   assertions/: an assertion cannot judge these topics
+    ├── FaultManagerError     fault_manager/
+    ├── LatencyError          latency/
+    ├── ReportError           report/
+    ├── LiveError             live/
+    │   └── ReloadError           a reloaded scenario is refused; the running one stays
+    ├── ClosedLoopError       closedloop/
+    └── CampaignError         campaign/
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 
 class BagfaultError(Exception):
-    """A problem with the user's input, scenario, or environment.
+    """A problem with the user's input, scenario, options or environment: exit code 2, one line."""
 
-    The command line prints it as one line and exits with code 2; anything
-    else that escapes is a bug in bagfault.
-    """
+
+class UsageError(BagfaultError):
+    """A command-line argument or API option has a value that cannot work."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong in a scenario, with its place in the file."""
+
+    file: str
+    where: str
+    path: str
+    message: str
+
+    def __str__(self) -> str:
+        return f'{self.file}:{self.where}: {self.path}: {self.message}'
+
+
+class ScenarioError(BagfaultError):
+    """A scenario cannot be used; carries every problem found."""
+
+    def __init__(self, problems: list[Problem] | str) -> None:
+        if isinstance(problems, str):
+            problems = [Problem('<scenario>', '1:1', '<top>', problems)]
+        self.problems = problems
+        super().__init__('\n'.join(str(p) for p in problems))
+
+
+class FieldValueError(BagfaultError):
+    """A config value does not fit its field; the message says why."""
+
+
+class InjectorError(BagfaultError):
+    """An injector cannot work as configured, or a message cannot take a fault."""
+
+
+class InjectorConfigError(InjectorError):
+    """An injector's options or a fault config fail a cross-field check."""
+
+
+class FieldPathError(InjectorError):
+    """A field path is malformed or does not exist in a message type."""
+
+
+class MalformedMessageError(InjectorError):
+    """A message cannot be decoded or does not hold what its fault needs."""
+
+
+class EngineError(BagfaultError):
+    """The scenario cannot run on these inputs (wrong type, undecodable topic, ...)."""
+
+
+class IoError(BagfaultError):
+    """Reading or writing a bag failed."""
+
+
+class InputError(IoError):
+    """An input bag is missing, unreadable, corrupt or unsupported."""
+
+
+class OutputError(IoError):
+    """An output cannot be written."""
+
+
+class AssertionSetupError(BagfaultError):
+    """An assertion cannot judge the topics and types of this run."""
+
+
+class FaultManagerError(BagfaultError):
+    """The fault manager oracle cannot watch the topics and types of this run."""
+
+
+class LatencyError(BagfaultError):
+    """An architecture file or a path latency measurement cannot be used."""
+
+
+class ReportError(BagfaultError):
+    """A report cannot be written."""
+
+
+class LiveError(BagfaultError):
+    """Live mode cannot start or continue (rclpy missing, type not installed, bad argument)."""
+
+
+class ReloadError(LiveError):
+    """A reloaded scenario is invalid or changes the injector layout; the running one stays."""
+
+
+class ClosedLoopError(BagfaultError):
+    """The system under test cannot be started, never became ready, or cannot be stopped."""
+
+
+class CampaignError(BagfaultError):
+    """A campaign file or plan cannot be used."""

@@ -7,7 +7,14 @@ and fields, so tools made for ros2_fault_injection read them unchanged.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar, Literal, Protocol
+
+FaultState = Literal['active', 'inactive', 'config_updated']
+"""What a FaultEvent reports: the fault switched on or off, or its config changed."""
+FaultSource = Literal['startup', 'scheduled', 'manual', 'cli', 'reload']
+"""Why: active_on_startup, a schedule, a live parameter or service, `--activate`, a scenario reload."""
+AssertionState = Literal['pending', 'passed', 'failed']
+ScenarioState = Literal['running', 'passed', 'failed']
 
 TIME_DEFINITION = 'int32 sec\nuint32 nanosec\n'
 SEPARATOR = '=' * 80
@@ -39,6 +46,14 @@ SCENARIO_STATUS_MSG = with_time(
 
 
 
+class EventKind(Protocol):
+    """An event record type: its topic, ROS type name and ros2msg definition."""
+
+    topic: ClassVar[str]
+    msgtype: ClassVar[str]
+    definition: ClassVar[str]
+
+
 @dataclass(frozen=True)
 class FaultEvent:
     """A fault changed state (`active`/`inactive`) or config, at bag time `time` (ns)."""
@@ -46,15 +61,20 @@ class FaultEvent:
     time: int
     fault_id: str
     injector_id: str
-    state: str
-    source: str
+    state: FaultState
+    source: FaultSource
     details: str
 
-    topic = FAULT_EVENT_TOPIC
-    msgtype = FAULT_EVENT_TYPE
-    definition = FAULT_EVENT_MSG
+    topic: ClassVar[str] = FAULT_EVENT_TOPIC
+    msgtype: ClassVar[str] = FAULT_EVENT_TYPE
+    definition: ClassVar[str] = FAULT_EVENT_MSG
 
-    def to_message(self, store: object) -> object:
+    @classmethod
+    def from_message(cls, time: int, message: Any) -> FaultEvent:
+        """The event a recorded ros2_fault_injection/msg/FaultEvent stands for, at its log time."""
+        return cls(time, message.fault_id, message.injector_id, message.state, message.source, message.details)
+
+    def to_message(self, store: Any) -> Any:
         """The ros2_fault_injection/msg/FaultEvent object."""
         return to_message(self, store)
 
@@ -66,14 +86,14 @@ class AssertionEvent:
     time: int
     assertion_id: str
     assertion_type: str
-    state: str
+    state: AssertionState
     message: str
 
-    topic = ASSERTION_EVENT_TOPIC
-    msgtype = ASSERTION_EVENT_TYPE
-    definition = ASSERTION_EVENT_MSG
+    topic: ClassVar[str] = ASSERTION_EVENT_TOPIC
+    msgtype: ClassVar[str] = ASSERTION_EVENT_TYPE
+    definition: ClassVar[str] = ASSERTION_EVENT_MSG
 
-    def to_message(self, store: object) -> object:
+    def to_message(self, store: Any) -> Any:
         """The ros2_fault_injection/msg/AssertionEvent object."""
         return to_message(self, store)
 
@@ -83,28 +103,42 @@ class ScenarioStatus:
     """Summary of all assertions at bag time `time` (ns)."""
 
     time: int
-    state: str
+    state: ScenarioState
     pending_count: int
     passed_count: int
     failed_count: int
     failed_assertion_ids: list[str] = field(default_factory=list)
     failed_messages: list[str] = field(default_factory=list)
 
-    topic = SCENARIO_STATUS_TOPIC
-    msgtype = SCENARIO_STATUS_TYPE
-    definition = SCENARIO_STATUS_MSG
+    topic: ClassVar[str] = SCENARIO_STATUS_TOPIC
+    msgtype: ClassVar[str] = SCENARIO_STATUS_TYPE
+    definition: ClassVar[str] = SCENARIO_STATUS_MSG
 
-    def to_message(self, store: object) -> object:
+    def to_message(self, store: Any) -> Any:
         """The ros2_fault_injection/msg/ScenarioStatus object."""
         return to_message(self, store)
 
 
-Event = Any  # FaultEvent, AssertionEvent, ScenarioStatus, or any record with topic/msgtype/definition/to_message
+class Event(Protocol):
+    """Any event record: a time, its kind's topic/type/definition, and its message object."""
+
+    @property
+    def time(self) -> int:
+        """Bag time (ns)."""
+        ...
+
+    topic: ClassVar[str]
+    msgtype: ClassVar[str]
+    definition: ClassVar[str]
+
+    def to_message(self, store: Any) -> Any:
+        """The typestore message object."""
+        ...
 
 
-def to_message(event: FaultEvent | AssertionEvent | ScenarioStatus, store: object) -> object:
+def to_message(event: FaultEvent | AssertionEvent | ScenarioStatus, store: Any) -> Any:
     """Build the typestore message object of a flat event (stamp + fields)."""
-    types = store.types  # type: ignore[attr-defined]
+    types = store.types
     stamp = types['builtin_interfaces/msg/Time'](sec=event.time // 1_000_000_000, nanosec=event.time % 1_000_000_000)
     values = {k: v for k, v in event.__dict__.items() if k != 'time'}
     return types[event.msgtype](stamp=stamp, **values)

@@ -11,6 +11,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from bagfault.errors import FieldValueError
+
 FIELD_TYPES = ('double', 'int', 'bool', 'string', 'non_empty_string', 'special_float', 'list')
 
 SPECIAL_FLOATS = {
@@ -22,10 +24,6 @@ SPECIAL_FLOATS = {
     'nan': math.nan,
     '.nan': math.nan,
 }
-
-
-class FieldValueError(ValueError):
-    """A config value does not fit its field; the message says why."""
 
 
 @dataclass(frozen=True)

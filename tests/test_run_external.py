@@ -12,7 +12,7 @@ from helpers import NS, counts, decoded, rosbags_counts
 from io_cases import ROSBAG2_DIRS, metadata_counts
 
 from bagfault import api
-from bagfault.engine import EngineError
+from bagfault.errors import EngineError
 from bagfault.faults.rotation import quaternion_to_rpy
 from bagfault.scenario import parse_scenario
 

@@ -73,7 +73,7 @@ class AssertionType:
         return set()
 
     def prepare(self) -> None:
-        """Check against the output's topics and types once they are known; raise EngineError."""
+        """Check against the output's topics and types once they are known; raise AssertionSetupError."""
 
     def deadline(self) -> int | None:
         """Bag time (ns) after which a pending assertion fails."""

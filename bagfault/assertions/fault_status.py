@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 from bagfault.assertions.base import AssertionType, fault_reference_problem, range_problems
-from bagfault.engine import EngineError
+from bagfault.errors import AssertionSetupError
 from bagfault.fault_manager.model import STATUSES, valid_code
 from bagfault.schema import ConfigField
 
@@ -51,7 +51,7 @@ class FaultStatusAssertion(AssertionType):
     def prepare(self) -> None:
         """Needs the fault manager."""
         if self.runner.fault_manager is None:
-            raise EngineError('fault_status needs the fault manager (add a fault_manager section or a report)')
+            raise AssertionSetupError('fault_status needs the fault manager (add a fault_manager section or a report)')
 
     def deadline(self) -> int | None:
         """From time zero without `after`; armed at the trigger otherwise."""
@@ -129,7 +129,7 @@ class FaultCountAssertion(AssertionType):
     def prepare(self) -> None:
         """Needs the fault manager."""
         if self.runner.fault_manager is None:
-            raise EngineError('fault_count needs the fault manager (add a fault_manager section or a report)')
+            raise AssertionSetupError('fault_count needs the fault manager (add a fault_manager section or a report)')
 
     def finish(self, time: int) -> None:
         """Count and decide."""

@@ -16,7 +16,7 @@ import numpy as np
 from bagfault.assertions.base import AssertionType, window_problems
 from bagfault.assertions.fields import resolve_on_topic
 from bagfault.assertions.windows import DURING, OUTSIDE, describe, in_window
-from bagfault.engine import EngineError
+from bagfault.errors import AssertionSetupError
 from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
@@ -82,9 +82,9 @@ class FieldDeltaAssertion(AssertionType):
         types = self.runner.topic_types
         out, inp = self.params['topic'], self.input_topic
         if out == inp:
-            raise EngineError(f'topic and input_topic are both {out}')
+            raise AssertionSetupError(f'topic and input_topic are both {out}')
         if out in types and inp in types and types[out] != types[inp]:
-            raise EngineError(f'{out} carries {types[out]} but {inp} carries {types[inp]}')
+            raise AssertionSetupError(f'{out} carries {types[out]} but {inp} carries {types[inp]}')
         self.path = resolve_on_topic(self.runner, out, self.params['field'])
         resolve_on_topic(self.runner, inp, self.params['field'])
 

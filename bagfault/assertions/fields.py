@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from bagfault.engine import EngineError
+from bagfault.errors import AssertionSetupError
 from bagfault.faults.fieldpath import FieldPath, FieldPathError
 
 if TYPE_CHECKING:
@@ -16,17 +16,17 @@ def resolve_on_topic(runner: AssertionRunner, topic: str, text: str) -> FieldPat
     try:
         path = FieldPath.parse(text)
     except FieldPathError as exc:
-        raise EngineError(str(exc)) from None
+        raise AssertionSetupError(str(exc)) from None
     msgtype = runner.topic_types.get(topic)
     if msgtype is None:
         return path
     codec = runner.catalog.codec(msgtype)
     if codec is None:
-        raise EngineError(f'cannot decode {msgtype} on {topic}: {runner.catalog.why_not(msgtype)}')
+        raise AssertionSetupError(f'cannot decode {msgtype} on {topic}: {runner.catalog.why_not(msgtype)}')
     try:
         resolved = path.resolve(msgtype, codec.store)
     except FieldPathError as exc:
-        raise EngineError(str(exc)) from None
+        raise AssertionSetupError(str(exc)) from None
     if not resolved.numeric:
-        raise EngineError(f'{text!r} on {topic} is a {resolved.leaf}, not a number')
+        raise AssertionSetupError(f'{text!r} on {topic} is a {resolved.leaf}, not a number')
     return resolved

@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from bagfault.assertions.base import AssertionType, fault_reference_problem
-from bagfault.engine import EngineError
+from bagfault.errors import AssertionSetupError
 from bagfault.faults.header import has_header
-from bagfault.latency import LatencyError
+from bagfault.errors import LatencyError
 from bagfault.latency.architecture import load_architecture
 from bagfault.latency.collect import SeriesCollector
 from bagfault.latency.compute import path_latency, statistics, window_mask
@@ -108,7 +108,7 @@ class PathLatencyAssertion(AssertionType):
             result = path_latency(self.architecture, self.path, self.collector.series(),
                                   stamp_origin=bool(self.params.get('stamp_origin')))
         except LatencyError as exc:
-            raise EngineError(f'assertion {self.spec.id!r}: {exc}') from None
+            raise AssertionSetupError(f'assertion {self.spec.id!r}: {exc}') from None
         values = result.latency_ms
         scope = ''
         if 'during' in self.params:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.assertions.base import FAILED, PASSED, PENDING, AssertionType
 from bagfault.assertions.registry import ASSERTION_TYPES
-from bagfault.engine import EngineError
+from bagfault.errors import AssertionSetupError
 from bagfault.events import AssertionEvent, FaultEvent, ScenarioStatus
 
 if TYPE_CHECKING:
@@ -57,10 +57,10 @@ class AssertionRunner:
         for check in self.checks:
             try:
                 check.prepare()
-            except EngineError as exc:
+            except AssertionSetupError as exc:
                 problems.append(f'{scenario.name}: assertion {check.spec.id!r}: {exc}')
         if problems:
-            raise EngineError('\n'.join(problems))
+            raise AssertionSetupError('\n'.join(problems))
         for check in self.checks:
             for topic in check.topics():
                 self._listeners.setdefault(topic, []).append(check)
@@ -68,7 +68,7 @@ class AssertionRunner:
                 if topic in topics and topic not in self._codecs:
                     codec = catalog.codec(topics[topic])
                     if codec is None:
-                        raise EngineError(f'{scenario.name}: assertion {check.spec.id!r}: cannot decode {topics[topic]} '
+                        raise AssertionSetupError(f'{scenario.name}: assertion {check.spec.id!r}: cannot decode {topics[topic]} '
                                           f'on {topic}: {catalog.why_not(topics[topic])}')
                     self._codecs[topic] = codec
 

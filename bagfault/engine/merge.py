@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterator
 
 Record = tuple[Any, ...]
+EVENT_RANK, COPY_RANK = -1, 0  # fault events before copied messages before injector outputs (ranks 1+)
 
 
 class TimeOrderedMerge:

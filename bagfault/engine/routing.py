@@ -13,13 +13,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from bagfault.engine import EngineError
-from bagfault.engine.pipeline import COPY_RANK, InjectorRuntime, OutputChannel
+from bagfault.engine.merge import COPY_RANK
+from bagfault.engine.pipeline import InjectorRuntime
+from bagfault.engine.run import OutputChannel
+from bagfault.errors import EngineError
 from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
-    from bagfault.engine.pipeline import Sink
+    from bagfault.engine.run import Sink
     from bagfault.io.channel import Channel
     from bagfault.io.sources import InputSet
     from bagfault.io.types import TypeCatalog
@@ -65,10 +67,10 @@ def build_routing(
     scenario: Scenario,
     catalog: TypeCatalog,
     sink: Sink,
-    scenario_name: str,
 ) -> Routing:
     """Check the scenario against the bag and register every output channel."""
     routing = Routing()
+    scenario_name = scenario.name
     for channel in inputs.channels:
         if channel.message_encoding != 'cdr' and channel.schema_encoding in ROS_SCHEMA_ENCODINGS:
             raise EngineError(

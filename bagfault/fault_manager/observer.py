@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from bagfault.engine import EngineError
+from bagfault.errors import FaultManagerError
 from bagfault.fault_manager.manager import FaultManager
 from bagfault.fault_manager.model import CONFIRMED, EVENT_CONFIRMED, FaultManagerEvent
 from bagfault.fault_manager.reporters import InjectedReports, condition_report, diagnostics_reports
@@ -40,6 +40,7 @@ class FaultManagerObserver:
         catalog: TypeCatalog,
         emit: Callable[[FaultManagerEvent], None],
         blackbox_base: Path | None = None,
+        blackbox_numbers: dict[str, int] | None = None,
     ) -> None:
         self.config = config
         self.manager = FaultManager(config)
@@ -51,13 +52,13 @@ class FaultManagerObserver:
         self.status_listeners = self.manager.status_listeners
         types = {topic: entry[0] for topic, entry in channels.items()}
         self.injected = InjectedReports(config.reports, scenario, set(types))
-        self.snapshots = SnapshotRecorder(config.snapshots, channels, catalog, blackbox_base)
+        self.snapshots = SnapshotRecorder(config.snapshots, channels, catalog, blackbox_base, blackbox_numbers)
         self._codecs: dict[str, Any] = {}
         self._conditions: dict[str, list[tuple[Any, FieldPath]]] = {}
         self._clears = sorted(config.clears, key=lambda c: c.at)
         if config.diagnostics_topic and config.diagnostics_topic in types:
             if types[config.diagnostics_topic] != DIAGNOSTICS_TYPE:
-                raise EngineError(f'fault_manager.diagnostics: {config.diagnostics_topic} carries '
+                raise FaultManagerError(f'fault_manager.diagnostics: {config.diagnostics_topic} carries '
                                   f'{types[config.diagnostics_topic]}, not {DIAGNOSTICS_TYPE}')
             self._codec(config.diagnostics_topic, types)
         for condition in config.conditions:
@@ -67,13 +68,13 @@ class FaultManagerObserver:
             try:
                 path = FieldPath.parse(condition.field).resolve(types[condition.topic], codec.store)
             except FieldPathError as exc:
-                raise EngineError(f'fault_manager.conditions on {condition.topic}: {exc}') from None
+                raise FaultManagerError(f'fault_manager.conditions on {condition.topic}: {exc}') from None
             self._conditions.setdefault(condition.topic, []).append((condition, path))
 
     def _codec(self, topic: str, types: dict[str, str]) -> Any:
         codec = self.catalog.codec(types[topic])
         if codec is None:
-            raise EngineError(f'fault_manager: cannot decode {types[topic]} on {topic}: '
+            raise FaultManagerError(f'fault_manager: cannot decode {types[topic]} on {topic}: '
                               f'{self.catalog.why_not(types[topic])}')
         self._codecs[topic] = codec
         return codec

@@ -67,6 +67,7 @@ class SnapshotRecorder:
         topics: dict[str, tuple[str, str, str]],
         catalog: TypeCatalog,
         blackbox_base: Path | None,
+        numbers: dict[str, int] | None = None,
     ) -> None:
         self.config = config
         self.channels = topics  # topic -> (msgtype, schema encoding, schema text)
@@ -79,7 +80,7 @@ class SnapshotRecorder:
         self.open: list[Capture] = []
         self.captures: list[Capture] = []
         self._last_capture: dict[str, int] = {}
-        self._numbers: dict[str, int] = {}
+        self._numbers: dict[str, int] = numbers if numbers is not None else {}  # shared by the passes of a loop
 
     def on_message(self, topic: str, time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Buffer one message of a selected topic; close captures that are over."""

@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from bagfault.errors import FieldPathError
+
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
@@ -26,10 +28,6 @@ NUMERIC = {
 FLOATS = {'float32', 'float64'}
 _SEGMENT = re.compile(r'^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\*|\d+)\])?$')
 BASE, NAME, ARRAY, SEQUENCE = 1, 2, 3, 4
-
-
-class FieldPathError(ValueError):
-    """A path does not exist in a message type or does not fit its use."""
 
 
 @dataclass(frozen=True)

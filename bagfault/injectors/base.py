@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
-from bagfault.errors import BagfaultError
+from bagfault.errors import InjectorConfigError, InjectorError
 from bagfault.faults.combine import strongest
 from bagfault.faults.drop import drop_mask, should_drop
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, ConfigField
@@ -67,14 +67,6 @@ class Codec(Protocol):
     def encode(self, message: Any) -> bytes:
         """Serialize."""
         ...
-
-
-class InjectorConfigError(ValueError):
-    """An injector's options or a fault config fail a cross-field check."""
-
-
-class InjectorError(BagfaultError):
-    """A message cannot take a fault (for example a point cloud without x, y, z)."""
 
 
 class Injector:

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from bagfault.errors import MalformedMessageError
 from bagfault.faults.combine import strongest, total
 from bagfault.injectors.base import Injector, InjectorConfigError, InjectorError
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, probability, stddev
@@ -25,10 +26,6 @@ if TYPE_CHECKING:
 FLOAT_TYPES = {7: 'f4', 8: 'f8'}  # sensor_msgs/PointField FLOAT32, FLOAT64
 
 
-class PointCloudError(ValueError):
-    """A cloud lacks what the fault needs (x, y, z as floats)."""
-
-
 def xyz_view(message: Any) -> tuple[np.ndarray, np.ndarray]:
     """(points structured array view over a contiguous copy of the data, n x 3 float64 coordinates)."""
     offsets = {}
@@ -36,10 +33,10 @@ def xyz_view(message: Any) -> tuple[np.ndarray, np.ndarray]:
     for field in message.fields:
         if field.name in ('x', 'y', 'z'):
             if field.datatype not in FLOAT_TYPES:
-                raise PointCloudError(f'field {field.name} has datatype {field.datatype}, not a float')
+                raise MalformedMessageError(f'field {field.name} has datatype {field.datatype}, not a float')
             offsets[field.name] = (field.offset, order + FLOAT_TYPES[field.datatype])
     if set(offsets) != {'x', 'y', 'z'}:
-        raise PointCloudError(f'cloud has fields {[f.name for f in message.fields]}, not x, y and z')
+        raise MalformedMessageError(f'cloud has fields {[f.name for f in message.fields]}, not x, y and z')
     count = message.width * message.height
     raw = np.asarray(message.data, dtype=np.uint8)
     rows = raw[: message.height * message.row_step].reshape(message.height, message.row_step)
@@ -84,7 +81,7 @@ class PointCloud2Injector(Injector):
         """Bias, noise, sector, NaN points, dropout; the cloud is rewritten once."""
         try:
             body, xyz = xyz_view(message)
-        except PointCloudError as exc:
+        except MalformedMessageError as exc:
             raise InjectorError(f'pointcloud2 injector {self.spec.id!r}: {exc}') from None
         count = len(xyz)
         changed = False

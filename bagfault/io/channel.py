@@ -4,6 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+Data = bytes | memoryview
+InputMessage = tuple[int, int, int, Data]
+"""(channel index into the source's `channels`, log_time ns, publish_time ns, serialized data)."""
+
 
 def normalize_msgtype(name: str) -> str:
     """'std_msgs/String' -> 'std_msgs/msg/String'; full names stay as they are."""

@@ -6,7 +6,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from bagfault.io import OutputError
+from bagfault.errors import OutputError
 from bagfault.io.mcap_writer import McapWriter
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')

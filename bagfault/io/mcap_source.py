@@ -22,7 +22,7 @@ from mcap.reader import NonSeekingReader, SeekingReader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import StreamReader, breakup_chunk
 
-from bagfault.io import InputError
+from bagfault.errors import InputError
 from bagfault.io.channel import Channel, normalize_msgtype
 
 if TYPE_CHECKING:

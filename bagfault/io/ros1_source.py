@@ -17,7 +17,7 @@ from rosbags.rosbag1 import ReaderError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
-from bagfault.io import InputError
+from bagfault.errors import InputError
 from bagfault.io.channel import Channel
 
 if TYPE_CHECKING:

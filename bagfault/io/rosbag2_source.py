@@ -8,22 +8,24 @@ without metadata.yaml is read as the set of storage files it holds.
 
 from __future__ import annotations
 
-import heapq
 import shutil
 import tempfile
+from dataclasses import replace
 from pathlib import Path, PurePath
 from typing import TYPE_CHECKING, Any
 
 import yaml
 import zstandard
 
-from bagfault.io import InputError
-from bagfault.io.channel import Channel
+from bagfault.errors import InputError
 from bagfault.io.mcap_source import McapSource
+from bagfault.io.merged import MergedSource, Source
 from bagfault.io.sqlite_source import SqliteSource
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
+    from collections.abc import Callable
+
+    from bagfault.io.channel import Channel
 
 STORAGE_SUFFIXES = ('.db3', '.mcap', '.db3.zstd', '.mcap.zstd')
 
@@ -32,31 +34,26 @@ def _is_storage(path: Path) -> bool:
     return path.is_file() and path.name.endswith(STORAGE_SUFFIXES)
 
 
-class Rosbag2Source:
-    """A rosbag2 bag made of one or more storage files, merged by time."""
+class Rosbag2Source(MergedSource):
+    """A rosbag2 bag made of one or more storage files, merged by time (files in listed order on ties)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.channels: list[Channel] = []
-        self.ros_distro: str | None = None
         self.metadata: dict[str, Any] = {}
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
-        self._parts: list[McapSource | SqliteSource] = []
-        self._maps: list[list[int]] = []
+        parts: list[Source] = []
+        distro: str | None = None
         try:
             files = self._files()
+            distro = self.metadata.get('ros_distro')
             for file in files:
-                self._parts.append(self._open_part(file))
+                parts.append(self._open_part(file))
         except BaseException:
-            self.close()
+            for part in parts:
+                part.close()
+            self._cleanup()
             raise
-        self._merge_channels()
-        counts = [p.message_count for p in self._parts]
-        self.message_count = sum(c for c in counts if c) if all(c is not None for c in counts) else None
-        starts = [p.start_time for p in self._parts if p.start_time is not None]
-        ends = [p.end_time for p in self._parts if p.end_time is not None]
-        self.start_time = min(starts) if starts else None
-        self.end_time = max(ends) if ends else None
+        super().__init__(parts, adjust=self._declared(), ros_distro=distro)
 
     def _files(self) -> list[Path]:
         if self.path.is_file():
@@ -78,7 +75,6 @@ class Rosbag2Source:
         if version > 9:
             raise InputError(f'{meta}: metadata version {version} is newer than bagfault knows (1-9)')
         self.metadata = info
-        self.ros_distro = info.get('ros_distro')
         fmt = (info.get('compression_format') or '').lower()
         mode = (info.get('compression_mode') or '').lower()
         if mode and mode != 'none' and fmt not in {'', 'zstd'}:
@@ -115,62 +111,35 @@ class Rosbag2Source:
             raise InputError(f'{file}: corrupt zstd file ({exc})') from None
         return target
 
-    def _merge_channels(self) -> None:
-        """One channel per (topic, type, encoding) across files, first definition wins."""
-        index: dict[tuple[str, str, str], int] = {}
+    def _declared(self) -> Callable[[Channel], Channel]:
+        """What metadata.yaml declares of a topic: its QoS (when the storage has none) and its format."""
         declared = [
             t['topic_metadata'] for t in self.metadata.get('topics_with_message_count', [])
             if isinstance(t, dict) and isinstance(t.get('topic_metadata'), dict)
         ]
         qos = {t.get('name'): t.get('offered_qos_profiles', '') for t in declared}
-        # A format declared in metadata.yaml counts even if the storage says cdr.
         formats = {t.get('name'): t.get('serialization_format') for t in declared}
-        for part in self._parts:
-            mapping = []
-            for channel in part.channels:
-                key = (channel.topic, channel.msgtype, channel.message_encoding)
-                if key not in index:
-                    metadata = channel.metadata
-                    if not channel.qos and isinstance(qos.get(channel.topic), str) and qos[channel.topic]:
-                        metadata = (('offered_qos_profiles', qos[channel.topic]),)
-                    encoding = formats.get(channel.topic) or channel.message_encoding
-                    if encoding != 'cdr':
-                        encoding = encoding if channel.message_encoding == 'cdr' else channel.message_encoding
-                    channel = Channel(channel.topic, channel.msgtype, channel.schema_encoding,
-                                      channel.schema_text, encoding, metadata)
-                    index[key] = len(self.channels)
-                    self.channels.append(channel)
-                elif channel.schema_text and not self.channels[index[key]].schema_text:
-                    old = self.channels[index[key]]
-                    self.channels[index[key]] = Channel(old.topic, old.msgtype, channel.schema_encoding,
-                                                        channel.schema_text, old.message_encoding, old.metadata)
-                mapping.append(index[key])
-            self._maps.append(mapping)
-            if self.ros_distro is None and part.ros_distro:
-                self.ros_distro = part.ros_distro
 
-    def messages(self) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
-        """All files' messages merged in time order (files in listed order on ties)."""
-        if len(self._parts) == 1:
-            mapping = self._maps[0]
-            for channel, log_time, publish_time, data in self._parts[0].messages():
-                yield mapping[channel], log_time, publish_time, data
-            return
-        streams = [_keyed(part, number, mapping) for number, (part, mapping) in enumerate(zip(self._parts, self._maps))]
-        for log_time, _, channel, publish_time, data in heapq.merge(*streams, key=lambda x: (x[0], x[1])):
-            yield channel, log_time, publish_time, data
+        def adjust(channel: Channel) -> Channel:
+            metadata = channel.metadata
+            declared_qos = qos.get(channel.topic)
+            if not channel.qos and isinstance(declared_qos, str) and declared_qos:
+                metadata = (('offered_qos_profiles', declared_qos),)
+            # A format declared in metadata.yaml counts even if the storage says cdr.
+            declared_format = formats.get(channel.topic)
+            encoding = declared_format if isinstance(declared_format, str) and declared_format else channel.message_encoding
+            if encoding != 'cdr' and channel.message_encoding != 'cdr':
+                encoding = channel.message_encoding
+            return replace(channel, message_encoding=encoding, metadata=metadata)
+
+        return adjust
 
     def close(self) -> None:
         """Close every file and remove decompressed copies."""
-        for part in self._parts:
-            part.close()
-        self._parts = []
+        super().close()
+        self._cleanup()
+
+    def _cleanup(self) -> None:
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
-
-
-def _keyed(source: Any, number: int, mapping: list[int]) -> Iterator[tuple[int, int, int, int, Any]]:
-    """Messages of one part as (log_time, part number, channel, publish_time, data) for merging."""
-    for channel, log_time, publish_time, data in source.messages():
-        yield log_time, number, mapping[channel], publish_time, data

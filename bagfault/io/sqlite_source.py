@@ -16,7 +16,7 @@ from urllib.parse import quote
 
 import zstandard
 
-from bagfault.io import InputError
+from bagfault.errors import InputError
 from bagfault.io.channel import Channel, normalize_msgtype
 
 if TYPE_CHECKING:

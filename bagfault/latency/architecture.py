@@ -17,7 +17,7 @@ from typing import Any
 
 import yaml
 
-from bagfault.latency import LatencyError
+from bagfault.errors import LatencyError
 
 UNDEFINED = 'UNDEFINED'
 CONTEXT_TYPES = ('use_latest_message', 'inherit_unique_stamp', 'callback_chain', 'tilde', UNDEFINED)

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bagfault.latency import LatencyError
+from bagfault.errors import LatencyError
 
 if TYPE_CHECKING:
     from bagfault.latency.architecture import Architecture, NamedPath

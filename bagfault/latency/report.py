@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from html import escape
 from typing import TYPE_CHECKING, Any
 
-from bagfault.latency import LatencyError
+from bagfault.errors import LatencyError
 from bagfault.latency.architecture import Architecture, load_architecture
 from bagfault.latency.collect import fault_windows, read_series
 from bagfault.latency.compute import PathResult, by_fault, path_latency, statistics

@@ -9,13 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bagfault.errors import BagfaultError
+from bagfault.errors import LiveError
 
 LOOPBACK_PROFILE = Path(__file__).with_name('fastdds_loopback.xml')
-
-
-class LiveError(BagfaultError):
-    """Live mode cannot start or continue (rclpy missing, type not installed, bad argument)."""
 
 
 def require_rclpy() -> None:

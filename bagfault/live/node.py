@@ -27,22 +27,21 @@ from rclpy.parameter import Parameter
 from bagfault import __version__
 from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
+from bagfault.errors import FieldValueError, LiveError, ReloadError, ScenarioError
+from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
-from bagfault.live import LiveError
 from bagfault.live.diagnostics import diagnostic_array
 from bagfault.live.params import fault_parameters
-from bagfault.live.recording import Recording
 from bagfault.live.ros import interface_class, qos
-from bagfault.live.session import LiveSession, LiveTopic, ReloadError
+from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import TriggerProxy
-from bagfault.scenario import ScenarioError, load_scenario
-from bagfault.schema import FieldValueError
+from bagfault.scenario import load_scenario
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from bagfault.engine.stop import StopFlag
     from bagfault.events import FaultEvent
-    from bagfault.live.runtime import StopFlag
     from bagfault.scenario.model import Scenario
 
 NODE_NAME = 'bagfault'
@@ -126,7 +125,7 @@ class ProxyNode:
         self.node = Node(NODE_NAME, context=context, parameter_overrides=overrides)
         self.logger = self.node.get_logger()
         self.session: LiveSession | None = None
-        self.recording: Recording | None = None
+        self.recording: McapSink | None = None
         self.delay: DelayLine | None = None
         self.publishers: dict[int, Any] = {}
         self.subscriptions: list[Any] = []
@@ -162,7 +161,7 @@ class ProxyNode:
         if waiting:
             self.logger.info('waiting for publishers to learn the type of ' + ', '.join(sorted(waiting.values()))
                              + " (or set the injector's message_type)")
-        while waiting and not self.stop:
+        while waiting and not self.stop.is_set():
             graph = dict(self.node.get_topic_names_and_types())
             for injector_id, topic in list(waiting.items()):
                 found = graph.get(topic)
@@ -193,7 +192,7 @@ class ProxyNode:
                     wanted[name] = wanted.get(name) or known
         wanted = {t: m for t, m in wanted.items() if t not in own and not t.startswith(OWN_PREFIXES)}
         deadline = time.monotonic() + OBSERVE_WAIT
-        while any(m is None for m in wanted.values()) and time.monotonic() < deadline and not self.stop:
+        while any(m is None for m in wanted.values()) and time.monotonic() < deadline and not self.stop.is_set():
             graph = dict(self.node.get_topic_names_and_types())
             for name in [t for t, m in wanted.items() if m is None]:
                 if graph.get(name):
@@ -210,19 +209,19 @@ class ProxyNode:
     def setup(self, executor: Any) -> None:
         """Types, session, recording, endpoints, parameters, services, timers."""
         types = self.resolve_types(executor)
-        if self.stop:
+        if self.stop.is_set():
             return
         classes = {injector_id: interface_class(msgtype) for injector_id, msgtype in types.items()}
         watched = self.watched_topics(executor)
         watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
-            self.recording = Recording(self.record_path, catalog)
+            self.recording = McapSink(self.record_path)
             self.recording.add_metadata('bagfault', {
                 'tool': 'bagfault', 'version': __version__, 'mode': 'proxy', 'seed': str(self.seed),
                 'scenario': self.scenario.name})
             self.recording.add_attachment(self.scenario.name, 'application/yaml', self.scenario.text.encode())
-        self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, recording=self.recording,
+        self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, sink=self.recording,
                                    blackbox_base=self.record_path, observed=watched)
         self.session.listeners.append(self._on_events)
         self.delay = DelayLine(self.now, self._publish)
@@ -290,7 +289,7 @@ class ProxyNode:
         try:
             self.publishers[id(topic)].publish(payload)
         except Exception as exc:  # noqa: BLE001 - shutting down while the delay line publishes
-            if not self.stop:
+            if not self.stop.is_set():
                 self.logger.error(f'{topic.output_topic}: publish failed: {exc}')
             return
         self.session.sent(topic, payload)
@@ -439,9 +438,24 @@ class ProxyNode:
         if self.session is not None:
             for topic, message in self.session.flush():
                 self._publish(topic, message.data)
-            if not self.session.started:
-                self.session.start()
             self.session.finish()
+            if self.recording is not None:
+                try:
+                    self.recording.finish()
+                except BaseException:
+                    self.session.run.close(ok=False)
+                    raise
+            self.session.run.close(ok=True)
         elif self.recording is not None:
             self.recording.abort()
+        self.node.destroy_node()
+
+    def abort(self) -> None:
+        """A failure: stop the delay line, drop the partial recording and black boxes."""
+        if self.delay is not None:
+            self.delay.stop()
+        if self.recording is not None:
+            self.recording.abort()
+        if self.session is not None:
+            self.session.run.close(ok=False)
         self.node.destroy_node()

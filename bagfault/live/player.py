@@ -1,31 +1,35 @@
 """`bagfault play`: a bag onto the live graph, through the scenario's faults, paced by bag time.
 
-The offline pipeline runs unchanged (same routing, injectors, scheduler on
-bag time, oracles); only its sink differs (`LiveSink`), so what is
-published, and recorded with --record, is what `bagfault run` would write.
-With --loop the bag starts again after its end, the timeline (and /clock)
-continuing where the previous pass ended.
+Each pass is the offline `replay` unchanged (same routing, injectors,
+scheduler on bag time, oracles); only its sink differs (`LiveSink`), so what
+is published, and recorded with --record, is what `bagfault run` would
+write. With --loop the bag starts again after its end, the timeline (and
+/clock) continuing where the previous pass ended; each pass's verdicts and
+black boxes are its own.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from bagfault.engine.pipeline import RunStats
-from bagfault.io.live_sink import LiveSink, PlaybackStopped
+from bagfault.engine.offline import replay
+from bagfault.engine.provenance import provenance
+from bagfault.engine.result import RunStats
+from bagfault.io.mcap_sink import McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
-from bagfault.live import LiveError
-from bagfault.live.recording import Recording
-from bagfault.live.runtime import StopFlag, ros_context
+from bagfault.live.runtime import ros_context
+from bagfault.live.sink import LiveSink
 
 if TYPE_CHECKING:
     from pathlib import Path
 
-    from bagfault.api import RunResult
+    from bagfault.engine.result import RunResult
+    from bagfault.engine.run import Run
+    from bagfault.engine.stop import StopFlag
     from bagfault.scenario.model import Scenario
 
-SETTLE = 0.5  # seconds between creating publishers and the first message, for discovery
+LOOP_GAP = 1_000_000  # ns between the end of a pass and the start of the next
 
 
 def run_play(
@@ -33,93 +37,64 @@ def run_play(
     inputs: list[Path],
     *,
     seed: int,
+    stop: StopFlag,
     rate: float = 1.0,
     clock: bool = False,
     loop: bool = False,
     record: Path | None = None,
-    delay: float = SETTLE,
-    stop: StopFlag | None = None,
+    delay: float = 0.5,
 ) -> RunResult:
     """Play until the end of the bag (or forever with `loop`) or a stop; the recording is complete on return."""
-    import time  # noqa: PLC0415
-
     from rclpy.node import Node  # noqa: PLC0415
 
-    from bagfault.api import RunResult, provenance, wire  # noqa: PLC0415
-
-    if rate <= 0:
-        raise LiveError(f'--rate {rate:g}: must be above 0')
-    stop = stop or StopFlag()
-    notes = list(scenario.warnings)
     total = RunStats()
+    numbers: dict[str, int] = {}  # black box numbering continues across passes
+    passes = 0
+    last: Run | None = None
     with ros_context(stop) as context:
         node = Node('bagfault_player', context=context)
-        first = InputSet(inputs)
-        catalog = TypeCatalog(first.channels, first.ros_distro)
-        recording = Recording(record, catalog) if record is not None else None
-        oracles = None
+        recording = McapSink(record) if record is not None else None
         try:
             if recording is not None:
                 recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'})
                 recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
-            sink = LiveSink(node, rate=rate, clock=clock, stop=stop, recording=recording)
-            passes = 0
-            input_set: InputSet | None = first
+            sink = LiveSink(node, rate=rate, clock=clock, stop=stop, recording=recording, settle=delay)
             while True:
-                assert input_set is not None
-                routing, pipeline, oracles = wire(input_set, scenario, catalog, sink, seed=seed, blackbox_base=record)
-                if passes == 0:
-                    time.sleep(delay)
-                stopped = False
-                try:
-                    stats = pipeline.run()
-                except PlaybackStopped:
-                    stopped = True
-                    stats = pipeline.stats
-                    end = stats.last_output_time if stats.last_output_time is not None else 0
-                    for observer in pipeline.observers:
-                        observer.finish(end)
-                input_set.close()
-                input_set = None
+                run, stopped = _pass(scenario, inputs, sink, seed=seed, record=record, numbers=numbers)
+                last = run
                 passes += 1
-                _add(total, stats)
-                if stopped or not loop or stats.input_messages == 0:
+                total.add(run.stats)
+                if stopped or not loop or run.stats.input_messages == 0:
                     break
-                sink.offset += (stats.last_time or 0) - (stats.first_time or 0) + 1_000_000
-                input_set = InputSet(inputs)
+                sink.offset += (run.stats.last_time or 0) - (run.stats.first_time or 0) + LOOP_GAP
             if recording is not None:
                 recording.finish()
-            if oracles is not None:
-                oracles.publish()
         except BaseException:
             if recording is not None:
                 recording.abort()
-            if oracles is not None:
-                oracles.discard()
             raise
         finally:
-            if input_set is not None:
-                input_set.close()
             node.destroy_node()
-    notes += routing.notes
-    notes.append(f'published {sink.published} messages in {passes} pass{"es" if passes != 1 else ""}'
-                 + (f' (stopped by {stop.reason})' if stop else ''))
+    assert last is not None
+    result = last.result('play', inputs, record, seed, total)
+    result.notes.append(f'published {sink.published} messages in {passes} pass{"es" if passes != 1 else ""}'
+                        + (f' (stopped by {stop.reason})' if stop.is_set() else ''))
+    if loop and passes > 1:
+        result.notes.append(f'verdicts are those of the last pass ({passes} passes)')
     for topic, msgtype in sorted(sink.skipped.items()):
-        notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
-    result = RunResult(scenario, list(inputs), record, seed, total, notes, mode='play')
-    if oracles is not None:
-        oracles.fill(result)
+        result.notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
     return result
 
 
-def _add(total: RunStats, stats: RunStats) -> None:
-    """Fold one pass into the totals (first pass sets the origin)."""
-    total.input_messages += stats.input_messages
-    total.output_messages += stats.output_messages
-    if total.first_time is None:
-        total.first_time, total.origin = stats.first_time, stats.origin
-    total.last_time = stats.last_time
-    total.last_output_time = stats.last_output_time
-    for topic, count in stats.per_topic_out.items():
-        total.per_topic_out[topic] = total.per_topic_out.get(topic, 0) + count
-    total.events.extend(stats.events)
+def _pass(scenario: Scenario, inputs: list[Path], sink: LiveSink, *, seed: int, record: Path | None,
+          numbers: dict[str, int]) -> tuple[Run, bool]:
+    """One pass over the bag; its black boxes are named before the next pass begins."""
+    input_set = InputSet(inputs)
+    try:
+        catalog = TypeCatalog(input_set.channels, input_set.ros_distro)
+        run, stopped = replay(input_set, scenario, catalog, sink, seed=seed, blackbox_base=record,
+                              blackbox_numbers=numbers)
+    finally:
+        input_set.close()
+    run.close(ok=True)
+    return run, stopped

@@ -17,14 +17,15 @@ from typing import TYPE_CHECKING, Any
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from bagfault import __version__
+from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
-from bagfault.live import LiveError
-from bagfault.live.recording import Recording
 from bagfault.live.ros import has_interface, interface_class, qos_yaml
-from bagfault.live.runtime import StopFlag, ros_context
+from bagfault.live.runtime import ros_context
 
 if TYPE_CHECKING:
     from pathlib import Path  # noqa: TC003 - dataclass field types are resolved lazily
+
+    from bagfault.engine.stop import StopFlag
 
 DISCOVERY_PERIOD = 0.1  # seconds between looks at the graph for new topics
 DEPTH = 100
@@ -44,11 +45,13 @@ class RecordResult:
 class Recorder:
     """Subscribes to matching topics as they appear and writes what arrives."""
 
-    def __init__(self, node: Any, topics: list[str], every: bool, recording: Recording) -> None:
+    def __init__(self, node: Any, topics: list[str], every: bool, recording: McapSink) -> None:
         self.node = node
         self.wanted = set(topics)
         self.every = every
         self.recording = recording
+        self.catalog = TypeCatalog([], 'jazzy')
+        self.channels: dict[str, int] = {}
         self.subscriptions: dict[str, Any] = {}
         self.skipped: dict[str, str] = {}
         self.counts: dict[str, int] = {}
@@ -75,13 +78,15 @@ class Recorder:
                 self.node.get_logger().warning(f'{topic}: {msgtype} has no Python bindings here; not recorded')
                 continue
             profile = self._profile(topic)
-            self.recording.channel(topic, msgtype, {'offered_qos_profiles': qos_yaml(profile)})
+            self.channels[topic] = self.recording.add_channel(topic, msgtype, *self.catalog.schema(msgtype), 'cdr',
+                                                              {'offered_qos_profiles': qos_yaml(profile)})
             self.subscriptions[topic] = self.node.create_subscription(
-                interface_class(msgtype), topic, partial(self._received, topic, msgtype), profile, raw=True)
+                interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
             self.node.get_logger().info(f'recording {topic} ({msgtype})')
 
-    def _received(self, topic: str, msgtype: str, data: bytes) -> None:
-        self.recording.write(topic, msgtype, self.node.get_clock().now().nanoseconds, data)
+    def _received(self, topic: str, data: bytes) -> None:
+        now = self.node.get_clock().now().nanoseconds
+        self.recording.write(self.channels[topic], now, now, data)
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
 
@@ -92,21 +97,18 @@ def run_record(
     every: bool = False,
     duration: float | None = None,
     use_sim_time: bool = False,
-    stop: StopFlag | None = None,
+    stop: StopFlag,
 ) -> RecordResult:
     """Record until `duration` seconds (wall clock) have passed or a stop; the file is complete on return."""
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.node import Node  # noqa: PLC0415
     from rclpy.parameter import Parameter  # noqa: PLC0415
 
-    if not topics and not every:
-        raise LiveError('record: give topics to record or --all')
     names = [t if t.startswith('/') else '/' + t for t in topics]
-    stop = stop or StopFlag()
     with ros_context(stop) as context:
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
         node = Node('bagfault_recorder', context=context, parameter_overrides=overrides)
-        recording = Recording(output, TypeCatalog([], 'jazzy'))
+        recording = McapSink(output)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         finished = False
@@ -117,7 +119,7 @@ def run_record(
             node.get_logger().info('bagfault record ready')
             started = last_look = time.monotonic()
             recorder.discover()
-            while not stop:
+            while not stop.is_set():
                 now = time.monotonic()
                 if duration is not None and now - started >= duration:
                     stop.set('duration')

@@ -1,7 +1,8 @@
 """rclpy start-up and shut-down shared by proxy, play and record: a private context, clean stops.
 
-SIGINT and SIGTERM set a flag instead of raising inside a callback, so every
-command leaves its spin loop normally and finalises its recording.
+SIGINT and SIGTERM set the caller's StopFlag instead of raising inside a
+callback, so every command leaves its spin loop normally and finalises its
+recording.
 """
 
 from __future__ import annotations
@@ -18,22 +19,7 @@ from bagfault.live import require_rclpy
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-
-class StopFlag:
-    """Set by SIGINT/SIGTERM (or by the command itself when it is done)."""
-
-    def __init__(self) -> None:
-        self.event = threading.Event()
-        self.reason = ''
-
-    def set(self, reason: str) -> None:
-        """Ask the spin loop to stop."""
-        if not self.event.is_set():
-            self.reason = reason
-            self.event.set()
-
-    def __bool__(self) -> bool:
-        return self.event.is_set()
+    from bagfault.engine.stop import StopFlag
 
 
 @contextlib.contextmanager
@@ -60,7 +46,7 @@ def ros_context(stop: StopFlag) -> Iterator[Any]:
 
 def spin_until(executor: Any, stop: StopFlag, period: float = 0.05) -> None:
     """Run callbacks until `stop` is set; a failing callback is reported and the node keeps running."""
-    while not stop:
+    while not stop.is_set():
         try:
             executor.spin_once(timeout_sec=period)
         except Exception:  # noqa: BLE001 - one bad callback must not take the proxy down

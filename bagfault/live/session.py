@@ -1,4 +1,4 @@
-"""A live session: the offline scheduler, injectors, oracles and MCAP sink on a live clock.
+"""A live session: the offline scheduler, injectors and run loop (oracles, sink) on a live clock.
 
 No rclpy here. The proxy node hands each received message (serialized
 bytes) with the ROS time to `receive`, publishes what comes back (now, or
@@ -15,26 +15,23 @@ import threading
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
-from bagfault.engine import EngineError
-from bagfault.engine.pipeline import RunStats
 from bagfault.engine.routing import build_injector
+from bagfault.engine.run import NullSink, Run
 from bagfault.engine.scheduler import FaultScheduler
+from bagfault.errors import EngineError, FieldValueError, InjectorConfigError, LiveError, ReloadError
 from bagfault.events import FaultEvent
-from bagfault.injectors.base import ActiveFault, Injector, InjectorConfigError, RawMessage
+from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 from bagfault.injectors.registry import get_injector_type
-from bagfault.live import LiveError
-from bagfault.schema import FieldValueError
 
 if TYPE_CHECKING:
     from collections.abc import Callable
+    from pathlib import Path
 
+    from bagfault.engine.result import RunStats
+    from bagfault.engine.run import OutputChannel, Sink
+    from bagfault.events import FaultSource
     from bagfault.io.types import TypeCatalog
-    from bagfault.live.recording import Recording
     from bagfault.scenario.model import InjectorSpec, Scenario
-
-
-class ReloadError(LiveError):
-    """A reloaded scenario is invalid or changes the injector layout; the running one stays."""
 
 
 @dataclass(eq=False)
@@ -83,7 +80,7 @@ def _layout(scenario: Scenario) -> list[tuple[Any, ...]]:
 
 
 class LiveSession:
-    """Owns the fault state of a proxy; thread-safe."""
+    """Owns the fault state of a proxy and its run loop; thread-safe."""
 
     def __init__(
         self,
@@ -93,20 +90,16 @@ class LiveSession:
         clock: Callable[[], int],
         *,
         seed: int,
-        recording: Recording | None = None,
-        blackbox_base: Any = None,
+        sink: Sink | None = None,
+        blackbox_base: Path | None = None,
         observed: dict[str, str] | None = None,
     ) -> None:
-        from bagfault.api import Oracles  # noqa: PLC0415
-
         self.scenario = scenario
         self.catalog = catalog
         self.clock = clock
         self.seed = seed
-        self.recording = recording
         self.lock = threading.RLock()
         self.listeners: list[Callable[[list[FaultEvent]], None]] = []
-        self.stats = RunStats()
         self.topics: list[LiveTopic] = []
         catalog.add_definition(FaultEvent.msgtype, FaultEvent.definition)
         for spec in scenario.injectors:
@@ -117,14 +110,24 @@ class LiveSession:
         self.observed = dict(observed or {})
         schemas = {}
         for name, msgtype in self.observed.items():
-            encoding, text = catalog.schema(msgtype)
-            schemas[name] = (msgtype, encoding, text)
+            schemas[name] = (msgtype, *catalog.schema(msgtype))
         for topic in self.topics:
-            encoding, text = catalog.schema(topic.msgtype)
-            schemas[topic.input_topic] = schemas[topic.output_topic] = (topic.msgtype, encoding, text)
-        self.oracles = Oracles(scenario, schemas, catalog, self._oracle_event, blackbox_base)
+            schemas[topic.input_topic] = schemas[topic.output_topic] = (topic.msgtype, *catalog.schema(topic.msgtype))
+        self.run = Run(scenario, sink if sink is not None else NullSink(), catalog, schemas,
+                       blackbox_base=blackbox_base)
         self.scheduler: FaultScheduler | None = None
-        self.origin: int | None = None
+        self.run.event_channel(FaultEvent)
+        self._inputs: dict[int, OutputChannel] = {}
+        self._outputs: dict[int, OutputChannel] = {}
+        for topic in self.topics:
+            self._inputs[id(topic)] = self.run.channel(topic.input_topic, topic.msgtype)
+            self._outputs[id(topic)] = self.run.channel(topic.output_topic, topic.msgtype)
+        self._watched = {name: self.run.channel(name, msgtype) for name, msgtype in self.observed.items()}
+
+    @property
+    def stats(self) -> RunStats:
+        """Counts and times of the session so far."""
+        return self.run.stats
 
     # -- wiring -------------------------------------------------------------------
     def _build(self, spec: InjectorSpec, msgtype: str) -> Injector:
@@ -140,42 +143,17 @@ class LiveSession:
             return
         self._refresh_active()
         for event in events:
-            self.stats.events.append(event)
-            for observer in self.oracles.observers:
-                observer.on_event(event)
-            self._record_event(event)
+            self.run.event(event)
         for listener in self.listeners:
             listener(events)
-
-    def _record_event(self, event: Any) -> None:
-        if self.recording is not None:
-            self.recording.write_event(event)
-        self.stats.output_messages += 1
-        self.stats.per_topic_out[event.topic] = self.stats.per_topic_out.get(event.topic, 0) + 1
-
-    def _oracle_event(self, event: Any) -> None:
-        """Assertion, scenario status and fault manager events: into the recording."""
-        self._record_event(event)
 
     # -- clock ------------------------------------------------------------------------
     def start(self) -> None:
         """Bag time zero is now: scheduler origin, startup faults, oracles."""
         with self.lock:
             now = self.clock()
-            self.origin = now
-            self.stats.first_time = self.stats.origin = now
-            if self.recording is not None:
-                self.recording.channel(FaultEvent.topic, FaultEvent.msgtype)
-                for kind in self.oracles.event_kinds:
-                    self.recording.channel(kind.topic, kind.msgtype)
-                for topic in self.topics:
-                    self.recording.channel(topic.input_topic, topic.msgtype)
-                    self.recording.channel(topic.output_topic, topic.msgtype)
-                for name, msgtype in self.observed.items():
-                    self.recording.channel(name, msgtype)
+            self.run.begin(now)
             self.scheduler = FaultScheduler(self.scenario, now, self.seed)
-            for observer in self.oracles.observers:
-                observer.start(now)
             self._publish_events(self.scheduler.advance(now))
             self._refresh_active()
 
@@ -204,12 +182,8 @@ class LiveSession:
                 if due is not None and due <= now:
                     self._publish_events(self.scheduler.advance(now))
             topic.received += 1
-            self.stats.input_messages += 1
-            self.stats.last_time = now
-            if self.recording is not None:
-                self.recording.write(topic.input_topic, topic.msgtype, now, data)
-            for observer in self.oracles.observers:
-                observer.on_message(topic.input_topic, now, data)
+            self.run.read(1, now)
+            self.run.message(self._inputs[id(topic)], now, now, data)
             message = RawMessage(now, now, data, topic.received)
             injector = topic.injector
             if not topic.active and not injector.busy:
@@ -230,28 +204,18 @@ class LiveSession:
         with self.lock:
             now = self.clock()
             topic.forwarded += 1
-            self.stats.output_messages += 1
-            self.stats.last_output_time = now
-            out = topic.output_topic
-            self.stats.per_topic_out[out] = self.stats.per_topic_out.get(out, 0) + 1
-            if self.recording is not None:
-                self.recording.write(out, topic.msgtype, now, data)
-            for observer in self.oracles.observers:
-                observer.on_message(out, now, data)
+            self.run.message(self._outputs[id(topic)], now, now, data)
             return now
 
     def observe(self, name: str, data: bytes) -> None:
         """A message on a topic the oracles watch (the system under test's /diagnostics, an asserted topic)."""
         with self.lock:
             now = self.clock()
-            self.stats.input_messages += 1
-            if self.recording is not None:
-                self.recording.write(name, self.observed[name], now, data)
-            for observer in self.oracles.observers:
-                observer.on_message(name, now, data)
+            self.run.read(1, now)
+            self.run.message(self._watched[name], now, now, data)
 
     # -- runtime control --------------------------------------------------------------
-    def set_active(self, fault_id: str, active: bool, source: str = 'manual') -> None:
+    def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None:
         """Switch a fault on or off now (a parameter or service call)."""
         with self.lock:
             if self.scheduler is None:
@@ -365,13 +329,11 @@ class LiveSession:
             return [(topic, m) for topic in self.topics for m in topic.injector.flush(now)]
 
     def finish(self) -> RunStats:
-        """End of the session: pending assertions fail, recording completed."""
+        """End of the session: pending assertions are decided at the current time."""
         with self.lock:
             now = self.clock()
-            for observer in self.oracles.observers:
-                observer.finish(now)
-            self.stats.last_time = now
-            if self.recording is not None:
-                self.recording.finish()
-            self.oracles.publish()
-            return replace(self.stats)
+            if not self.started:
+                self.start()
+            self.run.end(now)
+            self.run.stats.last_time = now
+            return replace(self.run.stats)

@@ -16,7 +16,7 @@ from bagfault.io.types import TypeCatalog
 if TYPE_CHECKING:
     from pathlib import Path
 
-    from bagfault.api import RunResult
+    from bagfault.engine.result import RunResult
 
 MAX_POINTS = 1500
 NS = 1_000_000_000

@@ -12,7 +12,7 @@ from bagfault import __version__
 from bagfault.events import AssertionEvent, ScenarioStatus
 
 if TYPE_CHECKING:
-    from bagfault.api import RunResult
+    from bagfault.engine.result import RunResult
 
 NS = 1_000_000_000
 SCHEMA_VERSION = 1

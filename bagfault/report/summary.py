@@ -6,7 +6,7 @@ import sys
 from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
-    from bagfault.api import RunResult
+    from bagfault.engine.result import RunResult
 
 
 def _seconds(time: int | None, origin: int | None) -> str:

@@ -8,7 +8,7 @@ import pytest
 from helpers import FIXTURES
 
 from bagfault import api
-from bagfault.engine import EngineError
+from bagfault.errors import AssertionSetupError
 from bagfault.scenario import ScenarioError, parse_scenario
 
 BASE = textwrap.dedent("""
@@ -151,7 +151,7 @@ def test_assertion_fields_are_validated(assertion, problem):
 
 
 def test_bad_field_path_stops_the_run_naming_the_closest_path(tmp_path):
-    with pytest.raises(EngineError) as info:
+    with pytest.raises(AssertionSetupError) as info:
         run(tmp_path, '- {id: a, type: field_range, topic: /odom, field: pose.pose.postion.x, max: 1}\n')
     text = str(info.value)
     assert "'pose.pose.postion.x' is not a field of nav_msgs/msg/Odometry" in text

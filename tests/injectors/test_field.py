@@ -11,7 +11,7 @@ from helpers import NS, decoded, make_bag, run_inline
 from rosbags.typesys import Stores, get_typestore
 
 from bagfault.demo import synthetic
-from bagfault.engine import EngineError
+from bagfault.errors import EngineError
 from bagfault.faults.fieldpath import leaf_paths
 from bagfault.scenario import ScenarioError, parse_scenario
 

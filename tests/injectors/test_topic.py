@@ -120,7 +120,7 @@ def test_stamp_offset_changes_only_the_header_stamp(tmp_path, bag):
 
 
 def test_stamp_offset_needs_a_header(tmp_path, bag):
-    from bagfault.engine import EngineError
+    from bagfault.errors import EngineError
 
     text = scenario('{stamp_offset_ms: 5}').replace('/imu,', '/cloud,')
     out, _ = run_inline(tmp_path, text, bag)  # PointCloud2 has a header: fine

@@ -10,7 +10,7 @@ import pytest
 from helpers import EXTERNAL
 from io_cases import ROSBAG2_DIRS, metadata_counts
 
-from bagfault.io import InputError
+from bagfault.errors import InputError
 from bagfault.io.sources import InputSet, open_source
 
 def read_all(path: Path) -> tuple[Counter[str], list[int]]:

@@ -13,7 +13,7 @@ from helpers import CARET, NS, SHARED
 from bagfault import api
 from bagfault.cli import main
 from bagfault.demo import synthetic
-from bagfault.latency import LatencyError
+from bagfault.errors import LatencyError
 from bagfault.latency.architecture import load_architecture
 from bagfault.latency.compute import TopicSeries, path_latency
 from bagfault.latency.report import measure

@@ -7,11 +7,11 @@ from pathlib import Path
 import pytest
 
 from bagfault.demo import synthetic
+from bagfault.errors import FieldValueError, ReloadError
+from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
-from bagfault.live.recording import Recording
-from bagfault.live.session import LiveSession, ReloadError
+from bagfault.live.session import LiveSession
 from bagfault.scenario import parse_scenario
-from bagfault.schema import FieldValueError
 from helpers import NS, decoded
 
 STORE = synthetic.store()
@@ -49,9 +49,8 @@ def value(data: bytes | memoryview, path: str) -> float:
     return message
 
 
-def session_for(text: str, clock: Clock, recording: Recording | None = None) -> LiveSession:
-    catalog = TypeCatalog([], 'jazzy') if recording is None else recording.catalog
-    session = LiveSession(parse_scenario(text), catalog, {'imu': IMU}, clock, seed=1, recording=recording)
+def session_for(text: str, clock: Clock, recording: McapSink | None = None) -> LiveSession:
+    session = LiveSession(parse_scenario(text), TypeCatalog([], 'jazzy'), {'imu': IMU}, clock, seed=1, sink=recording)
     session.start()
     return session
 
@@ -146,7 +145,7 @@ def test_malformed_messages_are_counted_and_forwarded_or_dropped() -> None:
 
 def test_recording_holds_raw_and_faulty_topics_and_the_events(tmp_path: Path) -> None:
     clock = Clock()
-    recording = Recording(tmp_path / 'live.mcap', TypeCatalog([], 'jazzy'))
+    recording = McapSink(tmp_path / 'live.mcap')
     session = session_for(SCENARIO, clock, recording)
     topic = session.topics[0]
     for k in range(4):
@@ -157,6 +156,7 @@ def test_recording_holds_raw_and_faulty_topics_and_the_events(tmp_path: Path) ->
             session.sent(topic, out.data)
     assert not (tmp_path / 'live.mcap').exists()  # only complete files carry the name
     session.finish()
+    recording.finish()
     raw = decoded(tmp_path / 'live.mcap', ['/imu_raw', '/imu', '/fault_injection/events'])
     assert [m.angular_velocity.z for _, m in raw['/imu_raw']] == [0.0, 1.0, 2.0, 3.0]
     assert [m.angular_velocity.z for _, m in raw['/imu']] == [0.0, 1.0, 2.5, 3.5]

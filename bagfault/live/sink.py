@@ -1,11 +1,12 @@
-"""A pipeline sink that publishes on live topics, paced to wall time, and records what it sent.
+"""A run-loop sink that publishes on live topics, paced to wall time, and records what it sent.
 
-The offline pipeline writes records in bag-time order; this sink holds each
-one until its time has come (bag time x 1/rate after the first), publishes
-/clock when asked, publishes the bytes on the record's topic with the
-recorded QoS, and writes the same record to the recording. Types without
-Python bindings here (for example bagfault's own event types) are recorded
-but not published.
+The offline pipeline hands records over in bag-time order; this sink holds
+each one until its time has come (bag time x 1/rate after the first),
+publishes /clock when asked, publishes the bytes on the record's topic with
+the recorded QoS, and writes the same record to the recording (an MCAP
+sink). Types without Python bindings here (for example bagfault's own
+event types) are recorded but not published. When the stop flag is set it
+raises `Stopped`, which ends the pass.
 """
 
 from __future__ import annotations
@@ -13,33 +14,30 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Any
 
-from bagfault.live import LiveError
+from bagfault.engine.stop import Stopped
 from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos
 
 if TYPE_CHECKING:
-    from bagfault.live.recording import Recording
-    from bagfault.live.runtime import StopFlag
+    from bagfault.engine.stop import StopFlag
+    from bagfault.io.mcap_sink import McapSink
 
 CLOCK_PERIOD = 0.01  # /clock at 100 Hz while waiting for the next message
 SLICE = 0.05  # longest sleep between checks of the stop flag
-
-
-class PlaybackStopped(LiveError):
-    """SIGINT/SIGTERM during playback."""
 
 
 class LiveSink:
     """Publishes pipeline records on live topics at their time; see module docstring."""
 
     def __init__(self, node: Any, *, rate: float, clock: bool, stop: StopFlag,
-                 recording: Recording | None = None) -> None:
+                 recording: McapSink | None = None, settle: float = 0.0) -> None:
         self.node = node
         self.rate = rate
         self.stop = stop
+        self.settle = settle  # seconds between creating the publishers and the first message, for discovery
         self.recording = recording
         self.offset = 0  # added to bag times: loops continue the timeline
         self._channels: dict[tuple[str, str], int] = {}
-        self._topics: list[tuple[str, str, Any]] = []
+        self._topics: list[tuple[Any, int | None]] = []  # publisher, recording channel id
         self._clock = None
         if clock:
             clock_type = interface_class('rosgraph_msgs/msg/Clock')
@@ -64,9 +62,11 @@ class LiveSink:
             publisher = self.node.create_publisher(interface_class(msgtype), topic, profile)
         elif not topic.startswith(('/fault_injection/', '/fault_manager/')):
             self.skipped[topic] = msgtype
+        recorded = None
         if self.recording is not None:
-            self.recording.channel(topic, msgtype, metadata)
-        self._topics.append((topic, msgtype, publisher))
+            recorded = self.recording.add_channel(topic, msgtype, schema_encoding, schema_text, message_encoding,
+                                                  metadata)
+        self._topics.append((publisher, recorded))
         self._channels[key] = len(self._topics) - 1
         return len(self._topics) - 1
 
@@ -82,12 +82,14 @@ class LiveSink:
     def _wait(self, bag_time: int) -> None:
         """Sleep until the record's wall time, publishing /clock meanwhile."""
         if self._origin is None:
+            if self.stop.wait(self.settle):
+                raise Stopped(self.stop.reason)
             self._origin = (bag_time, time.monotonic())
         first, started = self._origin
         due = started + (bag_time - first) / 1e9 / self.rate
         while True:
-            if self.stop:
-                raise PlaybackStopped(f'stopped by {self.stop.reason}')
+            if self.stop.is_set():
+                raise Stopped(self.stop.reason)
             now = time.monotonic()
             if now >= due:
                 break
@@ -99,11 +101,11 @@ class LiveSink:
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Publish one record when its time has come, and record it."""
-        topic, msgtype, publisher = self._topics[channel_id]
+        publisher, recorded = self._topics[channel_id]
         stamp = log_time + self.offset
         self._wait(stamp)
         if publisher is not None:
             publisher.publish(data if isinstance(data, bytes) else bytes(data))
             self.published += 1
-        if self.recording is not None:
-            self.recording.write(topic, msgtype, stamp, data)
+        if recorded is not None and self.recording is not None:
+            self.recording.write(recorded, stamp, publish_time + self.offset, data)

@@ -1,0 +1,171 @@
+"""Drivers of the run loop over bags: a bag through a scenario into any sink, a recording judged, a file run.
+
+`replay` is what `run`, `play` and `test` share: inputs -> routing ->
+pipeline -> Run (oracles) -> sink. `check_recording` feeds a recording's
+messages to the same Run with nothing injected. `run_to_file` wraps
+`replay` with the output MCAP, its provenance and an all-or-nothing finish.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from bagfault.engine.pipeline import Pipeline
+from bagfault.engine.provenance import provenance
+from bagfault.engine.routing import build_routing
+from bagfault.engine.run import NullSink, Observer, OutputChannel, Run
+from bagfault.engine.scheduler import seconds_to_ns
+from bagfault.engine.stop import Stopped
+from bagfault.events import FaultEvent
+from bagfault.io.mcap_sink import McapSink
+from bagfault.io.sources import InputSet
+from bagfault.io.types import TypeCatalog
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from pathlib import Path
+
+    from bagfault.engine.result import RunResult
+    from bagfault.engine.run import Sink
+    from bagfault.engine.scheduler import Activation
+    from bagfault.scenario.model import Scenario
+
+Progress = Callable[[int, int], None]
+EMPTY_INPUT = 'the input holds no messages; the output has channels only'
+
+
+def begin_progress(progress: Progress | None, inputs: InputSet) -> None:
+    """Tell a progress display what the whole job is, when it wants to know."""
+    begin = getattr(progress, 'begin', None)
+    if begin is not None:
+        begin(inputs.start_time, inputs.end_time, inputs.message_count)
+
+
+def replay(
+    inputs: InputSet,
+    scenario: Scenario,
+    catalog: TypeCatalog,
+    sink: Sink,
+    *,
+    seed: int,
+    activations: Sequence[Activation] = (),
+    start_offset: float = 0.0,
+    batch: bool = True,
+    progress: Progress | None = None,
+    observers: Sequence[Observer] = (),
+    blackbox_base: Path | None = None,
+    blackbox_numbers: dict[str, int] | None = None,
+) -> tuple[Run, bool]:
+    """One pass of the inputs through the scenario into `sink`; (the run, True if a Stopped ended it early).
+
+    On an error the run's black boxes are removed; on success the caller
+    closes the run once its own output is complete.
+    """
+    routing = build_routing(inputs, scenario, catalog, sink)
+    run = Run(scenario, sink, catalog, routing.schemas, observers=observers, blackbox_base=blackbox_base,
+              blackbox_numbers=blackbox_numbers)
+    run.notes += routing.notes
+    run.stats.replaced_topics = list(routing.replaced)
+    pipeline = Pipeline(inputs, run, routing.routes, routing.copies, seed=seed, activations=activations,
+                        start_offset=start_offset, batch=batch, progress=progress)
+    stopped = False
+    try:
+        try:
+            pipeline.process()
+        except Stopped:
+            stopped = True
+        run.end()
+    except BaseException:
+        run.close(ok=False)
+        raise
+    return run, stopped
+
+
+def run_to_file(
+    scenario: Scenario,
+    paths: Sequence[Path],
+    output: Path,
+    *,
+    seed: int,
+    activations: Sequence[Activation] = (),
+    start_offset: float = 0.0,
+    compression: str = 'zstd',
+    batch: bool = True,
+    progress: Progress | None = None,
+    observers: Sequence[Observer] = (),
+) -> RunResult:
+    """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing)."""
+    inputs = InputSet(paths)
+    try:
+        begin_progress(progress, inputs)
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
+        sink = McapSink(output, compression=compression)
+        try:
+            sink.add_metadata('bagfault', provenance(scenario, paths, seed, activations, start_offset))
+            sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
+            run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
+                            start_offset=start_offset, batch=batch, progress=progress, observers=observers,
+                            blackbox_base=output)
+        except BaseException:
+            sink.abort()
+            raise
+        finish(sink, run)
+    finally:
+        inputs.close()
+    if run.stats.input_messages == 0:
+        run.notes.append(EMPTY_INPUT)
+    return run.result('run', paths, output, seed)
+
+
+def finish(sink: McapSink, run: Run) -> None:
+    """Complete the output file, then give the run's black boxes their names; remove both on failure."""
+    try:
+        sink.finish()
+    except BaseException:
+        run.close(ok=False)
+        raise
+    run.close(ok=True)
+
+
+def check_recording(
+    scenario: Scenario,
+    path: Path,
+    *,
+    start_offset: float = 0.0,
+    observers: Sequence[Observer] = (),
+    progress: Progress | None = None,
+) -> RunResult:
+    """Judge a recording with the scenario's assertions and fault manager; inject nothing.
+
+    Fault events recorded on /fault_injection/events drive `fault_event`
+    assertions, `during` windows and reports; bag time zero is the
+    recording's first message (plus `start_offset` seconds).
+    """
+    inputs = InputSet([path])
+    try:
+        begin_progress(progress, inputs)
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
+        schemas = {c.topic: (c.msgtype, c.schema_encoding, c.schema_text) for c in inputs.channels}
+        sink = NullSink()
+        run = Run(scenario, sink, catalog, schemas, observers=observers)
+        channels = [OutputChannel(sink.add_channel(c.topic, c.msgtype, '', ''), c.topic, c.msgtype)
+                    for c in inputs.channels]
+        event_codec = catalog.codec(FaultEvent.msgtype) if FaultEvent.topic in schemas else None
+        for index, log_time, publish_time, data in inputs.messages():
+            if not run.started:
+                run.begin(log_time, seconds_to_ns(start_offset))
+            run.read(1, log_time)
+            channel = channels[index]
+            if event_codec is not None and channel.topic == FaultEvent.topic:
+                run.event(FaultEvent.from_message(log_time, event_codec.decode(data)), write=False)
+            run.message(channel, log_time, publish_time, data)
+            if progress is not None and run.stats.input_messages % 4096 == 0:
+                progress(run.stats.input_messages, log_time)
+        run.end(run.stats.last_time if run.stats.last_time is not None else 0)
+    finally:
+        inputs.close()
+    run.close(ok=True)
+    if run.stats.input_messages == 0:
+        run.notes.append('the recording holds no messages')
+    return run.result('check', [path], None, 0)

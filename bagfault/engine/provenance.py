@@ -1,0 +1,35 @@
+"""The `bagfault` metadata record: enough to reproduce a run from its output alone."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict
+from typing import TYPE_CHECKING
+
+from bagfault import __version__
+from bagfault.io.sources import fingerprint
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from pathlib import Path
+
+    from bagfault.engine.scheduler import Activation
+    from bagfault.scenario.model import Scenario
+
+
+def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activations: Sequence[Activation],
+               start_offset: float) -> dict[str, str]:
+    """Tool version, seed, scenario hash, inputs with sizes and sha256, `--activate` and `--start` options."""
+    return {
+        'tool': 'bagfault',
+        'version': __version__,
+        'seed': str(seed),
+        'scenario': scenario.name,
+        'scenario_sha256': hashlib.sha256(scenario.text.encode()).hexdigest(),
+        'inputs': json.dumps(
+            [{'name': p.name, 'files': [asdict(f) for f in fingerprint(p)]} for p in inputs], sort_keys=True
+        ),
+        'activate': json.dumps([asdict(a) for a in activations], sort_keys=True),
+        'start_offset': repr(float(start_offset)),
+    }

@@ -1,0 +1,68 @@
+"""What a run produced besides its output file: statistics, verdicts, notes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path  # noqa: TC003 - dataclass field types are resolved at run time by some callers
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:
+    from bagfault.assertions.base import AssertionResult
+    from bagfault.events import AssertionEvent, FaultEvent, ScenarioStatus
+    from bagfault.scenario.model import Scenario
+
+Mode = Literal['run', 'check', 'play', 'proxy', 'test']
+
+
+@dataclass
+class RunStats:
+    """Counts and times of one run, for the summary and the reports (times in ns of bag time)."""
+
+    input_messages: int = 0
+    output_messages: int = 0
+    first_time: int | None = None
+    last_time: int | None = None
+    origin: int | None = None
+    per_topic_out: dict[str, int] = field(default_factory=dict)
+    events: list[FaultEvent] = field(default_factory=list)
+    replaced_topics: list[str] = field(default_factory=list)
+    max_buffered: int = 0
+    last_output_time: int | None = None
+
+    def add(self, other: RunStats) -> None:
+        """Fold a later pass (play --loop) into these totals; the first pass keeps the origin."""
+        self.input_messages += other.input_messages
+        self.output_messages += other.output_messages
+        if self.first_time is None:
+            self.first_time, self.origin = other.first_time, other.origin
+        if other.last_time is not None:
+            self.last_time = other.last_time
+        if other.last_output_time is not None:
+            self.last_output_time = other.last_output_time
+        for topic, count in other.per_topic_out.items():
+            self.per_topic_out[topic] = self.per_topic_out.get(topic, 0) + count
+        self.events.extend(other.events)
+        self.max_buffered = max(self.max_buffered, other.max_buffered)
+        self.replaced_topics = list(dict.fromkeys([*self.replaced_topics, *other.replaced_topics]))
+
+
+@dataclass
+class RunResult:
+    """Everything a run, check, play, proxy or test produced besides its output file."""
+
+    scenario: Scenario
+    inputs: list[Path]
+    output: Path | None
+    seed: int
+    stats: RunStats
+    notes: list[str] = field(default_factory=list)
+    assertions: list[AssertionResult] = field(default_factory=list)
+    assertion_events: list[AssertionEvent | ScenarioStatus] = field(default_factory=list)
+    mode: Mode = 'run'
+    fault_manager: dict[str, Any] | None = None
+    wall_seconds: float | None = None
+
+    @property
+    def failed(self) -> bool:
+        """True when an assertion failed: exit code 1."""
+        return any(r.state == 'failed' for r in self.assertions)
