@@ -20,7 +20,8 @@ from bagfault.engine.offline import check_recording, run_to_file
 from bagfault.engine.result import RunResult
 from bagfault.engine.scheduler import Activation
 from bagfault.engine.stop import StopFlag
-from bagfault.errors import BagfaultError, OutputError, ScenarioError, UsageError
+from bagfault.errors import BagfaultError, ScenarioError, UsageError
+from bagfault.io.outputs import check_output
 from bagfault.scenario import Scenario, load_scenario
 
 if TYPE_CHECKING:
@@ -61,14 +62,11 @@ def _paths(inputs: Sequence[str | Path]) -> list[Path]:
     return paths
 
 
-def _check_output(inputs: Sequence[Path], output: Path) -> None:
-    out = output.resolve()
-    for path in inputs:
-        source = path.resolve()
-        if out == source:
-            raise OutputError(f'{output}: output path is the input {path}; choose another name')
-        if source.is_dir() and source in out.parents:
-            raise OutputError(f'{output}: output would be written inside the input bag {path}; choose another folder')
+def _check_output(output: Path, what: str, inputs: Sequence[Path], scenario: Scenario | None) -> None:
+    protected = [('the input', p) for p in inputs]
+    if scenario is not None and scenario.source is not None:
+        protected.append(('the scenario', scenario.source))
+    check_output(output, what, protected)
 
 
 def _activations(scenario: Scenario, texts: Sequence[str | Activation]) -> list[Activation]:
@@ -105,9 +103,7 @@ def run(
     loaded = scenario_of(scenario)
     paths = _paths(inputs)
     out = Path(output)
-    _check_output(paths, out)
-    if loaded.source is not None:
-        _check_output([loaded.source], out)
+    _check_output(out, 'output', paths, loaded)
     return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
                        start_offset=_seconds('--start', start_offset), compression=compression, batch=batch,
                        progress=progress, observers=observers)
@@ -126,17 +122,6 @@ def check(
                            observers=observers, progress=progress)
 
 
-def _record_path(record: str | Path | None) -> Path | None:
-    if record is None:
-        return None
-    path = Path(record)
-    if path.is_dir():
-        raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
-    if not (path.parent if str(path.parent) else Path('.')).is_dir():
-        raise OutputError(f'{path}: folder {path.parent} does not exist')
-    return path
-
-
 def proxy(
     scenario: Scenario | str | Path,
     *,
@@ -152,9 +137,9 @@ def proxy(
     from bagfault.live.proxy import run_proxy  # noqa: PLC0415
 
     loaded = scenario_of(scenario)
-    out = _record_path(record)
-    if out is not None and loaded.source is not None:
-        _check_output([loaded.source], out)
+    out = Path(record) if record is not None else None
+    if out is not None:
+        _check_output(out, 'recording', [], loaded)
     return run_proxy(loaded, seed=seed_of(loaded, seed), record=out, use_sim_time=use_sim_time,
                      stop=stop if stop is not None else StopFlag())
 
@@ -181,9 +166,9 @@ def play(
     paths = _paths(inputs)
     if not (math.isfinite(rate) and rate > 0):
         raise UsageError(f'--rate {rate:g}: must be above 0')
-    out = _record_path(record)
+    out = Path(record) if record is not None else None
     if out is not None:
-        _check_output([*paths, *([loaded.source] if loaded.source else [])], out)
+        _check_output(out, 'recording', paths, loaded)
     return run_play(loaded, paths, seed=seed_of(loaded, seed), rate=rate, clock=clock, loop=loop, record=out,
                     delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag())
 
@@ -203,8 +188,8 @@ def record(
     require_rclpy()
     from bagfault.live.recorder import run_record  # noqa: PLC0415
 
-    out = _record_path(output)
-    assert out is not None
+    out = Path(output)
+    _check_output(out, 'output', [], None)
     if duration is not None and not (math.isfinite(duration) and duration > 0):
         raise UsageError(f'--duration {duration:g}: must be above 0')
     if not topics and not every:

@@ -3,17 +3,24 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
 import traceback
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from bagfault import __version__
 from bagfault.errors import BagfaultError, UsageError
+from bagfault.io.outputs import check_output
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterator, Sequence
+
+    from bagfault.engine.result import RunResult
+    from bagfault.engine.run import Observer
+    from bagfault.report.files import ReportPaths
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
 
@@ -78,7 +85,8 @@ def _parser() -> argparse.ArgumentParser:
     _report_options(proxy)
 
     play = sub.add_parser('play', help="publish a bag on its topics, through a scenario's faults",
-                          usage='bagfault play [SCENARIO.yaml] INPUT... [--rate R] [--clock] [--loop] [--record OUT.mcap]')
+                          usage='bagfault play [SCENARIO.yaml] INPUT... [--rate R] [--clock] [--loop] '
+                                '[--record OUT.mcap]')
     play.add_argument('items', type=Path, nargs='+', metavar='[SCENARIO] INPUT',
                       help='an optional scenario file (.yaml) followed by bags')
     play.add_argument('--rate', type=float, default=1.0, help='playback speed factor (default 1.0)')
@@ -111,53 +119,42 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--html', type=Path, metavar='R.html', help='self-contained HTML report with plots')
 
 
-def _collectors(args: argparse.Namespace) -> list[object]:
-    from bagfault.report.rates import RateTracker  # noqa: PLC0415
+def _reports(args: argparse.Namespace) -> ReportPaths:
+    from bagfault.report.files import ReportPaths  # noqa: PLC0415
 
-    return [RateTracker()] if getattr(args, 'html', None) else []
-
-
-def _write_reports(args: argparse.Namespace, result: object, collectors: list[object]) -> None:
-    from bagfault.report import html, json_report, junit, markdown, model  # noqa: PLC0415
-    from bagfault.report.fields import collect  # noqa: PLC0415
-
-    report = model.build(result)  # type: ignore[arg-type]
-    if getattr(args, 'report', None):
-        _write_text(args.report, markdown.render(report))
-    if getattr(args, 'json', None):
-        _write_text(args.json, json_report.render(report))
-    if getattr(args, 'junit', None):
-        _write_text(args.junit, junit.render(report))
-    if getattr(args, 'html', None):
-        rates = collectors[0] if collectors else None
-        _write_text(args.html, html.render(report, rates, collect(result)))  # type: ignore[arg-type]
+    return ReportPaths(markdown=getattr(args, 'report', None), json=getattr(args, 'json', None),
+                       junit=getattr(args, 'junit', None), html=getattr(args, 'html', None))
 
 
-def _finish(args: argparse.Namespace, result: Any, collectors: Sequence[object] = ()) -> int:
+def _protected(**paths: Path | Sequence[Path] | None) -> list[tuple[str, Path]]:
+    """What reports must not replace: the command's inputs, scenario and main output."""
+    out: list[tuple[str, Path]] = []
+    for name, value in paths.items():
+        if value is None:
+            continue
+        for path in [value] if isinstance(value, Path) else value:
+            out.append((f'the {name}', path))
+    return out
+
+
+def _finish(reports: ReportPaths, result: RunResult, collectors: Sequence[Observer] = ()) -> int:
     """Reports, terminal summary, exit code: the end of every command that runs a scenario."""
     from bagfault.report.summary import print_run_summary  # noqa: PLC0415
 
-    _write_reports(args, result, list(collectors))
+    reports.write(result, collectors)
     print_run_summary(result)
     return EXIT_FAILED if result.failed else EXIT_OK
-
-
-def _write_text(path: Path, text: str) -> None:
-    from bagfault.errors import OutputError  # noqa: PLC0415
-
-    try:
-        path.write_text(text, encoding='utf-8')
-    except OSError as exc:
-        raise OutputError(f'{path}: cannot write report: {exc.strerror}') from None
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
     from bagfault.progress import ProgressBar  # noqa: PLC0415
 
+    reports = _reports(args)
+    reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
     scenario = api.load_scenario(args.scenario)
     bar = ProgressBar()
-    collectors = _collectors(args)
+    collectors = reports.collectors()
     try:
         result = api.run(
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
@@ -165,43 +162,50 @@ def _cmd_run(args: argparse.Namespace) -> int:
         )
     finally:
         bar.close()
-    return _finish(args, result, collectors)
+    return _finish(reports, result, collectors)
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
     from bagfault.progress import ProgressBar  # noqa: PLC0415
 
+    reports = _reports(args)
+    reports.check(_protected(recording=args.recording, scenario=args.scenario))
     scenario = api.load_scenario(args.scenario)
     bar = ProgressBar()
-    collectors = _collectors(args)
+    collectors = reports.collectors()
     try:
         result = api.check(scenario, args.recording, start_offset=args.start, observers=collectors, progress=bar)
     finally:
         bar.close()
-    return _finish(args, result, collectors)
+    return _finish(reports, result, collectors)
 
 
 def _cmd_proxy(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
 
+    reports = _reports(args)
+    reports.check(_protected(scenario=args.scenario, recording=args.record))
     scenario = api.load_scenario(args.scenario)
     result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time)
-    return _finish(args, result)
+    return _finish(reports, result)
 
 
 def _cmd_play(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
 
     items = list(args.items)
-    scenario = None
+    scenario_path = None
     if items[0].suffix in ('.yaml', '.yml') and items[0].is_file():
-        scenario = api.load_scenario(items.pop(0))
+        scenario_path = items.pop(0)
     if not items:
         raise UsageError('play: give at least one bag after the scenario')
+    reports = _reports(args)
+    reports.check(_protected(input=items, scenario=scenario_path, recording=args.record))
+    scenario = api.load_scenario(scenario_path) if scenario_path is not None else None
     result = api.play(scenario, items, rate=args.rate, clock=args.clock, loop=args.loop, record=args.record,
                       seed=args.seed, delay=args.delay)
-    return _finish(args, result)
+    return _finish(reports, result)
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
@@ -222,28 +226,25 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from bagfault import api, demo  # noqa: PLC0415
+    from bagfault.errors import OutputError  # noqa: PLC0415
     from bagfault.progress import ProgressBar  # noqa: PLC0415
-    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+    from bagfault.report.files import ReportPaths  # noqa: PLC0415
 
     directory = args.output_dir
     try:
         bag, scenario = demo.prepare(directory)
     except OSError as exc:
-        from bagfault.errors import OutputError  # noqa: PLC0415
-
         raise OutputError(f'{directory}: cannot write the demo files: {exc.strerror}') from None
+    reports = ReportPaths(markdown=directory / 'demo_report.md', html=directory / 'demo_report.html')
     bar = ProgressBar()
-    collectors = _collectors(argparse.Namespace(html=True))
+    collectors = reports.collectors()
     try:
         result = api.run(scenario, [bag], directory / 'demo_output.mcap', progress=bar, observers=collectors)
     finally:
         bar.close()
-    args.report = directory / 'demo_report.md'
-    args.html = directory / 'demo_report.html'
-    _write_reports(args, result, collectors)
-    print_run_summary(result)
-    print(f'report    {args.report}, {args.html}')
-    return EXIT_FAILED if result.failed else EXIT_OK
+    code = _finish(reports, result, collectors)
+    print(f'report    {reports.markdown}, {reports.html}')
+    return code
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -269,6 +270,7 @@ def _cmd_latency(args: argparse.Namespace) -> int:
     import json  # noqa: PLC0415
 
     from bagfault.errors import LatencyError  # noqa: PLC0415
+    from bagfault.io.outputs import write_atomic  # noqa: PLC0415
     from bagfault.latency.architecture import load_architecture  # noqa: PLC0415
     from bagfault.latency.report import measure, render_html, render_text, render_validation  # noqa: PLC0415
 
@@ -281,12 +283,16 @@ def _cmd_latency(args: argparse.Namespace) -> int:
         return EXIT_OK if all(p.usable for p in architecture.paths.values()) else EXIT_ERROR
     if len(items) < 2:
         raise LatencyError('usage: bagfault latency ARCH.yaml BAG... (or: bagfault latency validate ARCH.yaml)')
+    bags = [Path(item) for item in items[1:]]
+    for option, path in (('--json', args.json), ('--html', args.html)):
+        if path is not None:
+            check_output(path, f'{option} report', _protected(architecture=Path(items[0]), input=bags))
     report = measure(items[0], items[1:], path=args.path, stamp_origin=args.stamp_origin)
     print(render_text(report))
     if args.json:
-        _write_text(args.json, json.dumps(report.to_dict(), indent=1, sort_keys=True) + '\n')
+        write_atomic(args.json, json.dumps(report.to_dict(), indent=1, sort_keys=True) + '\n')
     if args.html:
-        _write_text(args.html, render_html(report))
+        write_atomic(args.html, render_html(report))
     return EXIT_OK
 
 
@@ -312,10 +318,11 @@ COMMANDS = {
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the `bagfault` command."""
+    """Entry point of the `bagfault` command: exit 0 passed, 1 an assertion failed, 2 could not run."""
     args = _parser().parse_args(argv)
     try:
-        return COMMANDS[args.command](args)
+        with _terminating_signals():
+            return COMMANDS[args.command](args)
     except BagfaultError as exc:
         if args.debug:
             traceback.print_exc()
@@ -323,13 +330,37 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f'bagfault: error: {line}', file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt:
-        print('bagfault: interrupted; no output written', file=sys.stderr)
-        return 130
+        if args.debug:
+            traceback.print_exc()
+        print('bagfault: interrupted; nothing was written under the requested names', file=sys.stderr)
+        return EXIT_ERROR
     except BrokenPipeError:  # `bagfault schema | head`: the reader left, nothing is wrong
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+    except Exception as exc:  # noqa: BLE001 - a bug must still end with the documented exit code
+        if args.debug:
+            traceback.print_exc()
+        print(f'bagfault: internal error: {type(exc).__name__}: {exc} (a bug in bagfault; --debug shows where)',
+              file=sys.stderr)
+        return EXIT_ERROR
+
+
+@contextlib.contextmanager
+def _terminating_signals() -> Iterator[None]:
+    """SIGTERM and SIGHUP end the command as Ctrl-C does: outputs are abandoned, temporary files removed.
+
+    Live commands replace these while they run: there a signal is a clean stop.
+    """
+    def interrupt(number: int, _frame: object) -> None:
+        raise KeyboardInterrupt(signal.Signals(number).name)
+
+    previous = {number: signal.signal(number, interrupt) for number in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 if __name__ == '__main__':
     sys.exit(main())
-

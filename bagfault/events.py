@@ -47,11 +47,22 @@ SCENARIO_STATUS_MSG = with_time(
 
 
 class EventKind(Protocol):
-    """An event record type: its topic, ROS type name and ros2msg definition."""
+    """An event record type (the class): its topic, ROS type name and ros2msg definition."""
 
-    topic: ClassVar[str]
-    msgtype: ClassVar[str]
-    definition: ClassVar[str]
+    @property
+    def topic(self) -> str:
+        """Topic the events go on."""
+        ...
+
+    @property
+    def msgtype(self) -> str:
+        """ROS type name."""
+        ...
+
+    @property
+    def definition(self) -> str:
+        """ros2msg definition."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -119,17 +130,13 @@ class ScenarioStatus:
         return to_message(self, store)
 
 
-class Event(Protocol):
+class Event(EventKind, Protocol):
     """Any event record: a time, its kind's topic/type/definition, and its message object."""
 
     @property
     def time(self) -> int:
         """Bag time (ns)."""
         ...
-
-    topic: ClassVar[str]
-    msgtype: ClassVar[str]
-    definition: ClassVar[str]
 
     def to_message(self, store: Any) -> Any:
         """The typestore message object."""

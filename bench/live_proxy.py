@@ -34,9 +34,9 @@ faults:
 
 def publisher(rate: float, seconds: float) -> None:
     """Publish Imu at `rate` with the send time in the stamp; print how many were sent."""
-    import rclpy  # noqa: PLC0415
-    from rclpy.qos import QoSProfile  # noqa: PLC0415
-    from sensor_msgs.msg import Imu  # noqa: PLC0415
+    import rclpy
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import Imu
 
     rclpy.init()
     node = rclpy.create_node('bench_publisher')
@@ -61,15 +61,15 @@ def publisher(rate: float, seconds: float) -> None:
 
 def subscriber(seconds: float) -> None:
     """Receive both topics; print latencies (ms) per topic."""
-    import rclpy  # noqa: PLC0415
-    from rclpy.qos import QoSProfile  # noqa: PLC0415
-    from sensor_msgs.msg import Imu  # noqa: PLC0415
+    import rclpy
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import Imu
 
     rclpy.init()
     node = rclpy.create_node('bench_subscriber')
     latencies: dict[str, list[float]] = {'/bench/imu_raw': [], '/bench/imu': []}
 
-    def receiver(topic: str):  # noqa: ANN202
+    def receiver(topic: str):
         def received(message: Imu) -> None:
             stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
             latencies[topic].append((time.time_ns() - stamp) / 1e6)
@@ -105,7 +105,7 @@ def main() -> int:
         return 0
 
     sys.path.insert(0, str(ROOT))
-    import bagfault.live  # noqa: PLC0415
+    import bagfault.live
 
     env = {**os.environ, 'ROS_DOMAIN_ID': os.environ.get('BENCH_DOMAIN_ID', '77'),
            'FASTRTPS_DEFAULT_PROFILES_FILE': str(bagfault.live.LOOPBACK_PROFILE)}
@@ -146,7 +146,7 @@ def main() -> int:
         print(f'  {name:<14} latency p50 {entry["p50"]:.3f} ms  p95 {entry["p95"]:.3f} ms  p99 {entry["p99"]:.3f} ms')
     added = report['added_latency_ms']
     print(f'  added by the proxy: p50 {added["p50"]:.3f} ms  p95 {added["p95"]:.3f} ms  p99 {added["p99"]:.3f} ms')
-    from bench.run import RESULTS, save  # noqa: PLC0415
+    from bench.run import RESULTS, save
 
     save(report, args.json or RESULTS / f'live-proxy-{report["date"]}.json')
     return 0

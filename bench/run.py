@@ -159,7 +159,7 @@ def ensure_bag(kind: str, seconds: float) -> Path:
 
 def count_messages(path: Path) -> int:
     """Message count from the MCAP summary."""
-    from mcap.reader import make_reader  # noqa: PLC0415
+    from mcap.reader import make_reader
 
     with path.open('rb') as stream:
         return make_reader(stream).get_summary().statistics.message_count
@@ -187,7 +187,7 @@ def measure(kind: str, seconds: float, repeat: int, include_baselines: bool = Tr
         results[name] = {'seconds': seconds_taken, 'runs': [t for t, _ in runs],
                          'mb_per_s': size / 1e6 / seconds_taken, 'messages_per_s': messages / seconds_taken,
                          'peak_rss_mb': max(r for _, r in runs) / 1e6}
-    for name, entry in results.items():
+    for entry in results.values():
         if 'limit' in results:
             entry['vs_limit'] = results['limit']['seconds'] / entry['seconds']
         if 'hand-written' in results:

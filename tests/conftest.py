@@ -9,7 +9,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from helpers import ANCHORS, EXTERNAL, FIXTURES  # noqa: E402
+from helpers import ANCHORS, EXTERNAL, FIXTURES
 
 
 def need(path: Path) -> Path:

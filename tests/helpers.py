@@ -77,7 +77,7 @@ def tree_digest(path: Path) -> str:
 
 def make_bag(path: Path, streams: list[tuple[str, str, float]], duration: float) -> Path:
     """A synthetic MCAP with (topic, type, rate) streams, values from bagfault.demo.synthetic."""
-    from bagfault.demo import synthetic  # noqa: PLC0415
+    from bagfault.demo import synthetic
 
     specs = [synthetic.Stream(topic, msgtype, rate) for topic, msgtype, rate in streams]
     synthetic.write_mcap(path, synthetic.messages(specs, duration))
@@ -86,10 +86,10 @@ def make_bag(path: Path, streams: list[tuple[str, str, float]], duration: float)
 
 def run_inline(tmp: Path, scenario_text: str, bag: Path, **kw: Any) -> tuple[Path, Any]:
     """Run a scenario given as YAML text; return (output path, result)."""
-    import textwrap  # noqa: PLC0415
+    import textwrap
 
-    from bagfault import api  # noqa: PLC0415
-    from bagfault.scenario import parse_scenario  # noqa: PLC0415
+    from bagfault import api
+    from bagfault.scenario import parse_scenario
 
     out = tmp / 'out.mcap'
     result = api.run(parse_scenario(textwrap.dedent(scenario_text)), [bag], out, **kw)

@@ -94,17 +94,17 @@ def test_turtlebot_values(turtlebot):
     origin = result.stats.origin
     before = decoded(bag, ['/imu', '/odom', '/scan', '/joint_states', '/tf'])
     after = decoded(out, ['/imu', '/odom', '/scan', '/joint_states', '/tf'])
-    for (t, a), (_, b) in zip(before['/imu'], after['/imu']):
+    for (t, a), (_, b) in zip(before['/imu'], after['/imu'], strict=True):
         expected = 0.5 if 2 * NS <= t - origin < 7 * NS else 0.0
         assert b.angular_velocity.z - a.angular_velocity.z == pytest.approx(expected, abs=1e-12)
         la, lb = a.linear_acceleration, b.linear_acceleration
         assert (lb.x, lb.y, lb.z) == (la.x, la.y, la.z)
-    for (_, a), (_, b) in zip(before['/odom'], after['/odom']):
+    for (_, a), (_, b) in zip(before['/odom'], after['/odom'], strict=True):
         assert b.pose.pose.position.x - a.pose.pose.position.x == pytest.approx(1.0, abs=1e-12)
         qa, qb = a.pose.pose.orientation, b.pose.pose.orientation
         dyaw = quaternion_to_rpy(qb.x, qb.y, qb.z, qb.w)[2] - quaternion_to_rpy(qa.x, qa.y, qa.z, qa.w)[2]
         assert math.remainder(dyaw, 2 * math.pi) == pytest.approx(math.radians(10), abs=1e-9)
-    for (t, a), (_, b) in zip(before['/scan'], after['/scan']):
+    for (t, a), (_, b) in zip(before['/scan'], after['/scan'], strict=True):
         angles = np.degrees(a.angle_min + np.arange(len(a.ranges)) * np.float64(a.angle_increment))
         angles = (angles + 180.0) % 360.0 - 180.0  # this lidar scans 0..360 degrees; the sector wraps
         inside = (angles >= -20.5) & (angles <= 20.5)
@@ -113,12 +113,12 @@ def test_turtlebot_values(turtlebot):
             assert np.array_equal(b.ranges[~inside], a.ranges[~inside])
         else:
             assert np.array_equal(b.ranges, a.ranges)
-    for (t, a), (_, b) in zip(before['/joint_states'], after['/joint_states']):
+    for (t, a), (_, b) in zip(before['/joint_states'], after['/joint_states'], strict=True):
         expected = 0.1 if t - origin >= NS // 2 else 0.0
         assert np.allclose(b.velocity - a.velocity, expected, atol=1e-12)
     matched = 0
-    for (_, a), (_, b) in zip(before['/tf'], after['/tf']):
-        for ta, tb in zip(a.transforms, b.transforms):
+    for (_, a), (_, b) in zip(before['/tf'], after['/tf'], strict=True):
+        for ta, tb in zip(a.transforms, b.transforms, strict=True):
             hit = ta.header.frame_id == 'odom' and ta.child_frame_id == 'base_footprint'
             matched += hit
             dy = tb.transform.translation.y - ta.transform.translation.y
@@ -153,7 +153,7 @@ def test_nav2_mcap_with_odom_bias(tmp_path, external):
     before, after = decoded(bag, ['/odom']), decoded(out, ['/odom'])
     origin = result.stats.origin
     shifted = 0
-    for (t, a), (_, b) in zip(before['/odom'], after['/odom']):
+    for (t, a), (_, b) in zip(before['/odom'], after['/odom'], strict=True):
         inside = 10 * NS <= t - origin < 30 * NS
         shifted += inside
         assert b.pose.pose.position.x - a.pose.pose.position.x == pytest.approx(2.0 if inside else 0.0, abs=1e-12)

@@ -33,7 +33,7 @@ def seconds(time: int) -> float:
 def pairs(out, raw_topic, topic):
     data = decoded(out, [raw_topic, topic])
     assert [t for t, _ in data[raw_topic]] == [t for t, _ in data[topic]]
-    return [(t, a, b) for (t, a), (_, b) in zip(data[raw_topic], data[topic])]
+    return [(t, a, b) for (t, a), (_, b) in zip(data[raw_topic], data[topic], strict=True)]
 
 
 def test_odom_bias_exactly_inside_its_window(multi):

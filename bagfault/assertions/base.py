@@ -9,16 +9,18 @@ names that time and what was observed.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
-    from bagfault.events import FaultEvent
+    from bagfault.events import AssertionState, FaultEvent
     from bagfault.scenario.model import AssertionSpec, Scenario
 
-PENDING, PASSED, FAILED = 'pending', 'passed', 'failed'
+PENDING: Final = 'pending'
+PASSED: Final = 'passed'
+FAILED: Final = 'failed'
 END_OF_BAG = 'not observed before the end of the bag'
 
 
@@ -28,7 +30,7 @@ class AssertionResult:
 
     id: str
     type: str
-    state: str = PENDING
+    state: AssertionState = PENDING
     time: int | None = None
     message: str = ''
 

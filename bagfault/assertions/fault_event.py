@@ -34,7 +34,7 @@ class FaultEventAssertion(AssertionType):
     def on_event(self, event: FaultEvent) -> None:
         """Pass when the watched fault reaches the expected state."""
         if event.fault_id == self.params['fault_id'] and event.state == self.params['state']:
-            self.passed(event.time, f"fault {event.fault_id} reached {event.state} at {self.runner.t(event.time)} "
+            self.passed(event.time, f'fault {event.fault_id} reached {event.state} at {self.runner.t(event.time)} '
                                     f'({event.source})')
 
     def waiting_for(self) -> str:

@@ -63,8 +63,9 @@ class FieldDeltaAssertion(AssertionType):
     def __init__(self, spec: AssertionSpec, runner: AssertionRunner) -> None:
         super().__init__(spec, runner)
         params = self.params
-        self.input_topic = params.get('input_topic') or next(
-            (i.input_topic for i in runner.scenario.injectors if i.output_topic == params['topic']), '')
+        self.input_topic: str = params.get('input_topic') or next(
+            (i.input_topic for i in runner.scenario.injectors if i.output_topic == params['topic'] and i.input_topic),
+            '')
         self.tolerance = params.get('tolerance', 1e-9)
         self.pending_inputs: dict[Any, deque[tuple[int, np.ndarray, bool]]] = {}
         self.order: deque[tuple[int, Any]] = deque()
@@ -80,7 +81,7 @@ class FieldDeltaAssertion(AssertionType):
     def prepare(self) -> None:
         """Both topics must carry the same type with the field."""
         types = self.runner.topic_types
-        out, inp = self.params['topic'], self.input_topic
+        out, inp = str(self.params['topic']), self.input_topic
         if out == inp:
             raise AssertionSetupError(f'topic and input_topic are both {out}')
         if out in types and inp in types and types[out] != types[inp]:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from bagfault.errors import AssertionSetupError
-from bagfault.faults.fieldpath import FieldPath, FieldPathError
+from bagfault.errors import AssertionSetupError, FieldPathError
+from bagfault.faults.fieldpath import FieldPath
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner

@@ -8,9 +8,8 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from bagfault.assertions.base import AssertionType, fault_reference_problem
-from bagfault.errors import AssertionSetupError
+from bagfault.errors import AssertionSetupError, LatencyError
 from bagfault.faults.header import has_header
-from bagfault.errors import LatencyError
 from bagfault.latency.architecture import load_architecture
 from bagfault.latency.collect import SeriesCollector
 from bagfault.latency.compute import path_latency, statistics, window_mask
@@ -84,7 +83,7 @@ class PathLatencyAssertion(AssertionType):
         for topic in self.path.topics:
             msgtype = self.runner.topic_types.get(topic)
             codec = self.runner.catalog.codec(msgtype) if msgtype else None
-            stamped[topic] = codec is not None and has_header(msgtype, codec.store)
+            stamped[topic] = codec is not None and has_header(codec.msgtype, codec.store)
         self.collector = SeriesCollector(stamped)
 
     def on_event(self, event: FaultEvent) -> None:

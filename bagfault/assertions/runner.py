@@ -21,6 +21,7 @@ from bagfault.events import AssertionEvent, FaultEvent, ScenarioStatus
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from bagfault.events import ScenarioState
     from bagfault.io.types import TypeCatalog
     from bagfault.scenario.model import Scenario
 
@@ -68,7 +69,8 @@ class AssertionRunner:
                 if topic in topics and topic not in self._codecs:
                     codec = catalog.codec(topics[topic])
                     if codec is None:
-                        raise AssertionSetupError(f'{scenario.name}: assertion {check.spec.id!r}: cannot decode {topics[topic]} '
+                        raise AssertionSetupError(f'{scenario.name}: assertion {check.spec.id!r}: '
+                                                  f'cannot decode {topics[topic]} '
                                           f'on {topic}: {catalog.why_not(topics[topic])}')
                     self._codecs[topic] = codec
 
@@ -152,7 +154,7 @@ class AssertionRunner:
         results = [c.result for c in self.checks]
         failed = [r for r in results if r.state == FAILED]
         pending = sum(r.state == PENDING for r in results)
-        state = 'failed' if failed else 'running' if pending else 'passed'
+        state: ScenarioState = 'failed' if failed else 'running' if pending else 'passed'
         status = ScenarioStatus(
             time=time, state=state, pending_count=pending,
             passed_count=sum(r.state == PASSED for r in results), failed_count=len(failed),

@@ -50,6 +50,11 @@ class SequenceAssertion(AssertionType):
         now = other.result.time
         assert now is not None
         steps = self.steps()
+
+        def at(step: AssertionType) -> int:
+            assert step.result.time is not None  # decided steps have a time
+            return step.result.time
+
         for number, step in enumerate(steps):
             result = step.result
             if result.state == FAILED:
@@ -58,15 +63,15 @@ class SequenceAssertion(AssertionType):
             if result.state != PASSED:
                 later = [s for s in steps[number + 1:] if s.result.state == PASSED]
                 if later:
-                    self.fail(now, f'step {later[0].spec.id} passed at {self.runner.t(later[0].result.time)} before '
+                    self.fail(now, f'step {later[0].spec.id} passed at {self.runner.t(at(later[0]))} before '
                                    f'step {step.spec.id}')
                 return
-            if number and result.time < steps[number - 1].result.time:
-                self.fail(now, f'step {step.spec.id} passed at {self.runner.t(result.time)}, before step '
-                               f'{steps[number - 1].spec.id} at {self.runner.t(steps[number - 1].result.time)}')
+            if number and at(step) < at(steps[number - 1]):
+                self.fail(now, f'step {step.spec.id} passed at {self.runner.t(at(step))}, before step '
+                               f'{steps[number - 1].spec.id} at {self.runner.t(at(steps[number - 1]))}')
                 return
         self.passed(now, 'steps passed in order: ' + ', '.join(
-            f'{s.spec.id} ({self.runner.t(s.result.time)})' for s in steps))
+            f'{s.spec.id} ({self.runner.t(at(s))})' for s in steps))
 
     def waiting_for(self) -> str:
         """Failure text."""

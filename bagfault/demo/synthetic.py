@@ -18,7 +18,7 @@ from mcap.writer import CompressionType, Writer
 from rosbags.typesys import Stores, get_typestore
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable, Iterator
+    from collections.abc import Callable, Iterable, Iterator
 
     from rosbags.typesys.store import Typestore
 
@@ -73,7 +73,8 @@ def odometry(ts: Typestore, time: int, t: float, frame: str = 'odom') -> Any:
         twist=T['geometry_msgs/msg/Twist'](linear=vec(x=0.1, y=0.05, z=0.0), angular=vec(x=0.0, y=0.0, z=0.1)),
         covariance=cov.copy(),
     )
-    return T['nav_msgs/msg/Odometry'](header=_header(ts, time, frame), child_frame_id='base_link', pose=pose, twist=twist)
+    return T['nav_msgs/msg/Odometry'](header=_header(ts, time, frame), child_frame_id='base_link', pose=pose,
+                                      twist=twist)
 
 
 def scan_ranges(t: float, beams: int = SCAN_BEAMS) -> np.ndarray:
@@ -81,7 +82,7 @@ def scan_ranges(t: float, beams: int = SCAN_BEAMS) -> np.ndarray:
     angles = -math.pi + np.arange(beams) * (2 * math.pi / beams)
     ranges = (2.0 + 0.5 * np.sin(angles + 0.1 * t)).astype(np.float32)
     ranges[::37] = np.inf
-    return ranges
+    return ranges  # type: ignore[no-any-return]
 
 
 def laser_scan(ts: Typestore, time: int, t: float, beams: int = SCAN_BEAMS) -> Any:
@@ -229,7 +230,7 @@ def compressed_image(ts: Typestore, time: int, t: float) -> Any:
     )
 
 
-BUILDERS = {
+BUILDERS: dict[str, Callable[[Typestore, int, float], Any]] = {
     'nav_msgs/msg/Odometry': odometry,
     'sensor_msgs/msg/LaserScan': laser_scan,
     'sensor_msgs/msg/JointState': joint_state,
@@ -297,10 +298,11 @@ def write_mcap(
                     text, _ = ts.generate_msgdef(msgtype, ros_version=2)
                     schemas[msgtype] = writer.register_schema(msgtype, 'ros2msg', text.encode())
                 channels[topic_stream.topic] = writer.register_channel(topic_stream.topic, 'cdr', schemas[msgtype], {})
-            data = message if isinstance(message, (bytes, bytearray, memoryview)) else ts.serialize_cdr(message, topic_stream.msgtype)
+            data = (message if isinstance(message, (bytes, bytearray, memoryview))
+                    else ts.serialize_cdr(message, topic_stream.msgtype))
             writer.add_message(channels[topic_stream.topic], time, bytes(data), time)
             count += 1
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
     return count
 
 

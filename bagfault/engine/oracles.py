@@ -38,10 +38,11 @@ class Oracles:
         self.runner: AssertionRunner | None = None
         if scenario.assertions:
             kinds += [AssertionEvent, ScenarioStatus]
-            for kind in (FaultEvent, *kinds):
+            every: list[EventKind] = [FaultEvent, *kinds]
+            for kind in every:
                 catalog.add_definition(kind.msgtype, kind.definition)
             topics = {topic: entry[0] for topic, entry in schemas.items()}
-            topics.update({kind.topic: kind.msgtype for kind in (FaultEvent, *kinds)})
+            topics.update({kind.topic: kind.msgtype for kind in every})
             self.runner = AssertionRunner(scenario, topics, catalog, emit, self.fault_manager)
             if self.fault_manager is not None:
                 self.fault_manager.status_listeners.append(self.runner.on_fault_status)

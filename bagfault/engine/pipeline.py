@@ -33,7 +33,6 @@ if TYPE_CHECKING:
     from bagfault.engine.run import OutputChannel, Run
     from bagfault.io.channel import Data, InputMessage
     from bagfault.io.sources import InputSet
-    from bagfault.io.types import TypeCatalog
     from bagfault.scenario.model import FaultSpec, InjectorSpec
 
 BATCH = 4096  # messages per batch at most ...

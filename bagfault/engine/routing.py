@@ -85,7 +85,8 @@ def build_routing(
         assert cls is not None
         if not issubclass(cls, Injector):
             routing.notes.append(
-                f'injector {spec.id!r} ({spec.type}) proxies a service: live mode only, its faults have no effect offline'
+                f'injector {spec.id!r} ({spec.type}) proxies a service: live mode only, '
+                'its faults have no effect offline'
             )
             continue
         assert spec.input_topic is not None and spec.output_topic is not None
@@ -134,21 +135,23 @@ def build_routing(
                                           channel.message_encoding, dict(channel.metadata))
             routing.copies[number] = OutputChannel(channel_id, channel.topic, channel.msgtype)
             routing.schemas[channel.topic] = (channel.msgtype, encoding, text)
-        for spec, cls, found in injectors:
+        for spec, _, found in injectors:
             if channel not in found:
                 continue
+            output_topic = spec.output_topic
+            assert output_topic is not None  # topic injectors have both endpoints (validated)
             faults = scenario.faults_of(spec.id)
             injector = build_injector(spec, channel.msgtype, faults, catalog, scenario_name)
             encoding, text = _schema(channel, catalog)
-            channel_id = sink.add_channel(spec.output_topic, channel.msgtype, encoding, text,
+            channel_id = sink.add_channel(output_topic, channel.msgtype, encoding, text,
                                           channel.message_encoding, dict(channel.metadata))
-            routing.schemas[spec.output_topic] = (channel.msgtype, encoding, text)
+            routing.schemas[output_topic] = (channel.msgtype, encoding, text)
             rank += 1
             runtime = InjectorRuntime(
                 spec=spec,
                 injector=injector,
                 faults=faults,
-                channel=OutputChannel(channel_id, spec.output_topic, channel.msgtype),
+                channel=OutputChannel(channel_id, output_topic, channel.msgtype),
                 rank=rank,
             )
             routing.routes.setdefault(number, []).append(runtime)

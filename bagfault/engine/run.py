@@ -208,7 +208,7 @@ class Run:
 
     def write_event(self, event: Event) -> None:
         """Encode and write an event record (fault, assertion, scenario status, fault manager) at its time."""
-        channel, codec = self.event_channel(type(event))
+        channel, codec = self.event_channel(event)
         self.sink.write(channel.id, event.time, event.time, codec.encode(event.to_message(codec.store)))
         stats = self.stats
         stats.output_messages += 1

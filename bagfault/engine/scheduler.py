@@ -28,6 +28,7 @@ from bagfault.injectors.base import ActiveFault
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
 
+    from bagfault.events import FaultSource
     from bagfault.scenario.model import FaultSpec, Scenario
 
 NS = 1_000_000_000
@@ -122,8 +123,8 @@ class FaultScheduler:
         }
         self.active: dict[str, int] = {}
         self._order = {f.id: i for i, f in enumerate(scenario.faults)}
-        self._heap: list[tuple[int, int, int, str, bool, str]] = []
-        self._sequences: dict[str, tuple[Iterator[tuple[int, bool]], str]] = {}
+        self._heap: list[tuple[int, int, int, str, bool, FaultSource]] = []
+        self._sequences: dict[str, tuple[Iterator[tuple[int, bool]], FaultSource]] = {}
         self._counter = 0
         self._followers: dict[str, list[FaultSpec]] = {}
         requested: dict[str, list[Activation]] = {}
@@ -150,7 +151,7 @@ class FaultScheduler:
             begin = seconds_to_ns(window.start)
             yield from _plain(begin, None if window.duration is None else begin + seconds_to_ns(window.duration))
 
-    def _add(self, fault_id: str, sequence: Iterator[tuple[int, bool]], source: str) -> None:
+    def _add(self, fault_id: str, sequence: Iterator[tuple[int, bool]], source: FaultSource) -> None:
         self._sequences[fault_id] = (sequence, source)
         self._pull(fault_id)
 
@@ -160,7 +161,7 @@ class FaultScheduler:
         if step is not None:
             self._push(self.origin + step[0], fault_id, step[1], source)
 
-    def _push(self, time: int, fault_id: str, state: bool, source: str) -> None:
+    def _push(self, time: int, fault_id: str, state: bool, source: FaultSource) -> None:
         self._counter += 1
         heapq.heappush(self._heap, (time, self._order[fault_id], self._counter, fault_id, state, source))
 
@@ -180,7 +181,7 @@ class FaultScheduler:
                 events.append(event)
         return events
 
-    def set_state(self, fault_id: str, state: bool, time: int, source: str) -> FaultEvent | None:
+    def set_state(self, fault_id: str, state: bool, time: int, source: FaultSource) -> FaultEvent | None:
         """Activate or deactivate a fault now (also for live/manual changes)."""
         fault = self.scenario.fault(fault_id)
         if fault is None or (fault_id in self.active) == state:

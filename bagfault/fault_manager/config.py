@@ -229,17 +229,17 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem) -> Fau
             problem((*PREFIX, key), f'unknown fault_manager key {key!r} (known: {", ".join(sorted(TOP_KEYS))})')
     config.thresholds = _thresholds(section, Thresholds(), PREFIX, problem)
     for number, node in enumerate(section.get('overrides') or []):
-        path = (*PREFIX, 'overrides', number)
+        where: tuple[Any, ...] = (*PREFIX, 'overrides', number)
         if not isinstance(node, dict) or not isinstance(node.get('source'), str):
-            problem(path, 'must be a mapping with source and thresholds')
+            problem(where, 'must be a mapping with source and thresholds')
             continue
         for key in node:
             if key not in THRESHOLD_KEYS | {'source'}:
-                problem((*path, key), f'unknown override key {key!r}')
-        config.overrides.append((node['source'], _thresholds(node, config.thresholds, path, problem)))
+                problem((*where, key), f'unknown override key {key!r}')
+        config.overrides.append((node['source'], _thresholds(node, config.thresholds, where, problem)))
     diagnostics = section.get('diagnostics')
     if diagnostics is not None:
-        path = (*PREFIX, 'diagnostics')
+        path: tuple[Any, ...] = (*PREFIX, 'diagnostics')
         if diagnostics is True:
             config.diagnostics_topic = '/diagnostics'
         elif isinstance(diagnostics, dict):

@@ -9,7 +9,7 @@ last_failed + auto_confirm_after_sec.
 from __future__ import annotations
 
 import heapq
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from bagfault.fault_manager.correlation import CorrelationEngine
@@ -60,8 +60,8 @@ class FaultManager:
         self.correlation = CorrelationEngine(config.correlation) if config.correlation else None
         self.events: list[FaultManagerEvent] = []
         self.rejected: list[tuple[Report, str]] = []
-        self.listeners: list = []
-        self.status_listeners: list = []
+        self.listeners: list[Callable[[FaultManagerEvent], None]] = []
+        self.status_listeners: list[Callable[[str, str, int], None]] = []
         self._timers: list[tuple[int, int, str, int]] = []
         self._counter = 0
 

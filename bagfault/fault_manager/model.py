@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from bagfault.events import SEPARATOR, TIME_DEFINITION
 
@@ -144,9 +144,9 @@ class FaultManagerEvent:
     fault: Fault
     auto_cleared_codes: tuple[str, ...] = ()
 
-    topic = FAULT_EVENT_TOPIC
-    msgtype = FAULT_EVENT_TYPE
-    definition = FAULT_EVENT_MSG
+    topic: ClassVar[str] = FAULT_EVENT_TOPIC
+    msgtype: ClassVar[str] = FAULT_EVENT_TYPE
+    definition: ClassVar[str] = FAULT_EVENT_MSG
 
     def to_message(self, store: Any) -> Any:
         """The ros2_medkit_msgs/msg/FaultEvent object."""

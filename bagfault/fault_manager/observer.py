@@ -9,12 +9,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from bagfault.errors import FaultManagerError
+from bagfault.errors import FaultManagerError, FieldPathError
 from bagfault.fault_manager.manager import FaultManager
 from bagfault.fault_manager.model import CONFIRMED, EVENT_CONFIRMED, FaultManagerEvent
 from bagfault.fault_manager.reporters import InjectedReports, condition_report, diagnostics_reports
 from bagfault.fault_manager.snapshots import SnapshotRecorder
-from bagfault.faults.fieldpath import FieldPath, FieldPathError
+from bagfault.faults.fieldpath import FieldPath
 
 if TYPE_CHECKING:
     from collections.abc import Callable

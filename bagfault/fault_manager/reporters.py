@@ -69,7 +69,9 @@ class InjectedReports:
         """The earliest periodic report; its fault re-arms one period later."""
         fault_id = min(self._next, key=lambda f: (self._next[f], f))
         time = self._next[fault_id]
-        self._next[fault_id] = time + round(self.reports[fault_id].period * NS)
+        period = self.reports[fault_id].period
+        assert period is not None  # only periodic reports are scheduled
+        self._next[fault_id] = time + round(period * NS)
         return [self._report(self.reports[fault_id], time)]
 
     def on_message(self, topic: str, time: int) -> list[Report]:

@@ -58,7 +58,7 @@ class FieldLayout:
         for position, value in self.checks:
             found = rows[:, position:position + 4].copy().view('<u4' if self.little else '>u4').ravel()
             ok &= found == value
-        return ok
+        return ok  # type: ignore[no-any-return]
 
     def column(self, rows: np.ndarray, path: str) -> np.ndarray:
         """A field of every row as float64."""
@@ -88,7 +88,7 @@ class _Walker:
 
     def _count(self) -> int:
         self.position = _align(self.position, 4)
-        (value,) = struct.unpack_from(self.order + 'I', self.body, self.position)
+        value: int = struct.unpack_from(self.order + 'I', self.body, self.position)[0]
         self.checks.append((self.position, value))
         self.position += 4
         return value

@@ -12,7 +12,7 @@ from __future__ import annotations
 import difflib
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -74,8 +74,8 @@ class FieldPath:
                 close = difflib.get_close_matches(segment.name, list(fields), n=1)
                 hint = f" (fields: {', '.join(fields)})" if not close else ''
                 raise FieldPathError(self._unknown(msgtype, store, f'{typename} has no field {segment.name!r}{hint}'))
-            kind, args = fields[segment.name]
-            kind = int(kind)
+            desc: Any = fields[segment.name]
+            kind, args = int(desc[0]), desc[1]
             if segment.index is not None:
                 if kind not in (ARRAY, SEQUENCE):
                     raise FieldPathError(f'{self.text!r}: {segment.name} in {typename} is not an array')
@@ -155,12 +155,9 @@ def _apply(obj: Any, segments: tuple[Segment, ...], func: Any) -> None:
         elif segment.index == '*':
             setattr(obj, segment.name, [func(v) for v in value])
         else:
-            if isinstance(value, np.ndarray):
-                value = value.copy()
-                value[segment.index] = func(value[segment.index])
-            else:
-                value = list(value)
-                value[segment.index] = func(value[segment.index])
+            assert isinstance(segment.index, int)
+            value = value.copy() if isinstance(value, np.ndarray) else list(value)
+            value[segment.index] = func(value[segment.index])
             setattr(obj, segment.name, value)
         return
     if segment.index is None:
@@ -179,10 +176,10 @@ def leaf_paths(msgtype: str, store: Typestore, depth: int = 6, *, numeric: bool 
     def walk(typename: str, prefix: str, level: int) -> None:
         if level > depth or typename not in store.fielddefs:
             return
-        for name, (kind, args) in store.fielddefs[typename][1]:
+        for name, desc in store.fielddefs[typename][1]:
             if name == 'structure_needs_at_least_one_member':  # rosbags' stand-in for empty messages
                 continue
-            kind = int(kind)
+            kind, args = int(desc[0]), cast('Any', desc[1])
             path = f'{prefix}{name}'
             if kind == BASE:
                 if not numeric or args[0] in NUMERIC:

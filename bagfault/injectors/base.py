@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
-from bagfault.errors import InjectorConfigError, InjectorError
+from bagfault.errors import InjectorConfigError, InjectorError, MalformedMessageError
 from bagfault.faults.combine import strongest
 from bagfault.faults.drop import drop_mask, should_drop
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, ConfigField
@@ -59,6 +59,7 @@ class Codec(Protocol):
     """Turns CDR bytes of one message type into objects and back."""
 
     msgtype: str
+    store: Any
 
     def decode(self, data: bytes | memoryview) -> Any:
         """Deserialize."""
@@ -174,7 +175,7 @@ class Injector:
         if not active:
             return messages
         keep = drop_mask(active, len(messages))
-        kept = [m for m, k in zip(messages, keep) if k] if keep is not None else messages
+        kept = [m for m, k in zip(messages, keep, strict=True) if k] if keep is not None else messages
         if kept and self.needs_decoding(active):
             kept = self.mutate_batch(kept, active)
         return self.retime(kept, active)
@@ -249,7 +250,8 @@ class ServiceInjector:
 InjectorType = type[Injector] | type[ServiceInjector]
 
 
-def patch_linear(injector: Injector, messages: list[RawMessage], active: Sequence[ActiveFault]) -> list[RawMessage] | None:
+def patch_linear(injector: Injector, messages: list[RawMessage],
+                 active: Sequence[ActiveFault]) -> list[RawMessage] | None:
     """Biases and noise on scalar fields of same-layout messages as numpy columns; None if layouts differ."""
     import numpy as np  # noqa: PLC0415
 
@@ -281,6 +283,11 @@ def patch_linear(injector: Injector, messages: list[RawMessage], active: Sequenc
                 columns[path] = np.where(noise != 0.0, columns[path] + noise, columns[path])
     for path in paths:
         layout.store(rows, path, columns[path])
-    blob = memoryview(rows.reshape(-1))
+    blob = memoryview(rows.reshape(-1).data)
     return [RawMessage(m.log_time, m.publish_time, blob[i * length:(i + 1) * length], m.order)
             for i, m in enumerate(messages)]
+
+
+# Plugins subclass Injector and raise these; they are bagfault.errors classes, re-exported for convenience.
+__all__ = ['ActiveFault', 'Codec', 'Injector', 'InjectorConfigError', 'InjectorError', 'InjectorType',
+           'MalformedMessageError', 'RawMessage', 'ServiceInjector', 'patch_linear']

@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from bagfault.faults.fieldpath import FLOATS, FieldPath, FieldPathError
-from bagfault.injectors.base import Injector, InjectorConfigError
+from bagfault.errors import FieldPathError, InjectorConfigError
+from bagfault.faults.fieldpath import FLOATS, FieldPath
+from bagfault.injectors.base import Injector
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField
 
 if TYPE_CHECKING:

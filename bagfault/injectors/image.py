@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from bagfault.errors import InjectorError
 from bagfault.faults.combine import strongest
-from bagfault.injectors.base import Injector, InjectorError
+from bagfault.injectors.base import Injector
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, boolean, probability
 
 if TYPE_CHECKING:
@@ -95,10 +96,10 @@ class ImageInjector(Injector):
             values += owner.random.stream('noise_stddev').standard_normal(values.shape) * sigma
         fraction, owner = strongest(active, 'dead_pixel_fraction')
         if owner is not None and fraction > 0:
-            key = (owner.id, owner.since, image.shape[:2])
-            if key not in self._dead:
-                self._dead[key] = owner.random.stream('dead_pixel_fraction').random(image.shape[:2]) < fraction
-            values[self._dead[key]] = 0.0
+            dead_key = (owner.id, owner.since, tuple(image.shape[:2]))
+            if dead_key not in self._dead:
+                self._dead[dead_key] = owner.random.stream('dead_pixel_fraction').random(image.shape[:2]) < fraction
+            values[self._dead[dead_key]] = 0.0
         if any(f.config.get('black_frame') for f in active):
             values[:] = 0.0
         if not floating:

@@ -38,7 +38,8 @@ class ImuInjector(Injector):
         stddev('angular_velocity_z_noise_stddev', 'Gaussian noise on angular_velocity.z, stddev in rad/s.'),
         *(double(f'linear_acceleration_{a}_bias', f'Added to linear_acceleration.{a}, in m/s^2.') for a in AXES),
         *(
-            stddev(f'linear_acceleration_{a}_noise_stddev', f'Gaussian noise on linear_acceleration.{a}, stddev in m/s^2.')
+            stddev(f'linear_acceleration_{a}_noise_stddev',
+                   f'Gaussian noise on linear_acceleration.{a}, stddev in m/s^2.')
             for a in AXES
         ),
     )

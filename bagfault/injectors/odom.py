@@ -42,10 +42,14 @@ class OdomInjector(Injector):
         stddev('y_noise_stddev', 'Gaussian noise on pose.pose.position.y, stddev in metres.'),
         double('yaw_bias_deg', 'Added to the yaw of pose.pose.orientation, in degrees.'),
         stddev('yaw_noise_stddev_deg', 'Gaussian noise on the yaw of pose.pose.orientation, stddev in degrees.'),
-        ConfigField('pose_covariance_scale', 'double', 'Multiplies every pose covariance entry (factor).', 1.0, min=0.0),
-        ConfigField('twist_covariance_scale', 'double', 'Multiplies every twist covariance entry (factor).', 1.0, min=0.0),
-        ConfigField('pose_covariance_floor', 'double', 'Minimum of every pose covariance entry after scaling.', 0.0, min=0.0),
-        ConfigField('twist_covariance_floor', 'double', 'Minimum of every twist covariance entry after scaling.', 0.0, min=0.0),
+        ConfigField('pose_covariance_scale', 'double', 'Multiplies every pose covariance entry (factor).', 1.0,
+                    min=0.0),
+        ConfigField('twist_covariance_scale', 'double', 'Multiplies every twist covariance entry (factor).', 1.0,
+                    min=0.0),
+        ConfigField('pose_covariance_floor', 'double', 'Minimum of every pose covariance entry after scaling.', 0.0,
+                    min=0.0),
+        ConfigField('twist_covariance_floor', 'double', 'Minimum of every twist covariance entry after scaling.', 0.0,
+                    min=0.0),
     )
 
     def mutate(self, message: Any, time: int, active: Sequence[ActiveFault]) -> None:

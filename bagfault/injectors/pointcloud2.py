@@ -13,9 +13,9 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from bagfault.errors import MalformedMessageError
+from bagfault.errors import InjectorConfigError, InjectorError, MalformedMessageError
 from bagfault.faults.combine import strongest, total
-from bagfault.injectors.base import Injector, InjectorConfigError, InjectorError
+from bagfault.injectors.base import Injector
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, probability, stddev
 
 if TYPE_CHECKING:
@@ -129,7 +129,9 @@ def _sector(xyz: np.ndarray, config: dict[str, Any]) -> np.ndarray:
     low, high = (((config[k] + 180.0) % 360.0) - 180.0 for k in ('sector_min_deg', 'sector_max_deg'))
     inside = (azimuth >= low) & (azimuth <= high) if low <= high else (azimuth >= low) | (azimuth <= high)
     distance = np.linalg.norm(xyz, axis=1)
-    return inside & (distance >= config.get('sector_min_range', 0.0)) & (distance <= config.get('sector_max_range', np.inf))
+    low, high = config.get('sector_min_range', 0.0), config.get('sector_max_range', np.inf)
+    selected: np.ndarray = inside & (distance >= low) & (distance <= high)
+    return selected
 
 
 def _write_xyz(message: Any, body: np.ndarray, xyz: np.ndarray) -> None:

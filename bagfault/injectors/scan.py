@@ -7,9 +7,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from bagfault.errors import InjectorConfigError
 from bagfault.faults.combine import total
 from bagfault.faults.noise import gaussian
-from bagfault.injectors.base import Injector, InjectorConfigError
+from bagfault.injectors.base import Injector
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, stddev
 
 if TYPE_CHECKING:
@@ -29,10 +30,12 @@ class ScanInjector(Injector):
         DROP_PROBABILITY,
         DELAY_MS,
         double('range_bias', 'Added to every finite range, in metres, then clamped to [range_min, range_max].'),
-        stddev('range_noise_stddev', 'Gaussian noise on every finite range, stddev in metres, clamped to [range_min, range_max].'),
+        stddev('range_noise_stddev',
+               'Gaussian noise on every finite range, stddev in metres, clamped to [range_min, range_max].'),
         double('sector_min_deg', 'Start angle of the blind sector, in degrees in the scan frame.'),
         double('sector_max_deg', 'End angle of the blind sector, in degrees in the scan frame.'),
-        ConfigField('sector_value', 'special_float', 'Range written inside the sector, in metres, or inf, -inf, nan.', math.inf),
+        ConfigField('sector_value', 'special_float', 'Range written inside the sector, in metres, or inf, -inf, nan.',
+                    math.inf),
     )
 
     @classmethod

@@ -31,7 +31,8 @@ class TfInjector(Injector):
         ConfigField('parent_frame', 'non_empty_string', 'Parent frame id of the transform to affect.', required=True),
         ConfigField('child_frame', 'non_empty_string', 'Child frame id of the transform to affect.', required=True),
         ConfigField(
-            'drop_probability', 'double', 'Probability that a matching transform is removed (0..1).', 0.0, min=0.0, max=1.0
+            'drop_probability', 'double', 'Probability that a matching transform is removed (0..1).', 0.0,
+            min=0.0, max=1.0
         ),
         DELAY_MS,
         double('x_bias', 'Added to transform.translation.x, in metres.'),
@@ -77,7 +78,7 @@ class TfInjector(Injector):
 
 def _matches(fault: ActiveFault, transform: Any) -> bool:
     config = fault.config
-    return (
+    return bool(
         config.get('parent_frame') == transform.header.frame_id
         and config.get('child_frame') == transform.child_frame_id
     )

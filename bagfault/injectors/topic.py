@@ -15,10 +15,11 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from bagfault.errors import InjectorConfigError
 from bagfault.faults.combine import strongest, total
 from bagfault.faults.drop import should_drop
 from bagfault.faults.header import has_header, shift_stamp
-from bagfault.injectors.base import Injector, InjectorConfigError, RawMessage
+from bagfault.injectors.base import Injector, RawMessage
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, boolean, integer, probability
 
 if TYPE_CHECKING:
@@ -36,7 +37,7 @@ class TopicInjector(Injector):
 
     type_name = 'topic'
     description = 'Any message type: stream faults on the serialized messages (no decoding).'
-    message_types = ()
+    message_types: ClassVar[tuple[str, ...]] = ()
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         integer('burst_drop', 'Drop this many consecutive messages ...', 0, min=0),
@@ -118,7 +119,7 @@ class TopicInjector(Injector):
             out += self._release(message.log_time, message.order)
         if not active:
             self.last_good = message
-            return out + [message]
+            return [*out, message]
         if not self._passes(message, active):
             return out
         if any(f.config.get('freeze') for f in active):
@@ -161,7 +162,8 @@ class TopicInjector(Injector):
         rates = [f.config['throttle_hz'] for f in active if f.config.get('throttle_hz', 0) > 0]
         if rates:
             period = round(1e9 / min(rates))
-            owner = min((f for f in active if f.config.get('throttle_hz', 0) > 0), key=lambda f: f.config['throttle_hz'])
+            throttling = (f for f in active if f.config.get('throttle_hz', 0) > 0)
+            owner = min(throttling, key=lambda f: f.config['throttle_hz'])
             if self._throttle_since != (owner.id, owner.since) or self._next_due is None:
                 self._throttle_since, self._next_due = (owner.id, owner.since), message.log_time
             if message.log_time < self._next_due:

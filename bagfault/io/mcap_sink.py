@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
 
 from bagfault.errors import OutputError
 from bagfault.io.mcap_writer import McapWriter
+from bagfault.io.outputs import current_umask
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')
 
@@ -33,7 +35,7 @@ class McapSink:
         except OSError as exc:
             raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
         self._tmp = Path(tmp)
-        os.chmod(handle, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
+        os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
         self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
                                   library=f'bagfault {_version()}')
@@ -93,17 +95,9 @@ class McapSink:
     def abort(self) -> None:
         """Drop the partial output."""
         self._writer.abandon()
-        try:
+        with contextlib.suppress(OSError):
             self._stream.close()
-        except OSError:
-            pass
         self._tmp.unlink(missing_ok=True)
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def _version() -> str:

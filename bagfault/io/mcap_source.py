@@ -19,7 +19,8 @@ import lz4.frame
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, SeekingReader
-from mcap.records import Chunk, Message
+from mcap.records import Channel as McapChannel
+from mcap.records import Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from bagfault.errors import InputError
@@ -143,7 +144,8 @@ class McapSource:
 
         try:
             info = yaml.safe_load(metadata.get('serialized_metadata', '')) or {}
-            self.ros_distro = info.get('rosbag2_bagfile_information', {}).get('ros_distro') or metadata.get('ROS_DISTRO')
+            stored = info.get('rosbag2_bagfile_information', {}).get('ros_distro')
+            self.ros_distro = stored or metadata.get('ROS_DISTRO')
         except yaml.YAMLError:
             self.ros_distro = metadata.get('ROS_DISTRO')
 
@@ -225,14 +227,13 @@ class McapSource:
             else:
                 parts = [record]
             for part in parts:
-                kind = type(part).__name__
-                if kind == 'Schema':
+                if isinstance(part, Schema):
                     self._schemas.setdefault(part.id, (part.name, part.encoding, part.data.decode(errors='replace')))
-                elif kind == 'Channel':
+                elif isinstance(part, McapChannel):
                     self._pending_channels.setdefault(
                         part.id, (part.schema_id, part.topic, part.message_encoding, dict(part.metadata))
                     )
-                elif kind == 'Metadata' and part.name == 'rosbag2':
+                elif isinstance(part, Metadata) and part.name == 'rosbag2':
                     self._read_rosbag2_metadata(part.metadata)
                 elif isinstance(part, Message):
                     messages.append((part.log_time, part.publish_time, part.channel_id, order, memoryview(part.data)))

@@ -100,7 +100,7 @@ class McapWriter:
     def _record(self, record: object) -> int:
         builder = RecordBuilder()
         record.write(builder)  # type: ignore[attr-defined]
-        data = builder.end()
+        data: bytes = builder.end()  # type: ignore[no-untyped-call]
         start = self._offset
         self._stream.write(data)
         self._offset += len(data)

@@ -72,7 +72,8 @@ class MergedSource:
             for channel, log_time, publish_time, data in self.parts[0].messages():
                 yield mapping[channel], log_time, publish_time, data
             return
-        streams = [_keyed(part, number, mapping) for number, (part, mapping) in enumerate(zip(self.parts, self._maps))]
+        streams = [_keyed(part, number, mapping)
+                   for number, (part, mapping) in enumerate(zip(self.parts, self._maps, strict=True))]
         for log_time, _, channel, publish_time, data in heapq.merge(*streams):
             yield channel, log_time, publish_time, data
 

@@ -32,7 +32,7 @@ class Ros1Source:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.ros_distro = ROS2_DISTRO
+        self.ros_distro: str | None = ROS2_DISTRO
         self.channels: list[Channel] = []
         self._converters: list[Callable[[Any], Any]] = []
         self._ids: dict[int, int] = {}
@@ -47,7 +47,7 @@ class Ros1Source:
             self._reader.close()
             raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({exc})') from None
         connections = self._reader.connections
-        self.message_count = sum(c.msgcount for c in connections)
+        self.message_count: int | None = sum(c.msgcount for c in connections)
         self.start_time = self._reader.start_time if self.message_count else None
         self.end_time = self._reader.end_time - 1 if self.message_count else None
 

@@ -127,7 +127,9 @@ class Rosbag2Source(MergedSource):
                 metadata = (('offered_qos_profiles', declared_qos),)
             # A format declared in metadata.yaml counts even if the storage says cdr.
             declared_format = formats.get(channel.topic)
-            encoding = declared_format if isinstance(declared_format, str) and declared_format else channel.message_encoding
+            encoding = channel.message_encoding
+            if isinstance(declared_format, str) and declared_format:
+                encoding = declared_format
             if encoding != 'cdr' and channel.message_encoding != 'cdr':
                 encoding = channel.message_encoding
             return replace(channel, message_encoding=encoding, metadata=metadata)

@@ -45,7 +45,8 @@ def open_source(path: Path) -> Source:
 
         return Ros1Source(path)
     if head.startswith(b'#ROSBAG'):
-        raise InputError(f'{path}: ROS 1 bag format {head[1:12].decode(errors="replace")!r} is not supported (V2.0 only)')
+        version = head[1:12].decode(errors='replace')
+        raise InputError(f'{path}: ROS 1 bag format {version!r} is not supported (V2.0 only)')
     if head.startswith(b'SQLite format 3') or path.name.endswith('.zstd'):
         return Rosbag2Source(path)
     raise InputError(f'{path}: not a bag (expected MCAP, rosbag2 .db3, a rosbag2 directory or a ROS 1 .bag)')

@@ -99,7 +99,7 @@ class TypeCatalog:
             types[name] = self.standard.fielddefs[name]
             for _, desc in types[name][1]:
                 missing.extend(_references(desc))
-        for name, (_, fields) in list(types.items()):
+        for _, fields in list(types.values()):
             for _, desc in fields:
                 for ref in _references(desc):
                     if ref not in types and ref in self.standard.fielddefs:

@@ -11,6 +11,7 @@ sample) is accepted as an alias with a warning naming the node.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -194,17 +195,17 @@ def load_architecture(path: str | Path) -> Architecture:
                      for i, e in enumerate(_required(raw, 'node_chain', f'path {name}'))]
         except LatencyError as exc:
             raise LatencyError(f'{file}: {exc}') from None
-        path = NamedPath(name, chain)
+        named = NamedPath(name, chain)
         for element in chain:
             if element.node_name in skipped:
-                path.problems.append(f'node {element.node_name} was skipped ({skipped[element.node_name]})')
+                named.problems.append(f'node {element.node_name} was skipped ({skipped[element.node_name]})')
             elif element.node_name not in nodes:
-                path.problems.append(f'path goes through node {element.node_name}, which is not in nodes')
+                named.problems.append(f'path goes through node {element.node_name}, which is not in nodes')
         if len(chain) < 2:
-            path.problems.append('a path needs at least two nodes')
-        for before, after in zip(chain, chain[1:]):
+            named.problems.append('a path needs at least two nodes')
+        for before, after in itertools.pairwise(chain):
             if before.publish_topic is None or before.publish_topic != after.subscribe_topic:
-                path.problems.append(f'{before.node_name} publishes {before.publish_topic} but {after.node_name} '
-                                     f'subscribes {after.subscribe_topic}')
-        paths[name] = path
+                named.problems.append(f'{before.node_name} publishes {before.publish_topic} but {after.node_name} '
+                                      f'subscribes {after.subscribe_topic}')
+        paths[name] = named
     return Architecture(file, paths, nodes, list(executors), warnings)

@@ -25,7 +25,7 @@ NS = 1_000_000_000
 def stamp_of(data: bytes | memoryview) -> int:
     """header.stamp in ns, read from the CDR bytes (the header is the first field)."""
     sec, nanosec = struct.unpack_from('<iI' if data[1] else '>iI', data, 4)
-    return sec * NS + nanosec
+    return int(sec) * NS + int(nanosec)
 
 
 class SeriesCollector:
@@ -71,14 +71,13 @@ def read_series(paths: Sequence[Path], topics: Sequence[str]) -> tuple[dict[str,
         wanted = {i: c.topic for i, c in enumerate(inputs.channels) if c.topic in stamped}
         events_channel = {i for i, c in enumerate(inputs.channels) if c.topic == FAULT_EVENT_TOPIC}
         event_codec = catalog.codec(FaultEvent.msgtype) if events_channel else None
-        events = []
-        for channel, time, _, data in inputs.messages():
-            topic = wanted.get(channel)
+        events: list[FaultEvent] = []
+        for index, time, _, data in inputs.messages():
+            topic = wanted.get(index)
             if topic is not None:
                 collector.add(topic, time, data)
-            elif channel in events_channel and event_codec is not None:
-                m = event_codec.decode(data)
-                events.append(FaultEvent(time, m.fault_id, m.injector_id, m.state, m.source, m.details))
+            elif index in events_channel and event_codec is not None:
+                events.append(FaultEvent.from_message(time, event_codec.decode(data)))
         series = collector.series()
         for topic in topics:
             series.setdefault(topic, TopicSeries.empty())

@@ -71,7 +71,7 @@ def _latest_same_stamp(in_times: np.ndarray, in_stamps: np.ndarray, out_times: n
     """Index of the latest input with the output's stamp received at or before it, -1 when none."""
     if in_times.size == 0 or out_times.size == 0:
         return np.full(out_times.size, -1, dtype=np.int64)
-    stamps, inverse = np.unique(np.concatenate([in_stamps, out_stamps]), return_inverse=True)
+    _, inverse = np.unique(np.concatenate([in_stamps, out_stamps]), return_inverse=True)
     in_ids, out_ids = inverse[: in_stamps.size], inverse[in_stamps.size:]
     ranks_all = np.unique(np.concatenate([in_times, out_times]))
     scale = np.int64(ranks_all.size + 1)
@@ -85,8 +85,11 @@ def _latest_same_stamp(in_times: np.ndarray, in_stamps: np.ndarray, out_times: n
     return np.where(same, found, -1)
 
 
+Case = tuple[np.ndarray, np.ndarray]  # start times (ns), latencies (ms)
+
+
 def _cases(input_times: np.ndarray, sample_times: np.ndarray, matched: np.ndarray,
-           first_times: np.ndarray) -> tuple[tuple[np.ndarray, ...], ...]:
+           first_times: np.ndarray) -> tuple[Case, Case, Case]:
     """best, worst and all response-time cases as (start time, latency ms) arrays."""
     if matched.size == 0:
         empty = (np.zeros(0, dtype=np.int64), np.zeros(0))
@@ -164,7 +167,7 @@ STATISTICS = ('min', 'mean', 'p50', 'p95', 'p99', 'max')
 def statistics(values: np.ndarray) -> dict[str, Any]:
     """count, min, mean, p50, p95, p99, max (ms); None values when empty."""
     if values.size == 0:
-        return {'count': 0, **{name: None for name in STATISTICS}}
+        return {'count': 0, **dict.fromkeys(STATISTICS)}
     return {
         'count': int(values.size),
         'min': float(values.min()),

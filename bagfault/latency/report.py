@@ -47,7 +47,7 @@ class LatencyReport:
                                      'worst': statistics(r.worst[1])},
                 'by_fault': by_fault(r, self.windows),
                 'samples': [[round((t - self.origin) / NS, 9), round(v, 6)]
-                            for t, v in zip(r.sample_times.tolist(), r.latency_ms.tolist())],
+                            for t, v in zip(r.sample_times.tolist(), r.latency_ms.tolist(), strict=True)],
                 'notes': r.notes,
             } for r in self.results],
         }

@@ -25,9 +25,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from bagfault import __version__
+from bagfault.errors import FieldValueError, LiveError, ReloadError, ScenarioError
 from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
-from bagfault.errors import FieldValueError, LiveError, ReloadError, ScenarioError
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
 from bagfault.live.diagnostics import diagnostic_array
@@ -231,10 +231,12 @@ class ProxyNode:
             cls = classes[topic.spec.id]
             self.publishers[id(topic)] = self.node.create_publisher(
                 cls, topic.output_topic, profile,
-                event_callbacks=PublisherEventCallbacks(incompatible_qos=partial(self._incompatible, topic, 'subscriber')))
+                event_callbacks=PublisherEventCallbacks(
+                    incompatible_qos=partial(self._incompatible, topic, 'subscriber')))
             self.subscriptions.append(self.node.create_subscription(
                 cls, topic.input_topic, partial(self._on_message, topic), profile, raw=True,
-                event_callbacks=SubscriptionEventCallbacks(incompatible_qos=partial(self._incompatible, topic, 'publisher'))))
+                event_callbacks=SubscriptionEventCallbacks(
+                    incompatible_qos=partial(self._incompatible, topic, 'publisher'))))
             self.logger.info(f'proxy {topic.input_topic} -> {topic.output_topic} ({topic.spec.type}, {topic.msgtype})')
         for name, cls in watched_classes.items():
             self.subscriptions.append(self.node.create_subscription(

@@ -93,6 +93,7 @@ def fault_parameters(scenario: Scenario) -> tuple[list[FaultParameter], list[str
             description=f'Fault {fault.id} of injector {fault.injector_id} is active (set to switch it now).')))
         for schema in cls.fields:
             name = f'{fault.id}.{schema.key}'
-            declared.append(FaultParameter(name, fault.id, schema.key, _value(schema, fault), _descriptor(name, schema)))
+            declared.append(FaultParameter(name, fault.id, schema.key, _value(schema, fault),
+                                           _descriptor(name, schema)))
     return declared, notes
 

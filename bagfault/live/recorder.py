@@ -23,7 +23,7 @@ from bagfault.live.ros import has_interface, interface_class, qos_yaml
 from bagfault.live.runtime import ros_context
 
 if TYPE_CHECKING:
-    from pathlib import Path  # noqa: TC003 - dataclass field types are resolved lazily
+    from pathlib import Path
 
     from bagfault.engine.stop import StopFlag
 

@@ -24,16 +24,17 @@ if TYPE_CHECKING:
 
 @contextlib.contextmanager
 def ros_context(stop: StopFlag) -> Iterator[Any]:
-    """An initialised rclpy context; signals set `stop` while it is open."""
+    """An initialised rclpy context; SIGINT, SIGTERM and SIGHUP set `stop` while it is open."""
     require_rclpy()
     import rclpy  # noqa: PLC0415
+    import rclpy.context  # noqa: PLC0415
     from rclpy.signals import SignalHandlerOptions  # noqa: PLC0415
 
-    context = rclpy.Context()
+    context = rclpy.context.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     previous = {}
     if threading.current_thread() is threading.main_thread():
-        for number in (signal.SIGINT, signal.SIGTERM):
+        for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             previous[number] = signal.signal(number, lambda n, _f: stop.set(signal.Signals(n).name))
     try:
         yield context

@@ -320,7 +320,8 @@ class LiveSession:
         """Every fault with its state and config, in file order."""
         with self.lock:
             active = self.scheduler.active if self.scheduler is not None else {}
-            return [FaultState(f.id, f.injector_id, f.id in active, copy.deepcopy(f.config)) for f in self.scenario.faults]
+            return [FaultState(f.id, f.injector_id, f.id in active, copy.deepcopy(f.config))
+                    for f in self.scenario.faults]
 
     def flush(self) -> list[tuple[LiveTopic, RawMessage]]:
         """Messages injectors still hold (reorder windows), to publish before stopping."""

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import dataclasses
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bagfault.faults.fieldpath import FieldPath, FieldPathError
+from bagfault.errors import FieldPathError
+from bagfault.faults.fieldpath import FieldPath
 from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
 from bagfault.io.sources import InputSet
@@ -30,9 +32,9 @@ class FieldPlot:
     input_topic: str
     output_topic: str
     field: str
-    before: tuple[list[float], list[float]] = ((), ())  # type: ignore[assignment]
-    after: tuple[list[float], list[float]] = ((), ())  # type: ignore[assignment]
-    faults: list[str] = field(default_factory=list)
+    before: tuple[list[float], list[float]] = dataclasses.field(default_factory=lambda: ([], []))
+    after: tuple[list[float], list[float]] = dataclasses.field(default_factory=lambda: ([], []))
+    faults: list[str] = dataclasses.field(default_factory=list)
 
 
 def plan(result: RunResult) -> list[FieldPlot]:

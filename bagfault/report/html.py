@@ -139,7 +139,8 @@ def render(
 <style>{STYLE}</style><script>{SCRIPT}</script></head>
 <body>
 <h1>bagfault report: {escape(report['scenario']['name'])}</h1>
-<p class="verdict {verdict_css}">{escape(report['verdict'].upper())}: {counts['passed']} passed, {counts['failed']} failed</p>
+<p class="verdict {verdict_css}">{escape(report['verdict'].upper())}: \
+{counts['passed']} passed, {counts['failed']} failed</p>
 <p>mode {escape(report['mode'])}; inputs {inputs}; output <code>{escape(str(report['output']))}</code>;
 seed {report['seed']}; bag duration {report['time']['duration_s']} s; bagfault {escape(report['tool']['version'])}</p>
 <h2>Fault timeline</h2>{_timeline(report)}

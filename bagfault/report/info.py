@@ -18,8 +18,8 @@ def render_info(paths: Sequence[Path]) -> str:
     try:
         counts = [0] * len(inputs.channels)
         first = last = None
-        for channel, log_time, _, _ in inputs.messages():
-            counts[channel] += 1
+        for index, log_time, _, _ in inputs.messages():
+            counts[index] += 1
             first = log_time if first is None else first
             last = log_time
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
@@ -30,7 +30,7 @@ def render_info(paths: Sequence[Path]) -> str:
             lines.append(f'duration:  {(last - first) / 1e9:.3f} s  (start {stamp(first)}, end {stamp(last)})')
         lines.append('topics:')
         width = max((len(c.topic) for c in inputs.channels), default=10)
-        for channel, count in zip(inputs.channels, counts):
+        for channel, count in zip(inputs.channels, counts, strict=True):
             if channel.schema_text:
                 definition = 'stored'
             elif catalog.schema(channel.msgtype)[1]:

@@ -67,7 +67,8 @@ def fault_manager_section(summary: dict[str, Any]) -> list[str]:
              '|---|---|---|---:|---:|---:|---|']
     for fault in summary['faults']:
         lines.append(f'| {fault["fault_code"]} | {fault["severity"]} | {fault["status"]} | '
-                     f'{fault["occurrence_count"]} | {fault["first_occurred_s"]:.3f} | {fault["last_occurred_s"]:.3f} | '
+                     f'{fault["occurrence_count"]} | {fault["first_occurred_s"]:.3f} | '
+                     f'{fault["last_occurred_s"]:.3f} | '
                      f'{", ".join(fault["reporting_sources"])} |')
     if summary['events']:
         lines += ['', '| t (s) | event | code | status | auto-cleared |', '|---:|---|---|---|---|']

@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
-from bagfault.errors import BagfaultError
+from bagfault.errors import UsageError
 from bagfault.injectors.registry import injector_types
 
 
-def schema_dict(type_name: str | None = None) -> dict[str, object]:
+def schema_dict(type_name: str | None = None) -> dict[str, Any]:
     """{type: {description, message_types, live_only, options, fields}}."""
     types = injector_types()
     if type_name is not None and type_name not in types:
-        raise BagfaultError(f'unknown injector type {type_name!r} (known: {", ".join(sorted(types))})')
+        raise UsageError(f'unknown injector type {type_name!r} (known: {", ".join(sorted(types))})')
     selected = [type_name] if type_name else sorted(types)
     return {
         name: {
@@ -28,12 +29,12 @@ def schema_dict(type_name: str | None = None) -> dict[str, object]:
 
 def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str:
     """Human table or JSON of one or all injector types."""
-    data = schema_dict(type_name)
+    data: dict[str, Any] = schema_dict(type_name)
     if as_json:
         return json.dumps(data, indent=2, sort_keys=True)
     lines = []
     for name, entry in data.items():
-        kinds = ', '.join(entry['message_types']) or 'any message type'  # type: ignore[arg-type]
+        kinds = ', '.join(entry['message_types']) or 'any message type'
         live = ' (live mode only)' if entry['live_only'] else ''
         lines.append(f'{name}: {entry["description"]}{live}')
         lines.append(f'  messages: {kinds}')
@@ -42,7 +43,7 @@ def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str
             if not fields:
                 continue
             lines.append('  injector options:' if title == 'options' else '  fault config keys:')
-            for field in fields:  # type: ignore[attr-defined]
+            for field in fields:
                 limits = []
                 if field['min'] is not None:
                     limits.append(f'min {field["min"]}')

@@ -25,7 +25,7 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
     stats = result.stats
     print(f'scenario  {result.scenario.name}  (seed {result.seed})', file=out)
     live = ', '.join(sorted({i.input_topic for i in result.scenario.injectors if i.input_topic}))
-    sources = ", ".join(str(p) for p in result.inputs) if result.inputs else f'live topics {live}'.rstrip()
+    sources = ', '.join(str(p) for p in result.inputs) if result.inputs else f'live topics {live}'.rstrip()
     print(f'inputs    {sources}', file=out)
     if result.output is not None:
         print(f'output    {result.output}  ({stats.output_messages} messages from {stats.input_messages} read)',

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from html import escape
-from typing import Sequence
 
 COLORS = ('#1f77b4', '#d62728', '#2ca02c', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#17becf')
 SHADE = 'rgba(214, 39, 40, 0.12)'
@@ -97,9 +97,10 @@ def line_chart(
     body += frame.axes(title, xlabel, ylabel)
     for number, (label, sx, sy) in enumerate(series):
         color = COLORS[number % len(COLORS)]
-        points, segments = [], []
+        points: list[str] = []
+        segments: list[list[str]] = []
         previous_y = None
-        for x, y in zip(sx, sy):
+        for x, y in zip(sx, sy, strict=True):
             if not math.isfinite(y):
                 if points:
                     segments.append(points)

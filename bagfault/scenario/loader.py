@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from bagfault.errors import Problem, ScenarioError
 from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 from bagfault.scenario.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
 
@@ -36,14 +37,11 @@ class _Collector:
         self.problems: list[Any] = []
 
     def add(self, path: PathKey, message: str) -> None:
-        from bagfault.scenario import Problem  # noqa: PLC0415 - avoid import cycle
-
         self.problems.append(Problem(self.file, self.located.where(path), format_path(path), message))
 
 
 def load_scenario(path: str | Path, *, validate: bool = True) -> Scenario:
     """Load and (by default) validate a scenario file; raise ScenarioError listing all problems."""
-    from bagfault.scenario import ScenarioError  # noqa: PLC0415
 
     file = Path(path)
     try:
@@ -59,7 +57,6 @@ def load_scenario(path: str | Path, *, validate: bool = True) -> Scenario:
 
 def parse_scenario(text: str, *, source: Path | None = None, validate: bool = True) -> Scenario:
     """Parse scenario text; raise ScenarioError listing every problem found."""
-    from bagfault.scenario import Problem, ScenarioError  # noqa: PLC0415
     from bagfault.scenario.validator import validate_scenario  # noqa: PLC0415
 
     name = str(source) if source else '<scenario>'
@@ -117,7 +114,7 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
     if not isinstance(faults, list):
         out.add(('faults',), 'must be a list of faults')
     else:
-        scenario.faults = [x for i, n in enumerate(faults) if (x := _fault(n, ('faults', i), out, located))]
+        scenario.faults = [f for i, n in enumerate(faults) if (f := _fault(n, ('faults', i), out, located))]
 
     assertions = root.get('assertions', [])
     if assertions is None:
@@ -126,7 +123,7 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
         out.add(('assertions',), 'must be a list of assertions')
     else:
         scenario.assertions = [
-            x for i, n in enumerate(assertions) if (x := _assertion(n, ('assertions', i), out))
+            a for i, n in enumerate(assertions) if (a := _assertion(n, ('assertions', i), out))
         ]
 
     if 'seed' in root:

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
 
 def _seconds(value: object, path: PathKey, out: _Collector, *, positive: bool) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:  # noqa: PLR0124
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
         out.add(path, f'{value!r} is not a number of seconds')
         return None
     if value < 0 or (positive and value == 0):

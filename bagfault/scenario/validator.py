@@ -12,9 +12,10 @@ from collections import Counter
 from typing import TYPE_CHECKING, Any
 
 from bagfault.assertions.registry import ASSERTION_TYPES
-from bagfault.injectors.base import InjectorConfigError, ServiceInjector
+from bagfault.errors import FieldValueError, InjectorConfigError
+from bagfault.injectors.base import ServiceInjector
 from bagfault.injectors.registry import get_injector_type, injector_types
-from bagfault.schema import ConfigField, FieldValueError
+from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
@@ -66,7 +67,8 @@ def _check_injector(injector: Any, out: _Collector) -> None:
         return
     is_service_type = issubclass(cls, ServiceInjector)
     if is_service_type and not injector.is_service:
-        out.add(injector.path, f'injector type {injector.type!r} proxies a service: give proxy_service and target_service')
+        out.add(injector.path,
+                f'injector type {injector.type!r} proxies a service: give proxy_service and target_service')
     if not is_service_type and injector.is_service:
         out.add(injector.path, f'injector type {injector.type!r} proxies a topic: give input_topic and output_topic')
     for field in cls.options:
@@ -87,7 +89,8 @@ def _check_outputs(scenario: Scenario, out: _Collector) -> None:
             continue
         if injector.output_topic in writers:
             out.add((*injector.path, 'output_topic'),
-                    f'output topic {injector.output_topic} is already written by injector {writers[injector.output_topic]!r}')
+                    f'output topic {injector.output_topic} is already written by injector '
+                    f'{writers[injector.output_topic]!r}')
         writers[injector.output_topic] = injector.id
 
 

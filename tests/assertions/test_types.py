@@ -141,7 +141,7 @@ def test_topic_hz_type_mismatch_fails_at_time_zero(tmp_path):
     ('{id: a, type: topic_gap, topic: /odom, max_gap: 1, within: 3}', 'within does not apply'),
     ('{id: a, type: message_count, topic: /odom, during: ghost, min: 1}', "unknown fault 'ghost'"),
     ('{id: a, type: sequence, steps: [a, b]}', 'a sequence cannot contain itself'),
-    ('{id: a, type: field_delta, topic: /nowhere, field: x, equals: 1}', "no injector writes /nowhere"),
+    ('{id: a, type: field_delta, topic: /nowhere, field: x, equals: 1}', 'no injector writes /nowhere'),
     ('{id: a, type: topic_gap, topic: /odom, max_gap: 0}', 'must be greater than 0'),
 ])
 def test_assertion_fields_are_validated(assertion, problem):

@@ -76,8 +76,9 @@ def test_fast_and_reference_paths_write_identical_files(
 
 def test_patching_falls_back_when_layouts_differ(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """IMU messages whose frame ids differ in length cannot share one layout: decoded instead, same bytes."""
-    from bagfault.demo import synthetic
     from mcap.writer import CompressionType, Writer
+
+    from bagfault.demo import synthetic
 
     ts = synthetic.store()
     bag = tmp_path / 'frames.mcap'

@@ -96,7 +96,7 @@ def test_random_activations_are_seeded_and_hold():
     assert first == again and first != other
     ons = [t for t, _, state, _ in first if state == 'active']
     offs = [t for t, _, state, _ in first if state == 'inactive']
-    assert all(off - on == pytest.approx(0.2) for on, off in zip(ons, offs))
+    assert all(off - on == pytest.approx(0.2) for on, off in zip(ons, offs, strict=True))
     # rate of arrivals ~ 0.5/s over the time not held
     assert len(ons) / (2000 - 0.2 * len(ons)) == pytest.approx(0.5, rel=0.1)
 
@@ -118,7 +118,7 @@ def test_after_follows_its_trigger():
 
 
 def test_event_details_use_the_anchor_format():
-    s = scenario("- {id: f, injector_id: imu, start: 1, config: {linear_acceleration_z_bias: 0.20, angular_velocity_z_bias: 1}}\n")
+    s = scenario('- {id: f, injector_id: imu, start: 1, config: {linear_acceleration_z_bias: 0.20, angular_velocity_z_bias: 1}}\n')
     [event] = FaultScheduler(s, ORIGIN, 0).advance(ORIGIN + 2 * NS)
     assert event.details == 'config={angular_velocity_z_bias=1, linear_acceleration_z_bias=0.20}'
     assert event.injector_id == 'imu'

@@ -43,7 +43,7 @@ def test_random_activations_hold_and_are_seeded(tmp_path, bag):
     out, result = run_inline(tmp_path, text, bag, seed=3)
     events = [(e.time, e.state) for e in result.stats.events]
     assert events and all(state == ('active' if i % 2 == 0 else 'inactive') for i, (_, state) in enumerate(events))
-    spans = list(zip(events[::2], events[1::2]))
+    spans = list(zip(events[::2], events[1::2], strict=True))
     assert all(off - on == 200_000_000 for (on, _), (off, _) in spans)
     kept = [t for t, _, _ in raw_messages(out)['/imu_out']]
     assert all(not on <= t < off for t in kept for (on, _), (off, _) in spans)

@@ -209,8 +209,7 @@ def test_13_symptoms_within_the_window_are_muted_and_cleared_with_root():
     assert [e.fault.fault_code for e in fm.events if e.event_type == 'fault_confirmed'] == ['ESTOP_001']
     fm.clear('ESTOP_001', 1 * NS)
     assert fm.events[-1].auto_cleared_codes == ('MOTOR_COMM_FL', 'DRIVE_FAULT')
-    assert {c: f.status for c, f in fm.faults.items()} == {c: 'CLEARED' for c in ('ESTOP_001', 'MOTOR_COMM_FL',
-                                                                                  'DRIVE_FAULT')}
+    assert {c: f.status for c, f in fm.faults.items()} == dict.fromkeys(('ESTOP_001', 'MOTOR_COMM_FL', 'DRIVE_FAULT'), 'CLEARED')
     assert fm.list_faults().muted_count == 0
 
 

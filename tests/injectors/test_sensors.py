@@ -29,7 +29,7 @@ def run_one(tmp_path, bag, kind, topic, config, **kw):
     """
     out, _ = run_inline(tmp_path, text, bag, **kw)
     data = decoded(out, [topic, f'{topic}_out'])
-    return list(zip(data[topic], data[f'{topic}_out']))
+    return list(zip(data[topic], data[f'{topic}_out'], strict=True))
 
 
 def inside(time):
@@ -141,7 +141,7 @@ def test_compressed_image_stream_faults(tmp_path, bag):
     """, bag)
     raw = raw_messages(out)
     frozen = next(d for t, _, d in raw['/camera/compressed'] if (t - START) / NS == pytest.approx(0.8))
-    for (t_in, _, d_in), (t_out, _, d_out) in zip(raw['/camera/compressed'], raw['/camera/compressed_out']):
+    for (t_in, _, d_in), (t_out, _, d_out) in zip(raw['/camera/compressed'], raw['/camera/compressed_out'], strict=True):
         if inside(t_in):
             assert (d_out, t_out - t_in) == (frozen, 100_000_000)
         else:

@@ -51,16 +51,16 @@ def test_freeze_repeats_the_last_good_payload_at_original_times(tmp_path, bag):
     raw, out, _ = streams(tmp_path, bag, '{freeze: true}')
     assert [time for time, _, _ in out] == [time for time, _, _ in raw]
     frozen_payload = next(data for time, _, data in raw if t(time) == pytest.approx(1.98))
-    for (time, _, data), (_, _, original) in zip(out, raw):
+    for (time, _, data), (_, _, original) in zip(out, raw, strict=True):
         expected = frozen_payload if 2.0 <= t(time) < 7.0 else original
         assert data == expected
 
 
 def test_corrupt_probability_one_changes_every_payload_never_the_cdr_header(tmp_path, bag):
     raw, out, _ = streams(tmp_path, bag, '{corrupt_probability: 1.0, corrupt_bits: 8}')
-    for (time, _, data), (_, _, original) in zip(out, raw):
+    for (time, _, data), (_, _, original) in zip(out, raw, strict=True):
         assert data[:4] == original[:4] and len(data) == len(original)
-        flipped = sum(bin(a ^ b).count('1') for a, b in zip(data, original))
+        flipped = sum(bin(a ^ b).count('1') for a, b in zip(data, original, strict=True))
         assert flipped == (8 if 2.0 <= t(time) < 7.0 else 0)
 
 
@@ -111,7 +111,7 @@ def test_reorder_window_shuffles_within_groups(tmp_path, bag):
 
 def test_stamp_offset_changes_only_the_header_stamp(tmp_path, bag):
     raw, out, _ = streams(tmp_path, bag, '{stamp_offset_ms: -1500}')
-    for (time, _, data), (_, _, original) in zip(out, raw):
+    for (time, _, data), (_, _, original) in zip(out, raw, strict=True):
         sec, nsec = struct.unpack_from('<iI', data, 4)
         sec0, nsec0 = struct.unpack_from('<iI', original, 4)
         shift = -1_500_000_000 if 2.0 <= t(time) < 7.0 else 0

@@ -8,10 +8,10 @@ import zlib
 from pathlib import Path
 
 import pytest
-from mcap.reader import make_reader
-from mcap.stream_reader import StreamReader
 import zstandard
+from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex
+from mcap.stream_reader import StreamReader
 
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.mcap_writer import McapWriter

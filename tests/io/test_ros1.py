@@ -45,7 +45,7 @@ def test_robot_localization_bag_with_imu_and_odom_faults(tmp_path, external):
     before = ros1_messages(bag, '/imu/data')
     origin = result.stats.origin
     biased = 0
-    for (t, a), (t2, b) in zip(before, after['/imu/data']):
+    for (t, a), (t2, b) in zip(before, after['/imu/data'], strict=True):
         assert t == t2
         inside = 10 * NS <= t - origin < 30 * NS
         biased += inside
@@ -53,7 +53,7 @@ def test_robot_localization_bag_with_imu_and_odom_faults(tmp_path, external):
         assert (b.header.stamp.sec, b.header.stamp.nanosec) == (a.header.stamp.sec, a.header.stamp.nanosec)
     assert biased > 500
     odom_before = ros1_messages(bag, '/husky_velocity_controller/odom')
-    for (_, a), (_, b) in zip(odom_before, after['/odom_faulty']):
+    for (_, a), (_, b) in zip(odom_before, after['/odom_faulty'], strict=True):
         assert b.pose.pose.position.x - a.pose.pose.position.x == pytest.approx(2.0, abs=1e-12)
 
 

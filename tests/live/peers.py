@@ -193,7 +193,7 @@ def describe_params(args) -> None:
     described = call('describe_parameters', DescribeParameters.Request(names=names)).descriptors
     values = call('get_parameters', GetParameters.Request(names=names)).values
     out = {}
-    for name, descriptor, value in zip(names, described, values):
+    for name, descriptor, value in zip(names, described, values, strict=True):
         ranges = [[r.from_value, r.to_value] for r in descriptor.floating_point_range]
         ranges += [[r.from_value, r.to_value] for r in descriptor.integer_range]
         current = {1: value.bool_value, 2: value.integer_value, 3: value.double_value, 4: value.string_value}.get(value.type)

@@ -34,9 +34,9 @@ def test_without_rclpy_live_commands_say_how_to_get_it(anchors: Path, tmp_path: 
 
 
 @pytest.mark.parametrize(('scenario', 'expected'), [
-    ("injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu}\nfaults: []\n",
+    ('injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu}\nfaults: []\n',
      "injector 'imu' reads and writes /imu; a live proxy needs distinct input_topic and output_topic"),
-    ("injector: {id: tf, type: tf, input_topic: /tf_raw, output_topic: /tf}\nfaults: []\n",
+    ('injector: {id: tf, type: tf, input_topic: /tf_raw, output_topic: /tf}\nfaults: []\n',
      'tf2_msgs/msg/TFMessage: type not installed for rclpy (pip install ros-jazzy-tf2-msgs'),
 ])
 def test_proxy_refuses_what_cannot_work_live(graph, tmp_path: Path, scenario: str, expected: str) -> None:

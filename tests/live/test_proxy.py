@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from helpers import NS, decoded
 
 BASE_Z = 0.001  # the publisher sends angular_velocity.z = 0.001 * (k % 100), k in orientation_covariance[0]
@@ -173,7 +172,7 @@ faults:
 """)
     record = tmp_path / 'proxy.mcap'
     proxy = graph.bagfault('proxy', str(scenario), '--use-sim-time', '--record', str(record), name='proxy')
-    graph.wait_for(proxy, "proxy /sensors/imu_raw")
+    graph.wait_for(proxy, 'proxy /sensors/imu_raw')
     play = graph.bagfault('play', str(bag), '--clock', '--rate', '2', '--delay', '1.5', name='play')
     assert play.wait(timeout=60) == 0
     time.sleep(0.5)

@@ -6,6 +6,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from bagfault_rover_plugins import WHEEL_ENCODERS_MSG
 from mcap.reader import make_reader
 from mcap.writer import Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -13,7 +14,6 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from bagfault import api
 from bagfault.injectors.registry import injector_types
 from bagfault.scenario import parse_scenario
-from bagfault_rover_plugins import WHEEL_ENCODERS_MSG
 
 TYPE = 'rover_msgs/msg/WheelEncoders'
 NS = 1_000_000_000

@@ -1,0 +1,61 @@
+"""The report files a command writes: checked before the run, written whole after it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from bagfault.io.outputs import check_output, write_atomic
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from pathlib import Path
+
+    from bagfault.engine.result import RunResult
+    from bagfault.engine.run import Observer
+    from bagfault.report.rates import RateTracker
+
+
+@dataclass(frozen=True)
+class ReportPaths:
+    """Where each report goes (None: not asked for)."""
+
+    markdown: Path | None = None
+    json: Path | None = None
+    junit: Path | None = None
+    html: Path | None = None
+
+    def named(self) -> list[tuple[str, Path]]:
+        """(option, path) of every report asked for."""
+        pairs = (('--report', self.markdown), ('--json', self.json), ('--junit', self.junit), ('--html', self.html))
+        return [(name, path) for name, path in pairs if path is not None]
+
+    def check(self, protected: Sequence[tuple[str, Path]]) -> None:
+        """Before the run: every report path is writable and replaces nothing the run reads or writes."""
+        named = self.named()
+        for number, (option, path) in enumerate(named):
+            others = [(f'the {name} report', other) for name, other in named[:number]]
+            check_output(path, f'{option} report', [*protected, *others])
+
+    def collectors(self) -> list[Observer]:
+        """Observers the reports need during the run (topic rates for the HTML report)."""
+        from bagfault.report.rates import RateTracker  # noqa: PLC0415
+
+        return [RateTracker()] if self.html is not None else []
+
+    def write(self, result: RunResult, collectors: Sequence[Observer] = ()) -> None:
+        """Render and write every report asked for."""
+        from bagfault.report import html, json_report, junit, markdown, model  # noqa: PLC0415
+        from bagfault.report.fields import collect  # noqa: PLC0415
+        from bagfault.report.rates import RateTracker  # noqa: PLC0415
+
+        report = model.build(result)
+        if self.markdown is not None:
+            write_atomic(self.markdown, markdown.render(report))
+        if self.json is not None:
+            write_atomic(self.json, json_report.render(report))
+        if self.junit is not None:
+            write_atomic(self.junit, junit.render(report))
+        if self.html is not None:
+            rates: RateTracker | None = next((c for c in collectors if isinstance(c, RateTracker)), None)
+            write_atomic(self.html, html.render(report, rates, collect(result)))
