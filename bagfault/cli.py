@@ -272,7 +272,8 @@ def _cmd_latency(args: argparse.Namespace) -> int:
     from bagfault.errors import LatencyError  # noqa: PLC0415
     from bagfault.io.outputs import write_atomic  # noqa: PLC0415
     from bagfault.latency.architecture import load_architecture  # noqa: PLC0415
-    from bagfault.latency.report import measure, render_html, render_text, render_validation  # noqa: PLC0415
+    from bagfault.latency.measure import measure  # noqa: PLC0415
+    from bagfault.report.latency import render_html, render_text, render_validation  # noqa: PLC0415
 
     items = args.items
     if items[0] == 'validate':

@@ -9,14 +9,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from helpers import ANCHORS, EXTERNAL, FIXTURES
-
-
-def need(path: Path) -> Path:
-    """Skip the test cleanly when a third-party folder is absent."""
-    if not path.exists():
-        pytest.skip(f'{path} not present')
-    return path
+from helpers import ANCHORS, EXTERNAL, FIXTURES, need
 
 
 @pytest.fixture
@@ -29,6 +22,12 @@ def rover_bag() -> Path:
 def rover_sqlite() -> Path:
     """3 s rosbag2 sqlite3 directory with the same streams."""
     return FIXTURES / 'rover_3s_sqlite3'
+
+
+@pytest.fixture(scope='session')
+def scenarios() -> Path:
+    """bagfault's own scenario files, one per layout of ros2_fault_injection (tests/fixtures/scenarios)."""
+    return FIXTURES / 'scenarios'
 
 
 @pytest.fixture(scope='session')

@@ -21,6 +21,48 @@ ANCHORS = SHARED / 'anchor_scenarios'
 CARET = SHARED / 'caret_samples'
 
 
+def need(path: Path) -> Path:
+    """Skip the test cleanly when third-party data is absent, saying so."""
+    if not path.exists():
+        import pytest
+
+        pytest.skip(f'needs third-party data: {path} not present (set BAGFAULT_SHARED)')
+    return path
+
+
+def rpy(q: Any) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (ZYX) of a geometry_msgs Quaternion, by the textbook formulas."""
+    import math
+
+    x, y, z, w = q.x, q.y, q.z, q.w
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def image_pixels(message: Any) -> Any:
+    """height x width x channels numpy array of a sensor_msgs/Image (rows of `step` bytes, REP 118 encodings)."""
+    import numpy as np
+
+    kind, channels = {'mono8': ('u1', 1), 'rgb8': ('u1', 3), 'bgr8': ('u1', 3), 'mono16': ('u2', 1),
+                      '32FC1': ('f4', 1)}[message.encoding]
+    dtype = np.dtype(('>' if message.is_bigendian else '<') + kind)
+    rows = np.asarray(message.data, dtype=np.uint8).reshape(message.height, message.step)
+    used = rows[:, :message.width * channels * dtype.itemsize].copy()
+    return used.view(dtype).reshape(message.height, message.width, channels)
+
+
+def third_party(cases: list[Any], *, arity: int = 1) -> list[Any]:
+    """Parameter cases made of third-party files: the cases when they are here, else one case that skips."""
+    if EXTERNAL.exists() and ANCHORS.exists():
+        return list(cases)
+    import pytest
+
+    reason = f'needs third-party data: {SHARED} not present (set BAGFAULT_SHARED)'
+    return [pytest.param(*([None] * arity), marks=pytest.mark.skip(reason=reason), id='third-party-data-absent')]
+
+
 def counts(path: Path) -> Counter[str]:
     """Messages per topic, read with the mcap library."""
     with path.open('rb') as stream:

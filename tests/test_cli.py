@@ -23,8 +23,8 @@ def run_cli(capsys, *args):
     return code, out.out, out.err
 
 
-def test_run_prints_a_summary(capsys, tmp_path, anchors, rover_bag):
-    code, out, err = run_cli(capsys, 'run', anchors / 'multi_injector_faults.yaml', rover_bag, '-o', tmp_path / 'o.mcap')
+def test_run_prints_a_summary(capsys, tmp_path, scenarios, rover_bag):
+    code, out, err = run_cli(capsys, 'run', scenarios / 'rover_multi.yaml', rover_bag, '-o', tmp_path / 'o.mcap')
     assert code == 0, err
     assert 'odom_position_bias' in out and '5.000 s' in out
     assert counts(tmp_path / 'o.mcap')['/odom'] == 1000
@@ -57,8 +57,8 @@ def test_validate_ok_and_warnings(capsys, anchors):
 
 @pytest.mark.parametrize('case', ['missing', 'empty', 'truncated', 'same_as_input', 'no_dir', 'inside_input',
                                   'unwritable'])
-def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, anchors, rover_bag, rover_sqlite, case):
-    scenario = anchors / 'multi_injector_faults.yaml'
+def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, scenarios, rover_bag, rover_sqlite, case):
+    scenario = scenarios / 'rover_multi.yaml'
     bag = tmp_path / 'in.mcap'
     shutil.copy(rover_bag, bag)
     out = tmp_path / 'out.mcap'
@@ -77,7 +77,7 @@ def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, anchors, ro
     elif case == 'inside_input':
         bag = tmp_path / 'sqlite_bag'
         shutil.copytree(rover_sqlite, bag)
-        scenario = anchors / 'odom_faults.yaml'
+        scenario = scenarios / 'odom.yaml'
         out = bag / 'out.mcap'
     before = tree_digest(bag) if bag.exists() else None
     listing = sorted(os.listdir(tmp_path))
@@ -92,25 +92,25 @@ def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, anchors, ro
         assert tree_digest(bag) == before
 
 
-def test_failure_during_the_run_leaves_nothing(capsys, tmp_path, anchors, rover_bag):
+def test_failure_during_the_run_leaves_nothing(capsys, tmp_path, scenarios, rover_bag):
     data = bytearray(rover_bag.read_bytes())
     data[len(data) // 2: len(data) // 2 + 4000] = bytes(4000)  # inside a compressed chunk
     bag = tmp_path / 'corrupt.mcap'
     bag.write_bytes(bytes(data))
-    code, _, err = run_cli(capsys, 'run', anchors / 'multi_injector_faults.yaml', bag, '-o', tmp_path / 'out.mcap')
+    code, _, err = run_cli(capsys, 'run', scenarios / 'rover_multi.yaml', bag, '-o', tmp_path / 'out.mcap')
     assert code == 2 and 'corrupt' in err and str(bag) in err
     assert sorted(os.listdir(tmp_path)) == ['corrupt.mcap']
 
 
-def test_debug_shows_the_traceback(capsys, tmp_path, anchors):
-    code, _, err = run_cli(capsys, '--debug', 'run', anchors / 'odom_faults.yaml', tmp_path / 'x.mcap', '-o', tmp_path / 'o.mcap')
+def test_debug_shows_the_traceback(capsys, tmp_path, scenarios):
+    code, _, err = run_cli(capsys, '--debug', 'run', scenarios / 'odom.yaml', tmp_path / 'x.mcap', '-o', tmp_path / 'o.mcap')
     assert code == 2 and 'Traceback' in err
 
 
-def test_unknown_activate_fault(capsys, tmp_path, anchors, rover_bag):
-    code, _, err = run_cli(capsys, 'run', anchors / 'odom_faults.yaml', rover_bag, '-o', tmp_path / 'o.mcap',
+def test_unknown_activate_fault(capsys, tmp_path, scenarios, rover_bag):
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', rover_bag, '-o', tmp_path / 'o.mcap',
                            '--activate', 'ghost@1')
-    assert code == 2 and '--activate ghost: no such fault in odom_faults.yaml' in err
+    assert code == 2 and '--activate ghost: no such fault in odom.yaml' in err
 
 
 def test_usage_error_is_exit_2(capsys):

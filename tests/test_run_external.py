@@ -8,19 +8,18 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from helpers import NS, counts, decoded, rosbags_counts
+from helpers import NS, counts, decoded, rosbags_counts, rpy, third_party
 from io_cases import ROSBAG2_DIRS, metadata_counts
 
 from bagfault import api
 from bagfault.errors import EngineError
-from bagfault.faults.rotation import quaternion_to_rpy
 from bagfault.scenario import parse_scenario
 
 PASS_THROUGH = parse_scenario('injectors: []\n')
 TURTLEBOT = 'Turtlebot_Walker_Algorithm_ROS2/walker_bag_topics_list'
 
 
-@pytest.mark.parametrize('relative', ROSBAG2_DIRS)
+@pytest.mark.parametrize('relative', third_party(ROSBAG2_DIRS))
 def test_every_readable_rosbag2_dir_runs_through(tmp_path, external, relative):
     bag = external / relative
     out = tmp_path / 'out.mcap'
@@ -40,11 +39,11 @@ ROSBAGS_CANNOT_READ = {
 }
 
 
-@pytest.mark.parametrize('relative', [
+@pytest.mark.parametrize('relative', third_party([
     'rosbag2/rosbag2_tests/resources/sqlite3/wrong_rmw_test',
     'rosbag2/rosbag2_tests/resources/mcap/wrong_rmw_test',
     'rosbag2-dashing/rosbag2_tests/resources/wrong_rmw_test',
-])
+]))
 def test_non_cdr_bags_are_refused(tmp_path, external, relative):
     with pytest.raises(EngineError, match="serialization format 'wrong_format' is not CDR"):
         api.run(PASS_THROUGH, [external / relative], tmp_path / 'out.mcap')
@@ -102,7 +101,7 @@ def test_turtlebot_values(turtlebot):
     for (_, a), (_, b) in zip(before['/odom'], after['/odom'], strict=True):
         assert b.pose.pose.position.x - a.pose.pose.position.x == pytest.approx(1.0, abs=1e-12)
         qa, qb = a.pose.pose.orientation, b.pose.pose.orientation
-        dyaw = quaternion_to_rpy(qb.x, qb.y, qb.z, qb.w)[2] - quaternion_to_rpy(qa.x, qa.y, qa.z, qa.w)[2]
+        dyaw = rpy(qb)[2] - rpy(qa)[2]
         assert math.remainder(dyaw, 2 * math.pi) == pytest.approx(math.radians(10), abs=1e-9)
     for (t, a), (_, b) in zip(before['/scan'], after['/scan'], strict=True):
         angles = np.degrees(a.angle_min + np.arange(len(a.ranges)) * np.float64(a.angle_increment))

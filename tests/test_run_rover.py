@@ -8,21 +8,20 @@ import shutil
 
 import numpy as np
 import pytest
-from helpers import FIXTURES, NS, counts, decoded, raw_messages, sha256
+from helpers import FIXTURES, NS, counts, decoded, raw_messages, rpy, sha256
 from mcap.reader import make_reader
 
 from bagfault import api
 from bagfault.demo import synthetic
-from bagfault.faults.rotation import quaternion_to_rpy
 
 START = synthetic.DEFAULT_START
 
 
 @pytest.fixture(scope='module')
 def multi(tmp_path_factory, request):
-    anchors = request.getfixturevalue('anchors')
+    scenarios = request.getfixturevalue('scenarios')
     out = tmp_path_factory.mktemp('multi') / 'out.mcap'
-    result = api.run(anchors / 'multi_injector_faults.yaml', [FIXTURES / 'rover_20s.mcap'], out, seed=3)
+    result = api.run(scenarios / 'rover_multi.yaml', [FIXTURES / 'rover_20s.mcap'], out, seed=3)
     return result, out
 
 
@@ -49,8 +48,8 @@ def test_odom_bias_exactly_inside_its_window(multi):
         if not inside:
             assert dx == 0.0 and dy == 0.0
         q_in, q_out = raw.pose.pose.orientation, mutated.pose.pose.orientation
-        yaw_in = quaternion_to_rpy(q_in.x, q_in.y, q_in.z, q_in.w)[2]
-        yaw_out = quaternion_to_rpy(q_out.x, q_out.y, q_out.z, q_out.w)[2]
+        yaw_in = rpy(q_in)[2]
+        yaw_out = rpy(q_out)[2]
         dyaw = math.remainder(yaw_out - yaw_in, 2 * math.pi)
         assert dyaw == pytest.approx(math.radians(10.0) if inside else 0.0, abs=1e-9)
 
@@ -122,7 +121,7 @@ def test_scan_noise_and_motor_bias_windows(multi):
         assert np.allclose(mutated.velocity - raw.velocity, expected, atol=1e-12)
 
 
-def test_output_file_conventions(multi, anchors):
+def test_output_file_conventions(multi, scenarios):
     result, out = multi
     with out.open('rb') as stream:
         reader = make_reader(stream)
@@ -137,13 +136,13 @@ def test_output_file_conventions(multi, anchors):
     assert meta.metadata['seed'] == '3'
     inputs = json.loads(meta.metadata['inputs'])
     assert inputs[0]['files'][0]['sha256'] == sha256(FIXTURES / 'rover_20s.mcap')
-    assert attachment.name == 'multi_injector_faults.yaml'
-    assert attachment.data == (anchors / 'multi_injector_faults.yaml').read_bytes()
+    assert attachment.name == 'rover_multi.yaml'
+    assert attachment.data == (scenarios / 'rover_multi.yaml').read_bytes()
     assert any('live mode only' in note for note in result.notes)
 
 
-def test_same_run_twice_is_byte_identical(tmp_path, anchors, rover_bag):
-    scenario = anchors / 'multi_injector_faults.yaml'
+def test_same_run_twice_is_byte_identical(tmp_path, scenarios, rover_bag):
+    scenario = scenarios / 'rover_multi.yaml'
     api.run(scenario, [rover_bag], tmp_path / 'a.mcap', seed=11, activate=['odom_position_noise'])
     api.run(scenario, [rover_bag], tmp_path / 'b.mcap', seed=11, activate=['odom_position_noise'])
     api.run(scenario, [rover_bag], tmp_path / 'c.mcap', seed=12, activate=['odom_position_noise'])
@@ -151,8 +150,8 @@ def test_same_run_twice_is_byte_identical(tmp_path, anchors, rover_bag):
     assert sha256(tmp_path / 'a.mcap') != sha256(tmp_path / 'c.mcap')
 
 
-def test_unrelated_fault_does_not_change_noise(tmp_path, anchors, rover_bag):
-    scenario = anchors / 'multi_injector_faults.yaml'
+def test_unrelated_fault_does_not_change_noise(tmp_path, scenarios, rover_bag):
+    scenario = scenarios / 'rover_multi.yaml'
     api.run(scenario, [rover_bag], tmp_path / 'a.mcap', seed=5)
     api.run(scenario, [rover_bag], tmp_path / 'b.mcap', seed=5, activate=['imu_linear_acceleration_noise'])
     a, b = raw_messages(tmp_path / 'a.mcap'), raw_messages(tmp_path / 'b.mcap')
@@ -160,9 +159,9 @@ def test_unrelated_fault_does_not_change_noise(tmp_path, anchors, rover_bag):
     assert a['/sensors/imu'] != b['/sensors/imu']
 
 
-def test_activate_switches_a_manual_fault_for_a_window(tmp_path, anchors, rover_bag):
+def test_activate_switches_a_manual_fault_for_a_window(tmp_path, scenarios, rover_bag):
     out = tmp_path / 'out.mcap'
-    result = api.run(anchors / 'multi_injector_faults.yaml', [rover_bag], out, activate=['odom_position_noise@2+3'])
+    result = api.run(scenarios / 'rover_multi.yaml', [rover_bag], out, activate=['odom_position_noise@2+3'])
     assert [(e.fault_id, e.state, e.source, seconds(e.time)) for e in result.stats.events
             if e.fault_id == 'odom_position_noise'] == [
         ('odom_position_noise', 'active', 'cli', 2.0), ('odom_position_noise', 'inactive', 'cli', 5.0)]
@@ -171,26 +170,26 @@ def test_activate_switches_a_manual_fault_for_a_window(tmp_path, anchors, rover_
         assert noisy == (2.0 <= seconds(time) < 5.0)
 
 
-def test_start_offset_moves_time_zero(tmp_path, anchors, rover_bag):
-    result = api.run(anchors / 'multi_injector_faults.yaml', [rover_bag], tmp_path / 'o.mcap', start_offset=1.5)
+def test_start_offset_moves_time_zero(tmp_path, scenarios, rover_bag):
+    result = api.run(scenarios / 'rover_multi.yaml', [rover_bag], tmp_path / 'o.mcap', start_offset=1.5)
     first = result.stats.events[0]
     assert (first.fault_id, seconds(first.time)) == ('odom_covariance_inflation', 4.5)
 
 
 @pytest.mark.parametrize('compression', ['none', 'lz4'])
-def test_compression_choice(tmp_path, anchors, rover_bag, compression):
+def test_compression_choice(tmp_path, scenarios, rover_bag, compression):
     out = tmp_path / 'o.mcap'
-    api.run(anchors / 'multi_injector_faults.yaml', [rover_bag], out, compression=compression)
+    api.run(scenarios / 'rover_multi.yaml', [rover_bag], out, compression=compression)
     with out.open('rb') as stream:
         summary = make_reader(stream).get_summary()
     assert {c.compression for c in summary.chunk_indexes} == {'' if compression == 'none' else 'lz4'}
     assert counts(out)['/odom'] == 1000
 
 
-def test_several_inputs_merge_in_time_order(tmp_path, anchors, rover_bag, rover_sqlite):
+def test_several_inputs_merge_in_time_order(tmp_path, scenarios, rover_bag, rover_sqlite):
     shifted = tmp_path / 'late.mcap'
     synthetic.write_mcap(shifted, synthetic.messages(synthetic.ROVER_STREAMS[:1], 2.0, START + NS // 100))
-    scenario = anchors / 'odom_faults.yaml'
+    scenario = scenarios / 'odom.yaml'
     out = tmp_path / 'o.mcap'
     shutil.copy(rover_bag, tmp_path / 'rover.mcap')
     api.run(scenario, [tmp_path / 'rover.mcap', shifted], out)

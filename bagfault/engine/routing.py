@@ -62,15 +62,36 @@ def _schema(channel: Channel, catalog: TypeCatalog) -> tuple[str, str]:
     return catalog.schema(channel.msgtype)
 
 
-def build_routing(
-    inputs: InputSet,
-    scenario: Scenario,
-    catalog: TypeCatalog,
-    sink: Sink,
-) -> Routing:
+@dataclass(frozen=True)
+class _Wired:
+    """A topic injector whose input topic is in the bag."""
+
+    spec: InjectorSpec
+    cls: type[Injector]
+    channels: list[Channel]
+
+    @property
+    def input_topic(self) -> str:
+        assert self.spec.input_topic is not None  # topic injectors have both endpoints (validated)
+        return self.spec.input_topic
+
+    @property
+    def output_topic(self) -> str:
+        assert self.spec.output_topic is not None
+        return self.spec.output_topic
+
+
+def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink) -> Routing:
     """Check the scenario against the bag and register every output channel."""
+    _check_encodings(inputs)
     routing = Routing()
-    scenario_name = scenario.name
+    wired = _wire(inputs, scenario, routing.notes)
+    _check_no_chains(scenario, wired)
+    _register(inputs, scenario, catalog, sink, wired, routing)
+    return routing
+
+
+def _check_encodings(inputs: InputSet) -> None:
     for channel in inputs.channels:
         if channel.message_encoding != 'cdr' and channel.schema_encoding in ROS_SCHEMA_ENCODINGS:
             raise EngineError(
@@ -78,54 +99,62 @@ def build_routing(
                 'bagfault reads ROS 2 CDR data only'
             )
 
+
+def _wire(inputs: InputSet, scenario: Scenario, notes: list[str]) -> list[_Wired]:
+    """The topic injectors that can run on this bag; the others are noted (as the anchor runs the rest)."""
     topics = inputs.topics()
-    injectors = []
+    wired = []
     for spec in scenario.injectors:
         cls = get_injector_type(spec.type)
         assert cls is not None
         if not issubclass(cls, Injector):
-            routing.notes.append(
-                f'injector {spec.id!r} ({spec.type}) proxies a service: live mode only, '
-                'its faults have no effect offline'
-            )
+            notes.append(f'injector {spec.id!r} ({spec.type}) proxies a service: live mode only, '
+                         'its faults have no effect offline')
             continue
-        assert spec.input_topic is not None and spec.output_topic is not None
+        assert spec.input_topic is not None
         found = topics.get(spec.input_topic)
         if not found:
-            raise EngineError(
-                f'{scenario_name}: injector {spec.id!r}: input topic {spec.input_topic} is not in the bag; '
-                + _topics_listing(inputs)
-            )
-        if cls.message_types:
-            wrong = [c for c in found if c.msgtype not in cls.message_types]
-            if wrong:
-                raise EngineError(
-                    f'{scenario_name}: injector {spec.id!r} ({spec.type}) needs {" or ".join(cls.message_types)} '
-                    f'but topic {spec.input_topic} in the bag carries {wrong[0].msgtype or "an unknown type"}'
-                )
-        expected = spec.options.get('message_type')
-        if expected and any(c.msgtype != expected for c in found):
-            actual = next(c.msgtype for c in found if c.msgtype != expected)
-            raise EngineError(
-                f'{scenario_name}: injector {spec.id!r} expects message_type {expected} '
-                f'but topic {spec.input_topic} in the bag carries {actual or "an unknown type"}'
-            )
-        injectors.append((spec, cls, found))
+            raise EngineError(f'{scenario.name}: injector {spec.id!r}: input topic {spec.input_topic} is not in '
+                              'the bag; ' + _topics_listing(inputs))
+        _check_types(scenario, spec, cls, found)
+        wired.append(_Wired(spec, cls, found))
+    return wired
 
-    in_place = {spec.input_topic for spec, _, _ in injectors if spec.input_topic == spec.output_topic}
-    written = {spec.output_topic for spec, _, _ in injectors}
-    read = {spec.input_topic for spec, _, _ in injectors}
-    for spec, _, _ in injectors:
-        if spec.output_topic in read and spec.output_topic != spec.input_topic:
+
+def _check_types(scenario: Scenario, spec: InjectorSpec, cls: type[Injector], found: list[Channel]) -> None:
+    if cls.message_types:
+        wrong = [c for c in found if c.msgtype not in cls.message_types]
+        if wrong:
             raise EngineError(
-                f'{scenario_name}: injector {spec.id!r} writes {spec.output_topic}, which another injector reads; '
+                f'{scenario.name}: injector {spec.id!r} ({spec.type}) needs {" or ".join(cls.message_types)} '
+                f'but topic {spec.input_topic} in the bag carries {wrong[0].msgtype or "an unknown type"}'
+            )
+    expected = spec.options.get('message_type')
+    if expected and any(c.msgtype != expected for c in found):
+        actual = next(c.msgtype for c in found if c.msgtype != expected)
+        raise EngineError(
+            f'{scenario.name}: injector {spec.id!r} expects message_type {expected} '
+            f'but topic {spec.input_topic} in the bag carries {actual or "an unknown type"}'
+        )
+
+
+def _check_no_chains(scenario: Scenario, wired: list[_Wired]) -> None:
+    read = {w.input_topic for w in wired}
+    for w in wired:
+        if w.output_topic in read and w.output_topic != w.input_topic:
+            raise EngineError(
+                f'{scenario.name}: injector {w.spec.id!r} writes {w.output_topic}, which another injector reads; '
                 'chained injectors are not supported offline'
             )
 
-    index = {id(c): i for i, c in enumerate(inputs.channels)}
+
+def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink, wired: list[_Wired],
+              routing: Routing) -> None:
+    """Output channels in input order: copies of untouched topics, then each injector output of the topic."""
+    in_place = {w.input_topic for w in wired if w.input_topic == w.output_topic}
+    written = {w.output_topic for w in wired}
     rank = COPY_RANK
-    for channel in inputs.channels:
-        number = index[id(channel)]
+    for number, channel in enumerate(inputs.channels):
         if channel.topic in written and channel.topic not in in_place:
             routing.replaced.append(channel.topic)
             routing.notes.append(f'recorded topic {channel.topic} is replaced by the injector that writes it')
@@ -135,27 +164,18 @@ def build_routing(
                                           channel.message_encoding, dict(channel.metadata))
             routing.copies[number] = OutputChannel(channel_id, channel.topic, channel.msgtype)
             routing.schemas[channel.topic] = (channel.msgtype, encoding, text)
-        for spec, _, found in injectors:
-            if channel not in found:
+        for w in wired:
+            if not any(c is channel for c in w.channels):
                 continue
-            output_topic = spec.output_topic
-            assert output_topic is not None  # topic injectors have both endpoints (validated)
-            faults = scenario.faults_of(spec.id)
-            injector = build_injector(spec, channel.msgtype, faults, catalog, scenario_name)
+            faults = scenario.faults_of(w.spec.id)
+            injector = build_injector(w.spec, channel.msgtype, faults, catalog, scenario.name)
             encoding, text = _schema(channel, catalog)
-            channel_id = sink.add_channel(output_topic, channel.msgtype, encoding, text,
+            channel_id = sink.add_channel(w.output_topic, channel.msgtype, encoding, text,
                                           channel.message_encoding, dict(channel.metadata))
-            routing.schemas[output_topic] = (channel.msgtype, encoding, text)
+            routing.schemas[w.output_topic] = (channel.msgtype, encoding, text)
             rank += 1
-            runtime = InjectorRuntime(
-                spec=spec,
-                injector=injector,
-                faults=faults,
-                channel=OutputChannel(channel_id, output_topic, channel.msgtype),
-                rank=rank,
-            )
-            routing.routes.setdefault(number, []).append(runtime)
-    return routing
+            output = OutputChannel(channel_id, w.output_topic, channel.msgtype)
+            routing.routes.setdefault(number, []).append(InjectorRuntime(w.spec, injector, faults, output, rank))
 
 
 def build_injector(spec: InjectorSpec, msgtype: str, faults: list[FaultSpec], catalog: TypeCatalog,

@@ -69,31 +69,7 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem) -> 
         problem((*path, 'default_window_ms'), f'{window!r} must be a positive integer (ms)')
     else:
         config.default_window_ms = window
-    patterns: dict[str, list[re.Pattern[str]]] = {}
-    for pattern_id, pattern in (node.get('patterns') or {}).items():
-        where = (*path, 'patterns', pattern_id)
-        if not isinstance(pattern, dict) or 'codes' not in pattern:
-            problem(where, 'must be {codes: [...]}')
-            continue
-        patterns[str(pattern_id)] = _codes(pattern['codes'], (*where, 'codes'), problem)
-
-    def refs(items: object, where: tuple[Any, ...]) -> list[re.Pattern[str]]:
-        out: list[re.Pattern[str]] = []
-        if not isinstance(items, list) or not items:
-            problem(where, 'must be a non-empty list of {pattern: ID} or {codes: [...]}')
-            return out
-        for number, item in enumerate(items):
-            if isinstance(item, dict) and 'pattern' in item:
-                if item['pattern'] not in patterns:
-                    problem((*where, number, 'pattern'), f"unknown pattern {item['pattern']!r}")
-                else:
-                    out += patterns[item['pattern']]
-            elif isinstance(item, dict) and 'codes' in item:
-                out += _codes(item['codes'], (*where, number, 'codes'), problem)
-            else:
-                problem((*where, number), 'must be {pattern: ID} or {codes: [...]}')
-        return out
-
+    patterns = _patterns(node.get('patterns') or {}, (*path, 'patterns'), problem)
     seen: set[str] = set()
     for number, item in enumerate(node.get('rules') or []):
         where = (*path, 'rules', number)
@@ -103,39 +79,86 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem) -> 
         if item['id'] in seen:
             problem((*where, 'id'), f"duplicate rule id {item['id']!r}")
         seen.add(item['id'])
-        mode = item.get('mode', 'hierarchical')
-        if mode not in ('hierarchical', 'auto_cluster'):
-            problem((*where, 'mode'), f"{mode!r} is not 'hierarchical' or 'auto_cluster'")
-            continue
-        window_ms = item.get('window_ms', config.default_window_ms)
-        if isinstance(window_ms, bool) or not isinstance(window_ms, int) or window_ms <= 0:
-            problem((*where, 'window_ms'), f'{window_ms!r} must be a positive integer (ms)')
-            window_ms = config.default_window_ms
-        rule = Rule(item['id'], str(item.get('name', item['id'])), mode, window_ms)
-        if mode == 'hierarchical':
-            root = item.get('root_cause')
-            if not isinstance(root, dict) or 'codes' not in root:
-                problem((*where, 'root_cause'), 'must be {codes: [...]}')
-            else:
-                rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
-            rule.symptom_codes = refs(item.get('symptoms'), (*where, 'symptoms'))
-            rule.mute_symptoms = bool(item.get('mute_symptoms', True))
-            rule.auto_clear_with_root = bool(item.get('auto_clear_with_root', True))
-        else:
-            rule.match_codes = refs(item.get('match'), (*where, 'match'))
-            min_count = item.get('min_count', 3)
-            if isinstance(min_count, bool) or not isinstance(min_count, int) or min_count <= 0:
-                problem((*where, 'min_count'), f'{min_count!r} must be a positive integer')
-            else:
-                rule.min_count = min_count
-            rule.show_as_single = bool(item.get('show_as_single', True))
-            representative = item.get('representative', 'highest_severity')
-            if representative not in REPRESENTATIVES:
-                problem((*where, 'representative'), f'{representative!r} is not one of {", ".join(REPRESENTATIVES)}')
-            else:
-                rule.representative = representative
-        config.rules.append(rule)
+        rule = _rule(item, where, config.default_window_ms, _References(patterns, problem), problem)
+        if rule is not None:
+            config.rules.append(rule)
     return config
+
+
+def _patterns(node: object, path: tuple[Any, ...], problem: Problem) -> dict[str, list[re.Pattern[str]]]:
+    """Named code patterns that rules refer to."""
+    patterns: dict[str, list[re.Pattern[str]]] = {}
+    if not isinstance(node, dict):
+        problem(path, 'must be a mapping of pattern ids to {codes: [...]}')
+        return patterns
+    for pattern_id, pattern in node.items():
+        where = (*path, pattern_id)
+        if not isinstance(pattern, dict) or 'codes' not in pattern:
+            problem(where, 'must be {codes: [...]}')
+            continue
+        patterns[str(pattern_id)] = _codes(pattern['codes'], (*where, 'codes'), problem)
+    return patterns
+
+
+@dataclass
+class _References:
+    """Resolves a rule's `symptoms` / `match` list of {pattern: ID} or {codes: [...]}."""
+
+    patterns: dict[str, list[re.Pattern[str]]]
+    problem: Problem
+
+    def __call__(self, items: object, where: tuple[Any, ...]) -> list[re.Pattern[str]]:
+        out: list[re.Pattern[str]] = []
+        if not isinstance(items, list) or not items:
+            self.problem(where, 'must be a non-empty list of {pattern: ID} or {codes: [...]}')
+            return out
+        for number, item in enumerate(items):
+            if isinstance(item, dict) and 'pattern' in item:
+                if item['pattern'] not in self.patterns:
+                    self.problem((*where, number, 'pattern'), f"unknown pattern {item['pattern']!r}")
+                else:
+                    out += self.patterns[item['pattern']]
+            elif isinstance(item, dict) and 'codes' in item:
+                out += _codes(item['codes'], (*where, number, 'codes'), self.problem)
+            else:
+                self.problem((*where, number), 'must be {pattern: ID} or {codes: [...]}')
+        return out
+
+
+def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, refs: _References,
+          problem: Problem) -> Rule | None:
+    mode = item.get('mode', 'hierarchical')
+    if mode not in ('hierarchical', 'auto_cluster'):
+        problem((*where, 'mode'), f"{mode!r} is not 'hierarchical' or 'auto_cluster'")
+        return None
+    window_ms = item.get('window_ms', default_window_ms)
+    if isinstance(window_ms, bool) or not isinstance(window_ms, int) or window_ms <= 0:
+        problem((*where, 'window_ms'), f'{window_ms!r} must be a positive integer (ms)')
+        window_ms = default_window_ms
+    rule = Rule(item['id'], str(item.get('name', item['id'])), mode, window_ms)
+    if mode == 'hierarchical':
+        root = item.get('root_cause')
+        if not isinstance(root, dict) or 'codes' not in root:
+            problem((*where, 'root_cause'), 'must be {codes: [...]}')
+        else:
+            rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
+        rule.symptom_codes = refs(item.get('symptoms'), (*where, 'symptoms'))
+        rule.mute_symptoms = bool(item.get('mute_symptoms', True))
+        rule.auto_clear_with_root = bool(item.get('auto_clear_with_root', True))
+        return rule
+    rule.match_codes = refs(item.get('match'), (*where, 'match'))
+    min_count = item.get('min_count', 3)
+    if isinstance(min_count, bool) or not isinstance(min_count, int) or min_count <= 0:
+        problem((*where, 'min_count'), f'{min_count!r} must be a positive integer')
+    else:
+        rule.min_count = min_count
+    rule.show_as_single = bool(item.get('show_as_single', True))
+    representative = item.get('representative', 'highest_severity')
+    if representative not in REPRESENTATIVES:
+        problem((*where, 'representative'), f'{representative!r} is not one of {", ".join(REPRESENTATIVES)}')
+    else:
+        rule.representative = representative
+    return rule
 
 
 @dataclass

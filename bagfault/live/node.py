@@ -11,97 +11,38 @@ parameters; `~/reload_scenario` (std_srvs/srv/Trigger) reloads the file;
 
 from __future__ import annotations
 
-import heapq
-import itertools
-import threading
 import time
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from bagfault import __version__
-from bagfault.errors import FieldValueError, LiveError, ReloadError, ScenarioError
-from bagfault.injectors.base import Injector
-from bagfault.injectors.registry import get_injector_type
+from bagfault.errors import ReloadError, ScenarioError
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
+from bagfault.live.delay import DelayLine
 from bagfault.live.diagnostics import diagnostic_array
-from bagfault.live.params import fault_parameters
+from bagfault.live.graph import DIAGNOSTICS_TYPE, resolve_types, watched_topics
+from bagfault.live.params import FaultParameters
 from bagfault.live.ros import interface_class, qos
 from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import TriggerProxy
 from bagfault.scenario import load_scenario
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
 
     from bagfault.engine.stop import StopFlag
     from bagfault.events import FaultEvent
     from bagfault.scenario.model import Scenario
 
 NODE_NAME = 'bagfault'
-OBSERVE_WAIT = 5.0  # seconds to wait for publishers of watched topics whose type is not known
-DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
-OWN_PREFIXES = ('/fault_injection/', '/fault_manager/')
 TICK = 0.01  # scheduler resolution in live mode, seconds
 DIAGNOSTICS_PERIOD = 1.0
 MALFORMED_LOG_EVERY = 100
-
-
-class DelayLine:
-    """Holds delayed messages and publishes each when the ROS clock reaches its due time."""
-
-    def __init__(self, clock: Callable[[], int], publish: Callable[[LiveTopic, bytes], None]) -> None:
-        self.clock = clock
-        self.publish = publish
-        self._heap: list[tuple[int, int, LiveTopic, bytes]] = []
-        self._counter = itertools.count()
-        self._condition = threading.Condition()
-        self._stopped = False
-        self._thread = threading.Thread(target=self._run, name='bagfault-delay', daemon=True)
-        self._thread.start()
-
-    def put(self, due: int, topic: LiveTopic, data: bytes) -> None:
-        """Publish `data` on the topic's output at ROS time `due` (ns)."""
-        with self._condition:
-            heapq.heappush(self._heap, (due, next(self._counter), topic, data))
-            self._condition.notify()
-
-    def _run(self) -> None:
-        while True:
-            with self._condition:
-                while not self._heap and not self._stopped:
-                    self._condition.wait()
-                if self._stopped:
-                    return
-                wait = (self._heap[0][0] - self.clock()) / 1e9
-                if wait > 0:
-                    self._condition.wait(min(wait, 0.05))  # re-read the clock: sim time may jump
-                    continue
-                _, _, topic, data = heapq.heappop(self._heap)
-            self.publish(topic, data)
-
-    def stop(self) -> int:
-        """Stop; return how many delayed messages were still waiting (not sent)."""
-        with self._condition:
-            self._stopped = True
-            left = len(self._heap)
-            self._heap.clear()
-            self._condition.notify()
-        self._thread.join(timeout=2.0)
-        return left
-
-
-def _message_type(spec: Any) -> str | None:
-    cls = get_injector_type(spec.type)
-    if cls is not None and issubclass(cls, Injector) and len(cls.message_types) == 1:
-        return cls.message_types[0]
-    return spec.options.get('message_type') or None
 
 
 class ProxyNode:
@@ -130,8 +71,7 @@ class ProxyNode:
         self.publishers: dict[int, Any] = {}
         self.subscriptions: list[Any] = []
         self.services: list[TriggerProxy] = []
-        self.parameters: dict[str, Any] = {}
-        self._syncing = False
+        self.parameters: FaultParameters | None = None
         self._warned: set[tuple[str, str]] = set()
         self._last_diagnostics = 0.0
         self.unsent = 0
@@ -142,77 +82,13 @@ class ProxyNode:
         return self.node.get_clock().now().nanoseconds
 
     # -- set-up ---------------------------------------------------------------------------------
-    def resolve_types(self, executor: Any) -> dict[str, str]:
-        """Message type per topic injector: from its injector type, `message_type`, or the graph."""
-        types: dict[str, str] = {}
-        waiting: dict[str, str] = {}
-        for spec in self.scenario.injectors:
-            if spec.is_service:
-                continue
-            if spec.input_topic == spec.output_topic:
-                raise LiveError(f'{self.scenario.name}: injector {spec.id!r} reads and writes {spec.input_topic}; '
-                                'a live proxy needs distinct input_topic and output_topic (/x_raw -> /x)')
-            known = _message_type(spec)
-            if known:
-                types[spec.id] = known
-            else:
-                assert spec.input_topic is not None
-                waiting[spec.id] = spec.input_topic
-        if waiting:
-            self.logger.info('waiting for publishers to learn the type of ' + ', '.join(sorted(waiting.values()))
-                             + " (or set the injector's message_type)")
-        while waiting and not self.stop.is_set():
-            graph = dict(self.node.get_topic_names_and_types())
-            for injector_id, topic in list(waiting.items()):
-                found = graph.get(topic)
-                if found:
-                    if len(found) > 1:
-                        raise LiveError(f'topic {topic} carries several types ({", ".join(found)}); '
-                                        f'set message_type on injector {injector_id!r}')
-                    types[injector_id] = found[0]
-                    del waiting[injector_id]
-            executor.spin_once(timeout_sec=0.1)
-        return types
-
-    def watched_topics(self, executor: Any) -> dict[str, str]:
-        """Topics the oracles need besides the proxy's own: FM diagnostics and conditions, asserted topics."""
-        own = {t for spec in self.scenario.injectors for t in (spec.input_topic, spec.output_topic) if t}
-        wanted: dict[str, str | None] = {}
-        config = self.scenario.fault_manager_config
-        if config is not None:
-            if config.diagnostics_topic:
-                wanted[config.diagnostics_topic] = DIAGNOSTICS_TYPE
-            for condition in config.conditions:
-                wanted.setdefault(condition.topic, None)
-        for assertion in self.scenario.assertions:
-            for key in ('topic', 'input_topic'):
-                name = assertion.params.get(key)
-                if isinstance(name, str) and name:
-                    known = assertion.params.get('message_type') if key == 'topic' else None
-                    wanted[name] = wanted.get(name) or known
-        wanted = {t: m for t, m in wanted.items() if t not in own and not t.startswith(OWN_PREFIXES)}
-        deadline = time.monotonic() + OBSERVE_WAIT
-        while any(m is None for m in wanted.values()) and time.monotonic() < deadline and not self.stop.is_set():
-            graph = dict(self.node.get_topic_names_and_types())
-            for name in [t for t, m in wanted.items() if m is None]:
-                if graph.get(name):
-                    wanted[name] = graph[name][0]
-            executor.spin_once(timeout_sec=0.1)
-        watched = {}
-        for name, msgtype in wanted.items():
-            if msgtype is None:
-                self.logger.warning(f'{name}: no publisher within {OBSERVE_WAIT:g} s, type unknown; not watched')
-            else:
-                watched[name] = msgtype
-        return watched
-
     def setup(self, executor: Any) -> None:
         """Types, session, recording, endpoints, parameters, services, timers."""
-        types = self.resolve_types(executor)
+        types = resolve_types(self.node, self.scenario, executor, self.stop)
         if self.stop.is_set():
             return
         classes = {injector_id: interface_class(msgtype) for injector_id, msgtype in types.items()}
-        watched = self.watched_topics(executor)
+        watched = watched_topics(self.node, self.scenario, executor, self.stop)
         watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
@@ -246,9 +122,7 @@ class ProxyNode:
             if spec.is_service:
                 self.services.append(TriggerProxy(self.node, spec, self.session))
                 self.logger.info(f'proxy service {spec.proxy_service} -> {spec.target_service}')
-        self._declare_parameters()
-        self.node.add_on_set_parameters_callback(self._check_parameters)
-        self.node.add_post_set_parameters_callback(self._apply_parameters)
+        self.parameters = FaultParameters(self.node, self.session, self._publish)
         trigger = interface_class('std_srvs/srv/Trigger')
         self.node.create_service(trigger, '~/reload_scenario', self._reload)
         diagnostics = interface_class('diagnostic_msgs/msg/DiagnosticArray')
@@ -331,81 +205,10 @@ class ProxyNode:
     def _on_events(self, events: list[FaultEvent]) -> None:
         for event in events:
             self.logger.info(f'fault {event.fault_id}: {event.state} ({event.source}) {event.details}')
-        self._sync_parameters()
+        if self.parameters is not None:
+            self.parameters.sync()
         if self.session is not None and self.session.started:
             self._publish_diagnostics()
-
-    # -- parameters ------------------------------------------------------------------------------
-    def _declare_parameters(self) -> None:
-        declared, notes = fault_parameters(self.scenario if self.session is None else self.session.scenario)
-        for note in notes:
-            self.logger.warning(note)
-        wanted = {p.name: p for p in declared}
-        for name in [n for n in self.parameters if n not in wanted]:
-            self.node.undeclare_parameter(name)
-            del self.parameters[name]
-        for name, parameter in wanted.items():
-            if name not in self.parameters:
-                self._syncing = True
-                try:
-                    self.node.declare_parameter(name, parameter.value, parameter.descriptor)
-                finally:
-                    self._syncing = False
-            self.parameters[name] = parameter
-
-    def _sync_parameters(self) -> None:
-        """Parameters show the session's state (after scheduled changes, events, reloads)."""
-        if self.session is None or self._syncing:
-            return
-        updates = []
-        for state in self.session.faults():
-            name = f'{state.fault_id}.active'
-            if name in self.parameters and self.node.get_parameter(name).value != state.active:
-                updates.append(Parameter(name, Parameter.Type.BOOL, state.active))
-            for key, value in state.config.items():
-                name = f'{state.fault_id}.{key}'
-                declared = self.parameters.get(name)
-                if declared is None or declared.descriptor.read_only:
-                    continue
-                if self.node.get_parameter(name).value != value:
-                    updates.append(Parameter(name, value=value))
-        if updates:
-            self._syncing = True
-            try:
-                self.node.set_parameters(updates)
-            finally:
-                self._syncing = False
-
-    def _check_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        if self._syncing or self.session is None:
-            return SetParametersResult(successful=True)
-        for parameter in parameters:
-            declared = self.parameters.get(parameter.name)
-            if declared is None or declared.key is None:
-                continue
-            try:
-                self.session.check_config(declared.fault_id, declared.key, parameter.value)
-            except FieldValueError as exc:
-                return SetParametersResult(successful=False, reason=f'{parameter.name}: {exc}')
-        return SetParametersResult(successful=True)
-
-    def _apply_parameters(self, parameters: list[Parameter]) -> None:
-        if self._syncing or self.session is None:
-            return
-        self._syncing = True
-        try:
-            for parameter in parameters:
-                declared = self.parameters.get(parameter.name)
-                if declared is None:
-                    continue
-                if declared.key is None:
-                    self.session.set_active(declared.fault_id, bool(parameter.value), 'manual')
-                else:
-                    for topic, message in self.session.set_config(declared.fault_id, declared.key, parameter.value):
-                        self._publish(topic, message.data)
-        finally:
-            self._syncing = False
-        self._sync_parameters()
 
     # -- reload --------------------------------------------------------------------------------
     def _reload(self, request: Any, response: Any) -> Any:
@@ -424,8 +227,9 @@ class ProxyNode:
             response.success, response.message = True, f'reloaded {source.name}: {len(scenario.faults)} faults'
             for topic, message in held:
                 self._publish(topic, message.data)
-            self._declare_parameters()  # faults may have come or gone
-            self._sync_parameters()
+            assert self.parameters is not None
+            self.parameters.declare()  # faults may have come or gone
+            self.parameters.sync()
         if response.success:
             self.logger.info(response.message)
         else:

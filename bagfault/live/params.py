@@ -15,11 +15,22 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import yaml
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.parameter import Parameter
 
+from bagfault.errors import FieldValueError
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from bagfault.live.session import LiveSession, LiveTopic
     from bagfault.scenario.model import FaultSpec, Scenario
     from bagfault.schema import ConfigField
 
@@ -97,3 +108,91 @@ def fault_parameters(scenario: Scenario) -> tuple[list[FaultParameter], list[str
                                            _descriptor(name, schema)))
     return declared, notes
 
+
+class FaultParameters:
+    """The proxy's faults as ROS parameters: declared from the schema, checked, applied, kept in sync."""
+
+    def __init__(self, node: Any, session: LiveSession,
+                 publish: Callable[[LiveTopic, bytes | memoryview], None]) -> None:
+        self.node = node
+        self.session = session
+        self.publish = publish
+        self.parameters: dict[str, FaultParameter] = {}
+        self._syncing = False
+        self.declare()
+        node.add_on_set_parameters_callback(self.check)
+        node.add_post_set_parameters_callback(self.apply)
+
+    def declare(self) -> None:
+        """Declare the parameters of every fault of the current scenario; undeclare those of removed faults."""
+        declared, notes = fault_parameters(self.session.scenario)
+        for note in notes:
+            self.node.get_logger().warning(note)
+        wanted = {p.name: p for p in declared}
+        for name in [n for n in self.parameters if n not in wanted]:
+            self.node.undeclare_parameter(name)
+            del self.parameters[name]
+        for name, parameter in wanted.items():
+            if name not in self.parameters:
+                self._syncing = True
+                try:
+                    self.node.declare_parameter(name, parameter.value, parameter.descriptor)
+                finally:
+                    self._syncing = False
+            self.parameters[name] = parameter
+
+    def sync(self) -> None:
+        """Parameters show the session's state (after scheduled changes, events, reloads)."""
+        if self._syncing:
+            return
+        updates = []
+        for state in self.session.faults():
+            name = f'{state.fault_id}.active'
+            if name in self.parameters and self.node.get_parameter(name).value != state.active:
+                updates.append(Parameter(name, Parameter.Type.BOOL, state.active))
+            for key, value in state.config.items():
+                name = f'{state.fault_id}.{key}'
+                declared = self.parameters.get(name)
+                if declared is None or declared.descriptor.read_only:
+                    continue
+                if self.node.get_parameter(name).value != value:
+                    updates.append(Parameter(name, value=value))
+        if updates:
+            self._syncing = True
+            try:
+                self.node.set_parameters(updates)
+            finally:
+                self._syncing = False
+
+    def check(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Refuse values the schema refuses, with its reason."""
+        if self._syncing:
+            return SetParametersResult(successful=True)
+        for parameter in parameters:
+            declared = self.parameters.get(parameter.name)
+            if declared is None or declared.key is None:
+                continue
+            try:
+                self.session.check_config(declared.fault_id, declared.key, parameter.value)
+            except FieldValueError as exc:
+                return SetParametersResult(successful=False, reason=f'{parameter.name}: {exc}')
+        return SetParametersResult(successful=True)
+
+    def apply(self, parameters: list[Parameter]) -> None:
+        """Switch faults and change config values now."""
+        if self._syncing:
+            return
+        self._syncing = True
+        try:
+            for parameter in parameters:
+                declared = self.parameters.get(parameter.name)
+                if declared is None:
+                    continue
+                if declared.key is None:
+                    self.session.set_active(declared.fault_id, bool(parameter.value), 'manual')
+                else:
+                    for topic, message in self.session.set_config(declared.fault_id, declared.key, parameter.value):
+                        self.publish(topic, message.data)
+        finally:
+            self._syncing = False
+        self.sync()

@@ -191,7 +191,7 @@ def test_field_injector_on_every_rosbags_rs_type(tmp_path, external):
             old, new = a, b
             for name in names:
                 old, new = getattr(old, name), getattr(new, name)
-            if isinstance(getattr(b, path.split('.')[0], None), bool) or (old in (True, False) and new in (True, False)):
-                continue
+            if isinstance(old, (bool, np.bool_)):
+                continue  # a bool field: adding 1 sets it, which the type allows
             saturated = old == new and old in (255, 65535, 2**32 - 1, 127, 32767, 2**31 - 1, 2**63 - 1, 2**64 - 1)
             assert new - old == pytest.approx(1.0, abs=1e-3) or saturated, (topic, msgtype, path, old, new)

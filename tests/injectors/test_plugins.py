@@ -31,18 +31,18 @@ def bagfault(plugin_path: Path, *args: str, cwd: Path | None = None) -> subproce
                           env=env, cwd=cwd, check=False)
 
 
-def test_without_the_plugin_the_type_is_unknown(anchors):
-    result = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'validate', str(anchors / 'battery_faults.yaml')],
+def test_without_the_plugin_the_type_is_unknown(scenarios):
+    result = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'validate', str(scenarios / 'battery.yaml')],
                             capture_output=True, text=True, check=False)
     assert result.returncode == 2
     assert "unknown injector type 'battery_state'" in result.stderr
 
 
-def test_installed_plugin_is_found_validated_and_runs(plugin_path, tmp_path, anchors):
+def test_installed_plugin_is_found_validated_and_runs(plugin_path, tmp_path, scenarios):
     listed = bagfault(plugin_path, 'schema', 'battery_state', '--json')
     assert listed.returncode == 0, listed.stderr
     assert '"voltage_bias"' in listed.stdout
-    checked = bagfault(plugin_path, 'validate', str(anchors / 'battery_faults.yaml'))
+    checked = bagfault(plugin_path, 'validate', str(scenarios / 'battery.yaml'))
     assert checked.returncode == 0, checked.stderr
     tests = subprocess.run(
         [sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider', str(EXAMPLE / 'tests')],

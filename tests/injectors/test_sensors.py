@@ -6,10 +6,9 @@ import math
 
 import numpy as np
 import pytest
-from helpers import NS, decoded, make_bag, raw_messages, run_inline
+from helpers import NS, decoded, image_pixels, make_bag, raw_messages, run_inline
 
 from bagfault.demo import synthetic
-from bagfault.injectors.image import pixels
 
 START = synthetic.DEFAULT_START
 
@@ -80,7 +79,7 @@ def test_image_faults(tmp_path, bag):
     rows = run_one(tmp_path, bag, 'image', '/camera', '{brightness_scale: 0.5, dead_pixel_fraction: 0.1}')
     dead_sets = set()
     for (time, a), (_, b) in rows:
-        pa, pb = pixels(a).astype(int), pixels(b).astype(int)
+        pa, pb = image_pixels(a).astype(int), image_pixels(b).astype(int)
         if inside(time):
             dead = (pb == 0).all(axis=2) & (pa > 1).any(axis=2)
             dead_sets.add(dead.tobytes())
@@ -98,14 +97,14 @@ def test_image_stuck_black_and_noise(tmp_path, bag):
     first = next(bytes(a.data) for (time, a), _ in rows if inside(time))
     assert frames and set(frames) == {first}
     rows = run_one(tmp_path, bag, 'image', '/camera', '{black_frame: true}')
-    assert all(not pixels(b).any() for (time, _), (_, b) in rows if inside(time))
+    assert all(not image_pixels(b).any() for (time, _), (_, b) in rows if inside(time))
     rows = run_one(tmp_path, bag, 'image', '/camera', '{noise_stddev: 5.0}')
     for (time, a), (_, b) in rows:
         if inside(time):
-            diff = pixels(b).astype(float) - pixels(a).astype(float)
-            middle = (pixels(a) > 20) & (pixels(a) < 235)
+            diff = image_pixels(b).astype(float) - image_pixels(a).astype(float)
+            middle = (image_pixels(a) > 20) & (image_pixels(a) < 235)
             assert np.std(diff[middle]) == pytest.approx(5.0, rel=0.1)
-            assert pixels(b).dtype == np.uint8
+            assert image_pixels(b).dtype == np.uint8
 
 
 @pytest.mark.parametrize('encoding', ['mono8', 'mono16', '32FC1', 'bgr8'])
@@ -130,7 +129,7 @@ def test_image_encodings(tmp_path, encoding):
     """, bag)
     [(_, result)] = decoded(out, ['/img_out'])['/img_out'][:1]
     limit = {'mono8': 255, 'bgr8': 255, 'mono16': 65535, '32FC1': np.inf}[encoding]
-    assert np.array_equal(pixels(result), np.minimum(values.astype(float) * 2.0, limit))
+    assert np.array_equal(image_pixels(result), np.minimum(values.astype(float) * 2.0, limit))
     assert result.step == 12 * channels * values.dtype.itemsize
 
 

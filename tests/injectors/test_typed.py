@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from helpers import rpy
 
 from bagfault.demo import synthetic
-from bagfault.faults.rotation import quaternion_to_rpy
 from bagfault.injectors.imu import ImuInjector
 from bagfault.injectors.joint_state import JointStateInjector
 from bagfault.injectors.odom import OdomInjector
@@ -22,7 +22,7 @@ ODOM, SCAN, JOINT, IMU, TF = (
 
 
 def yaw_of(q) -> float:
-    return quaternion_to_rpy(q.x, q.y, q.z, q.w)[2]
+    return rpy(q)[2]
 
 
 def test_odom_biases_add_up_and_yaw_bias_is_in_degrees(harness):
@@ -158,7 +158,7 @@ def test_tf_roll_pitch_yaw_bias_add_to_the_angles(harness):
                              'pitch_bias_deg': 5.0, 'yaw_bias_deg': 10.0})
     [(_, out)], _ = harness.run(TfInjector, TF, [msg], active)
     q = out.transforms[1].transform.rotation
-    assert quaternion_to_rpy(q.x, q.y, q.z, q.w) == pytest.approx(
+    assert rpy(q) == pytest.approx(
         (math.radians(5), math.radians(5), math.radians(10)), abs=1e-12)
 
 

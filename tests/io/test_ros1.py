@@ -6,7 +6,7 @@ import textwrap
 from collections import Counter
 
 import pytest
-from helpers import NS, counts, decoded
+from helpers import NS, counts, decoded, third_party
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
@@ -57,7 +57,7 @@ def test_robot_localization_bag_with_imu_and_odom_faults(tmp_path, external):
         assert b.pose.pose.position.x - a.pose.pose.position.x == pytest.approx(2.0, abs=1e-12)
 
 
-@pytest.mark.parametrize('name', ['example.bag', 'example-lz4.bag', 'example-bz2.bag'])
+@pytest.mark.parametrize('name', third_party(['example.bag', 'example-lz4.bag', 'example-bz2.bag']))
 def test_chunk_compressions_give_the_same_messages(external, name):
     source = open_source(external / 'rosbag.js/fixtures' / name)
     try:

@@ -7,7 +7,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from helpers import EXTERNAL
+from helpers import EXTERNAL, third_party
 from io_cases import ROSBAG2_DIRS, metadata_counts
 
 from bagfault.errors import InputError
@@ -27,7 +27,7 @@ def read_all(path: Path) -> tuple[Counter[str], list[int]]:
         source.close()
 
 
-@pytest.mark.parametrize('relative', ROSBAG2_DIRS)
+@pytest.mark.parametrize('relative', third_party(ROSBAG2_DIRS))
 def test_rosbag2_directory_counts_match_metadata(external, relative):
     path = external / relative
     topics, times = read_all(path)
@@ -35,11 +35,11 @@ def test_rosbag2_directory_counts_match_metadata(external, relative):
     assert times == sorted(times)
 
 
-@pytest.mark.parametrize(('relative', 'total'), [
+@pytest.mark.parametrize(('relative', 'total'), third_party([
     ('rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/file_compression', 775),
     ('rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/message_compression', 1127),
     ('rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/multiple_files', 52),
-])
+], arity=2))
 def test_directories_without_metadata_read_all_storage_files(external, relative, total):
     target = external / 'rosbag2-humble/rosbag2_tests/resources/reindex_test_bags/target_metadata' / Path(relative).name
     topics, times = read_all(external / relative)
@@ -48,7 +48,7 @@ def test_directories_without_metadata_read_all_storage_files(external, relative,
     assert times == sorted(times)
 
 
-@pytest.mark.parametrize(('relative', 'expected'), [
+@pytest.mark.parametrize(('relative', 'expected'), third_party([
     ('rosbag2/rosbag2_cpp/test/rosbag2_cpp/bags/only_topics.mcap', {'/parameter_events': 7}),
     ('rosbag2/rosbag2_cpp/test/rosbag2_cpp/bags/only_services.mcap', {'/add_two_ints/_service_event': 12}),
     ('rosbag2/rosbag2_cpp/test/rosbag2_cpp/bags/topics_and_services.db3',
@@ -57,7 +57,7 @@ def test_directories_without_metadata_read_all_storage_files(external, relative,
      {'/parameter_events': 7, '/add_two_ints/_service_event': 6}),
     ('mcap/testdata/db3/chatter.db3', {'/chatter': 7}),
     ('evo/test/data/nav2_turtlebot.mcap', {'/odom': 2639, '/tf': 5422, '/tf_static': 1, '/amcl_pose': 135}),
-])
+], arity=2))
 def test_bare_storage_files(external, relative, expected):
     topics, _ = read_all(external / relative)
     assert topics == Counter(expected)
@@ -91,7 +91,7 @@ def test_old_type_names_are_normalized(external):
 CONFORMANCE = sorted((EXTERNAL / 'mcap/tests/conformance/data').glob('*/*.mcap'))
 
 
-@pytest.mark.parametrize('path', CONFORMANCE, ids=lambda p: p.name)
+@pytest.mark.parametrize('path', third_party(CONFORMANCE), ids=lambda p: p.name)
 def test_mcap_conformance_inputs(path):
     expected = {'NoData': 0, 'OneMessage': 1, 'TenMessages': 10, 'OneAttachment': 0, 'OneMetadata': 0}
     topics, times = read_all(path)

@@ -8,7 +8,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from helpers import CARET, NS, SHARED
+from helpers import CARET, FIXTURES, NS, SHARED, need
 
 from bagfault import api
 from bagfault.cli import main
@@ -16,7 +16,7 @@ from bagfault.demo import synthetic
 from bagfault.errors import LatencyError
 from bagfault.latency.architecture import load_architecture
 from bagfault.latency.compute import TopicSeries, path_latency
-from bagfault.latency.report import measure
+from bagfault.latency.measure import measure
 from bagfault.scenario import ScenarioError, parse_scenario
 
 START = synthetic.DEFAULT_START
@@ -24,10 +24,14 @@ START = synthetic.DEFAULT_START
 
 @pytest.fixture(scope='session')
 def caret_file():
-    path = CARET / 'end_to_end_sample_architecture.yaml'
-    if not path.exists():
-        pytest.skip('caret sample absent')
-    return path
+    """bagfault's own CARET architecture file for the synthetic target pipeline."""
+    return FIXTURES / 'caret' / 'target_pipeline.yaml'
+
+
+@pytest.fixture(scope='session')
+def caret_sample():
+    """CARET's own end-to-end sample architecture file (third-party data)."""
+    return need(CARET / 'end_to_end_sample_architecture.yaml')
 
 
 def write_target_bag(path, **kw):
@@ -41,7 +45,9 @@ def target_bag(tmp_path_factory):
     return write_target_bag(tmp_path_factory.mktemp('caret') / 'target.mcap', duration=20.0)
 
 
-def test_real_architecture_file_loads(caret_file, capsys):
+@pytest.mark.parametrize('which', ['caret_file', 'caret_sample'])
+def test_architecture_file_loads(which, request, capsys):
+    caret_file = request.getfixturevalue(which)
     architecture = load_architecture(caret_file)
     assert list(architecture.paths) == ['target'] and not architecture.warnings
     path = architecture.paths['target']
@@ -57,7 +63,7 @@ def test_real_architecture_file_loads(caret_file, capsys):
 
 
 def seed_sample(tmp_path):
-    text = (SHARED / 'seeds' / 'caret_architecture_file.md').read_text()
+    text = need(SHARED / 'seeds' / 'caret_architecture_file.md').read_text()
     block = re.search(r'```yaml\n(.*?)```', text, re.S)
     if block is None:
         pytest.skip('seed document absent')

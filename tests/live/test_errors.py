@@ -26,8 +26,8 @@ def one_error_line(done: subprocess.CompletedProcess[str]) -> str:
     return lines[0]
 
 
-def test_without_rclpy_live_commands_say_how_to_get_it(anchors: Path, tmp_path: Path) -> None:
-    for args in (['proxy', str(anchors / 'imu_faults.yaml')], ['record', '--all', '-o', str(tmp_path / 'r.mcap')],
+def test_without_rclpy_live_commands_say_how_to_get_it(scenarios: Path, tmp_path: Path) -> None:
+    for args in (['proxy', str(scenarios / 'imu.yaml')], ['record', '--all', '-o', str(tmp_path / 'r.mcap')],
                  ['play', str(ROOT / 'tests/fixtures/rover_20s.mcap')]):
         line = one_error_line(bagfault(None, *args, block_rclpy=True))
         assert "pip install 'bagfault[live]'" in line

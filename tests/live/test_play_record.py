@@ -73,3 +73,30 @@ def test_plain_play_loops_until_stopped(graph, tmp_path: Path) -> None:
     assert len(times) > 2 * 50  # more than two passes of the 1 s bag
     assert times == sorted(times) and len(set(times)) == len(times)  # the timeline continues across passes
     assert 'passes' in play.out_path.read_text()
+
+
+def test_loop_names_every_pass_black_box_and_leaves_no_partial_file(graph, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'short.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 1.0)
+    scenario = tmp_path / 'spike.yaml'
+    scenario.write_text("""
+injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}
+faults:
+  - {id: spike, injector_id: imu, start: 0.3, duration: 0.3, config: {linear_acceleration_z_bias: 10.0}}
+fault_manager:
+  conditions: [{topic: /imu_out, when: {field: linear_acceleration.z, above: 15.0}, code: SPIKE}]
+  snapshots: {default_topics: [/imu_out], duration_sec: 0.2, duration_after_sec: 0.1}
+""")
+    played = tmp_path / 'played.mcap'
+    play = graph.bagfault('play', str(scenario), str(bag), '--loop', '--rate', '4', '--delay', '0',
+                          '--record', str(played), name='play')
+    time.sleep(5.0)
+    assert graph.stop(play) == 0
+    passes = int(play.out_path.read_text().split(' messages in ')[1].split(' pass')[0])
+    assert passes >= 3
+    boxes = sorted((p.name for p in tmp_path.glob('played.blackbox.*')), key=lambda name: int(name.split('.')[3]))
+    # one black box per pass that reached its confirmation (the last may have been stopped before it)
+    assert boxes[:passes - 1] == [f'played.blackbox.SPIKE.{n}.mcap' for n in range(1, passes)]
+    assert len(boxes) in (passes - 1, passes)
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith('.partial')] == []
+    for box in tmp_path.glob('played.blackbox.*'):
+        assert counts(box)['/imu_out'] > 0

@@ -18,9 +18,9 @@ def delta_z(message) -> float:
     return message.angular_velocity.z - BASE_Z * (k % 100)
 
 
-def test_imu_bias_switched_on_through_a_parameter(graph, anchors: Path, tmp_path: Path) -> None:
+def test_imu_bias_switched_on_through_a_parameter(graph, scenarios: Path, tmp_path: Path) -> None:
     record = tmp_path / 'proxy.mcap'
-    proxy = graph.bagfault('proxy', str(anchors / 'imu_faults.yaml'), '--record', str(record), name='proxy')
+    proxy = graph.bagfault('proxy', str(scenarios / 'imu.yaml'), '--record', str(record), name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
     echo = graph.peer('echo', '/sensors/imu', 'sensor_msgs/msg/Imu', '--seconds', '9',
                       '--fields', 'angular_velocity.z', 'orientation_covariance', name='echo')
@@ -65,10 +65,10 @@ def test_imu_bias_switched_on_through_a_parameter(graph, anchors: Path, tmp_path
     assert any(t < event_time for t, _ in outputs) and any(t >= event_time for t, _ in outputs)
 
 
-def test_stop_by_sigterm_finalises_the_recording_and_bagfault_check_reads_it(graph, anchors: Path,
+def test_stop_by_sigterm_finalises_the_recording_and_bagfault_check_reads_it(graph, scenarios: Path,
                                                                               tmp_path: Path) -> None:
     scenario = tmp_path / 'imu.yaml'
-    scenario.write_text((anchors / 'imu_faults.yaml').read_text() + """
+    scenario.write_text((scenarios / 'imu.yaml').read_text() + """
 assertions:
   - {id: bias_seen, type: fault_event, fault_id: imu_yaw_rate_bias, state: active}
 """)
@@ -88,9 +88,9 @@ assertions:
     assert 'not observed before the end of the bag' in check.out_path.read_text()
 
 
-def test_reload_service_applies_new_faults_and_refuses_layout_changes(graph, anchors: Path, tmp_path: Path) -> None:
+def test_reload_service_applies_new_faults_and_refuses_layout_changes(graph, scenarios: Path, tmp_path: Path) -> None:
     scenario = tmp_path / 'imu.yaml'
-    shutil.copy(anchors / 'imu_faults.yaml', scenario)
+    shutil.copy(scenarios / 'imu.yaml', scenario)
     proxy = graph.bagfault('proxy', str(scenario), name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
     described = graph.call('describe-params', '/bagfault', 'imu_')

@@ -6,8 +6,8 @@ import time
 from pathlib import Path
 
 
-def test_forced_failure_delay_and_missing_target(graph, anchors: Path) -> None:
-    proxy = graph.bagfault('proxy', str(anchors / 'trigger_service_faults.yaml'), name='proxy')
+def test_forced_failure_delay_and_missing_target(graph, scenarios: Path) -> None:
+    proxy = graph.bagfault('proxy', str(scenarios / 'trigger.yaml'), name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
 
     # no target yet: a clear failure at once instead of a hanging client

@@ -26,9 +26,9 @@ EXPECTED_PASS_TIMES = {
 
 
 @pytest.fixture(scope='module')
-def reports(tmp_path_factory, anchors):
+def reports(tmp_path_factory, scenarios):
     folder = tmp_path_factory.mktemp('reports')
-    code = main(['run', str(anchors / 'multi_injector_faults.yaml'), str(FIXTURES / 'rover_20s.mcap'),
+    code = main(['run', str(scenarios / 'rover_multi.yaml'), str(FIXTURES / 'rover_20s.mcap'),
                  '-o', str(folder / 'out.mcap'), '--report', str(folder / 'r.md'), '--json', str(folder / 'r.json'),
                  '--junit', str(folder / 'r.xml'), '--html', str(folder / 'r.html')])
     return code, folder
@@ -50,10 +50,12 @@ def test_anchor_assertions_pass_at_their_times(reports):
     assert len(statuses) == 7  # one per change and one at the end
 
 
-def test_changing_within_to_4_fails_at_4_seconds(tmp_path, anchors, capsys):
-    text = (anchors / 'multi_injector_faults.yaml').read_text()
+def test_changing_within_to_4_fails_at_4_seconds(tmp_path, scenarios, capsys):
+    text = (scenarios / 'rover_multi.yaml').read_text()
     scenario = tmp_path / 'late.yaml'
-    scenario.write_text(text.replace('state: active\n    within: 6.0', 'state: active\n    within: 4.0'))
+    late = text.replace('state: active, within: 6.0', 'state: active, within: 4.0')
+    assert late != text
+    scenario.write_text(late)
     code = main(['run', str(scenario), str(FIXTURES / 'rover_20s.mcap'), '-o', str(tmp_path / 'o.mcap'),
                  '--json', str(tmp_path / 'r.json')])
     assert code == 1
@@ -92,14 +94,14 @@ def test_json_report_has_stable_documented_keys(reports):
     assert data['assertion_counts'] == {'passed': 6, 'failed': 0, 'pending': 0}
 
 
-def test_junit_validates_and_lists_every_assertion(reports, tmp_path, anchors):
+def test_junit_validates_and_lists_every_assertion(reports, tmp_path, scenarios):
     _, folder = reports
     schema = xmlschema.XMLSchema(str(FIXTURES / 'junit.xsd'))
     schema.validate(str(folder / 'r.xml'))
     text = (folder / 'r.xml').read_text()
     assert text.count('<testcase ') == 6 and '<failure' not in text
     scenario = tmp_path / 'late.yaml'
-    scenario.write_text((anchors / 'multi_injector_faults.yaml').read_text().replace('min_hz: 10.0', 'min_hz: 60.0'))
+    scenario.write_text((scenarios / 'rover_multi.yaml').read_text().replace('min_hz: 10.0', 'min_hz: 60.0'))
     assert main(['run', str(scenario), str(FIXTURES / 'rover_20s.mcap'), '-o', str(tmp_path / 'o.mcap'),
                  '--junit', str(tmp_path / 'r.xml')]) == 1
     schema.validate(str(tmp_path / 'r.xml'))
@@ -111,7 +113,7 @@ def test_junit_validates_and_lists_every_assertion(reports, tmp_path, anchors):
 def test_markdown_report(reports):
     _, folder = reports
     text = (folder / 'r.md').read_text()
-    assert text.startswith('# bagfault report: multi_injector_faults.yaml')
+    assert text.startswith('# bagfault report: rover_multi.yaml')
     assert '**PASSED**: 6 passed, 0 failed' in text
     assert '| 5.000 | odom_position_bias | odom | active | scheduled | `config={x_bias=1.0, y_bias=-0.25}` |' in text
     assert '| PASS | odom_yaw_bias_activates | fault_event | 5.000 |' in text
@@ -143,9 +145,9 @@ def test_html_renders_in_headless_chromium_with_its_plots(reports, tmp_path):
     assert '<script src' not in html and 'http' not in html.split('<body')[1].replace('http://www.w3.org', '')
 
 
-def test_check_on_the_recording_gives_the_same_results(reports, tmp_path, anchors, capsys):
+def test_check_on_the_recording_gives_the_same_results(reports, tmp_path, scenarios, capsys):
     _, folder = reports
-    code = main(['check', str(anchors / 'multi_injector_faults.yaml'), str(folder / 'out.mcap'),
+    code = main(['check', str(scenarios / 'rover_multi.yaml'), str(folder / 'out.mcap'),
                  '--json', str(tmp_path / 'c.json'), '--junit', str(tmp_path / 'c.xml')])
     assert code == 0
     ran = json.loads((folder / 'r.json').read_text())['assertions']
@@ -155,13 +157,13 @@ def test_check_on_the_recording_gives_the_same_results(reports, tmp_path, anchor
         (a['id'], a['state'], a['t_s']) for a in ran]
 
 
-def test_check_without_fault_events_fails_with_exit_1(tmp_path, anchors, capsys):
-    code = main(['check', str(anchors / 'multi_injector_faults.yaml'), str(FIXTURES / 'rover_20s.mcap')])
+def test_check_without_fault_events_fails_with_exit_1(tmp_path, scenarios, capsys):
+    code = main(['check', str(scenarios / 'rover_multi.yaml'), str(FIXTURES / 'rover_20s.mcap')])
     out = capsys.readouterr().out
     assert code == 1
     assert 'FAIL  odom_yaw_bias_activates' in out
     assert 'FAIL  odom_stays_above_10hz' in out  # the raw bag has no /odom topic
 
 
-def test_check_missing_recording_is_exit_2(tmp_path, anchors, capsys):
-    assert main(['check', str(anchors / 'multi_injector_faults.yaml'), str(tmp_path / 'none.mcap')]) == 2
+def test_check_missing_recording_is_exit_2(tmp_path, scenarios, capsys):
+    assert main(['check', str(scenarios / 'rover_multi.yaml'), str(tmp_path / 'none.mcap')]) == 2

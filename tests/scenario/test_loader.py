@@ -6,6 +6,7 @@ import math
 import textwrap
 
 import pytest
+from helpers import third_party
 
 from bagfault.scenario import ScenarioError, load_scenario, parse_scenario
 
@@ -21,7 +22,7 @@ ANCHOR_FILES = [
 ]
 
 
-@pytest.mark.parametrize('name', ANCHOR_FILES)
+@pytest.mark.parametrize('name', third_party(ANCHOR_FILES))
 def test_every_anchor_scenario_loads(anchors, name):
     scenario = load_scenario(anchors / name)
     assert scenario.injectors and scenario.faults
@@ -29,25 +30,25 @@ def test_every_anchor_scenario_loads(anchors, name):
     assert len(ids) == len(set(ids))
 
 
-def test_battery_scenario_names_the_unknown_type(anchors):
+def test_battery_scenario_names_the_unknown_type(scenarios):
     with pytest.raises(ScenarioError) as info:
-        load_scenario(anchors / 'battery_faults.yaml')
+        load_scenario(scenarios / 'battery.yaml')
     problems = info.value.problems
     assert len(problems) == 1
     assert "unknown injector type 'battery_state'" in problems[0].message
     assert problems[0].path == 'injectors[0].type'
-    assert problems[0].where == '3:11'
+    assert problems[0].where == '4:11'
 
 
-def test_nested_topic_layout(anchors):
-    scenario = load_scenario(anchors / 'service_integration_faults.yaml')
+def test_nested_topic_layout(scenarios):
+    scenario = load_scenario(scenarios / 'nested_odom.yaml')
     odom = scenario.injector('odom')
     assert (odom.input_topic, odom.output_topic, odom.qos_depth) == ('/test/odom_raw', '/test/odom', 10)
     assert scenario.faults[0].config == {'x_bias': 1.0, 'drop_probability': 0.0}
 
 
-def test_flat_list_layout_and_schedules(anchors):
-    scenario = load_scenario(anchors / 'multi_injector_faults.yaml')
+def test_flat_list_layout_and_schedules(scenarios):
+    scenario = load_scenario(scenarios / 'rover_multi.yaml')
     assert [i.id for i in scenario.injectors] == ['odom', 'scan', 'motor_feedback', 'imu', 'enable_motors', 'tf_odom_base']
     tf = scenario.injector('tf_odom_base')
     assert (tf.input_topic, tf.output_topic, tf.qos_depth) == ('/tf_raw', '/tf', 50)
@@ -66,8 +67,8 @@ def test_flat_list_layout_and_schedules(anchors):
     assert scenario.assertions[0].within == 6.0
 
 
-def test_single_injector_layout(anchors):
-    scenario = load_scenario(anchors / 'scan_faults.yaml')
+def test_single_injector_layout(scenarios):
+    scenario = load_scenario(scenarios / 'scan.yaml')
     assert len(scenario.injectors) == 1
     assert scenario.fault('scan_range_noise').active_on_startup
     assert scenario.fault('scan_delay').config == {'delay_ms': 250}

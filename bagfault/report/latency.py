@@ -1,77 +1,18 @@
-"""`bagfault latency`: per-path tables, JSON, and an HTML page with time series and histogram."""
+"""`bagfault latency` shown: per-path tables, and an HTML page with time series and histogram."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from html import escape
 from typing import TYPE_CHECKING, Any
 
-from bagfault.errors import LatencyError
-from bagfault.latency.architecture import Architecture, load_architecture
-from bagfault.latency.collect import fault_windows, read_series
-from bagfault.latency.compute import PathResult, by_fault, path_latency, statistics
+from bagfault.latency.compute import by_fault, statistics
+from bagfault.latency.measure import LatencyReport
 from bagfault.report import svg
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
-    from pathlib import Path
+    from bagfault.latency.architecture import Architecture
 
 NS = 1_000_000_000
-
-
-@dataclass
-class LatencyReport:
-    """Everything `bagfault latency` shows."""
-
-    architecture: Architecture
-    inputs: list[str]
-    origin: int
-    results: list[PathResult]
-    windows: dict[str, list[tuple[int, int | None]]]
-    unusable: dict[str, list[str]] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form, per path: statistics of the samples and of each response-time case, per fault window."""
-        return {
-            'architecture': str(self.architecture.source),
-            'inputs': self.inputs,
-            'warnings': self.architecture.warnings,
-            'unusable_paths': self.unusable,
-            'paths': [{
-                'path': r.name,
-                'topics': r.topics,
-                'inputs': r.inputs,
-                'dropped_inputs': r.dropped,
-                'latency_ms': statistics(r.latency_ms),
-                'response_time_ms': {'all': statistics(r.all_cases[1]), 'best': statistics(r.best[1]),
-                                     'worst': statistics(r.worst[1])},
-                'by_fault': by_fault(r, self.windows),
-                'samples': [[round((t - self.origin) / NS, 9), round(v, 6)]
-                            for t, v in zip(r.sample_times.tolist(), r.latency_ms.tolist(), strict=True)],
-                'notes': r.notes,
-            } for r in self.results],
-        }
-
-
-def measure(arch_file: str | Path, bags: Sequence[str | Path], *, path: str | None = None,
-            stamp_origin: bool = False) -> LatencyReport:
-    """Load the architecture, read the path topics of the bags, compute every usable path."""
-    from pathlib import Path as _Path  # noqa: PLC0415
-
-    architecture = load_architecture(arch_file)
-    if path is not None and path not in architecture.paths:
-        raise LatencyError(f'{arch_file}: no path {path!r} (paths: {", ".join(architecture.paths)})')
-    wanted = [architecture.paths[path]] if path else list(architecture.paths.values())
-    usable = [p for p in wanted if p.usable]
-    unusable = {p.name: p.problems for p in wanted if not p.usable}
-    if path is not None and not usable:
-        raise LatencyError(f'{arch_file}: path {path} cannot be measured: {"; ".join(unusable[path])}')
-    topics = sorted({t for p in usable for t in p.topics})
-    series, events = read_series([_Path(b) for b in bags], topics)
-    starts = [s.times[0] for s in series.values() if s.times.size]
-    origin = min(starts) if starts else 0
-    results = [path_latency(architecture, p, series, stamp_origin=stamp_origin) for p in usable]
-    return LatencyReport(architecture, [str(b) for b in bags], origin, results, fault_windows(events), unusable)
 
 
 def _row(name: str, stats: dict[str, Any]) -> str:

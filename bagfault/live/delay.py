@@ -1,0 +1,57 @@
+"""Delayed messages of the live proxy: each published when the ROS clock reaches its due time."""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import threading
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from bagfault.live.session import LiveTopic
+
+
+class DelayLine:
+    """Holds delayed messages and publishes each when the ROS clock reaches its due time."""
+
+    def __init__(self, clock: Callable[[], int], publish: Callable[[LiveTopic, bytes], None]) -> None:
+        self.clock = clock
+        self.publish = publish
+        self._heap: list[tuple[int, int, LiveTopic, bytes]] = []
+        self._counter = itertools.count()
+        self._condition = threading.Condition()
+        self._stopped = False
+        self._thread = threading.Thread(target=self._run, name='bagfault-delay', daemon=True)
+        self._thread.start()
+
+    def put(self, due: int, topic: LiveTopic, data: bytes) -> None:
+        """Publish `data` on the topic's output at ROS time `due` (ns)."""
+        with self._condition:
+            heapq.heappush(self._heap, (due, next(self._counter), topic, data))
+            self._condition.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._condition:
+                while not self._heap and not self._stopped:
+                    self._condition.wait()
+                if self._stopped:
+                    return
+                wait = (self._heap[0][0] - self.clock()) / 1e9
+                if wait > 0:
+                    self._condition.wait(min(wait, 0.05))  # re-read the clock: sim time may jump
+                    continue
+                _, _, topic, data = heapq.heappop(self._heap)
+            self.publish(topic, data)
+
+    def stop(self) -> int:
+        """Stop; return how many delayed messages were still waiting (not sent)."""
+        with self._condition:
+            self._stopped = True
+            left = len(self._heap)
+            self._heap.clear()
+            self._condition.notify()
+        self._thread.join(timeout=2.0)
+        return left

@@ -1,0 +1,90 @@
+"""What the proxy learns from the ROS graph before it starts: topic types, and the topics its oracles watch."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+from bagfault.errors import LiveError
+from bagfault.injectors.base import Injector
+from bagfault.injectors.registry import get_injector_type
+
+if TYPE_CHECKING:
+    from bagfault.engine.stop import StopFlag
+    from bagfault.scenario.model import InjectorSpec, Scenario
+
+OBSERVE_WAIT = 5.0  # seconds to wait for publishers of watched topics whose type is not known
+DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+OWN_PREFIXES = ('/fault_injection/', '/fault_manager/')
+
+
+def _message_type(spec: InjectorSpec) -> str | None:
+    cls = get_injector_type(spec.type)
+    if cls is not None and issubclass(cls, Injector) and len(cls.message_types) == 1:
+        return cls.message_types[0]
+    return spec.options.get('message_type') or None
+
+
+def resolve_types(node: Any, scenario: Scenario, executor: Any, stop: StopFlag) -> dict[str, str]:
+    """Message type per topic injector: from its injector type, `message_type`, or the graph."""
+    types: dict[str, str] = {}
+    waiting: dict[str, str] = {}
+    for spec in scenario.injectors:
+        if spec.is_service:
+            continue
+        if spec.input_topic == spec.output_topic:
+            raise LiveError(f'{scenario.name}: injector {spec.id!r} reads and writes {spec.input_topic}; '
+                            'a live proxy needs distinct input_topic and output_topic (/x_raw -> /x)')
+        known = _message_type(spec)
+        if known:
+            types[spec.id] = known
+        else:
+            assert spec.input_topic is not None
+            waiting[spec.id] = spec.input_topic
+    if waiting:
+        node.get_logger().info('waiting for publishers to learn the type of ' + ', '.join(sorted(waiting.values()))
+                         + " (or set the injector's message_type)")
+    while waiting and not stop.is_set():
+        graph = dict(node.get_topic_names_and_types())
+        for injector_id, topic in list(waiting.items()):
+            found = graph.get(topic)
+            if found:
+                if len(found) > 1:
+                    raise LiveError(f'topic {topic} carries several types ({", ".join(found)}); '
+                                    f'set message_type on injector {injector_id!r}')
+                types[injector_id] = found[0]
+                del waiting[injector_id]
+        executor.spin_once(timeout_sec=0.1)
+    return types
+
+def watched_topics(node: Any, scenario: Scenario, executor: Any, stop: StopFlag) -> dict[str, str]:
+    """Topics the oracles need besides the proxy's own: FM diagnostics and conditions, asserted topics."""
+    own = {t for spec in scenario.injectors for t in (spec.input_topic, spec.output_topic) if t}
+    wanted: dict[str, str | None] = {}
+    config = scenario.fault_manager_config
+    if config is not None:
+        if config.diagnostics_topic:
+            wanted[config.diagnostics_topic] = DIAGNOSTICS_TYPE
+        for condition in config.conditions:
+            wanted.setdefault(condition.topic, None)
+    for assertion in scenario.assertions:
+        for key in ('topic', 'input_topic'):
+            name = assertion.params.get(key)
+            if isinstance(name, str) and name:
+                known = assertion.params.get('message_type') if key == 'topic' else None
+                wanted[name] = wanted.get(name) or known
+    wanted = {t: m for t, m in wanted.items() if t not in own and not t.startswith(OWN_PREFIXES)}
+    deadline = time.monotonic() + OBSERVE_WAIT
+    while any(m is None for m in wanted.values()) and time.monotonic() < deadline and not stop.is_set():
+        graph = dict(node.get_topic_names_and_types())
+        for name in [t for t, m in wanted.items() if m is None]:
+            if graph.get(name):
+                wanted[name] = graph[name][0]
+        executor.spin_once(timeout_sec=0.1)
+    watched = {}
+    for name, msgtype in wanted.items():
+        if msgtype is None:
+            node.get_logger().warning(f'{name}: no publisher within {OBSERVE_WAIT:g} s, type unknown; not watched')
+        else:
+            watched[name] = msgtype
+    return watched

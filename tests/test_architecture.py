@@ -1,0 +1,61 @@
+"""The package's layering: the core imports none of the modes, reports or the API (ARCHITECTURE.md)."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'bagfault'
+CORE = ('scenario', 'injectors', 'faults', 'engine', 'io', 'assertions', 'fault_manager', 'latency')
+CORE_MODULES = ('events', 'schema', 'errors')
+OUTSIDE = ('bagfault.live', 'bagfault.api', 'bagfault.cli', 'bagfault.report', 'bagfault.closedloop',
+           'bagfault.campaign', 'bagfault.view', 'bagfault.pytest_plugin')
+
+
+def _core_files() -> list[Path]:
+    files = [PACKAGE / f'{name}.py' for name in CORE_MODULES]
+    for name in CORE:
+        files += sorted((PACKAGE / name).rglob('*.py'))
+    return files
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """Every module a file imports, at any depth (lazy imports inside functions included)."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.append((node.lineno, node.module))
+            found += [(node.lineno, f'{node.module}.{alias.name}') for alias in node.names]
+    return found
+
+
+def test_core_modules_import_no_mode_report_or_api() -> None:
+    files = _core_files()
+    assert len(files) > 60  # the scan did find the package
+    wrong = [f'{path.relative_to(PACKAGE)}:{line}: {module}'
+             for path in files for line, module in _imports(path) if module.startswith(OUTSIDE)]
+    assert wrong == []
+
+
+def test_importing_engine_and_io_loads_nothing_of_live_or_api() -> None:
+    modules = sorted('.'.join(p.relative_to(PACKAGE.parent).with_suffix('').parts).removesuffix('.__init__')
+                     for name in ('engine', 'io') for p in (PACKAGE / name).rglob('*.py'))
+    code = ('import importlib, json, sys\n'
+            f'for name in {modules!r}: importlib.import_module(name)\n'
+            'print(json.dumps(sorted(sys.modules)))')
+    loaded = json.loads(subprocess.run([sys.executable, '-c', code], check=True, capture_output=True, text=True,
+                                       cwd=PACKAGE.parent).stdout)
+    assert 'bagfault.engine.run' in loaded and 'bagfault.io.sources' in loaded  # the probe did import them
+    assert [m for m in loaded if m.startswith(OUTSIDE)] == []
+
+
+def test_only_the_command_line_and_the_pytest_plugin_import_the_api() -> None:
+    users = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob('*.py')
+             if any(module == 'bagfault.api' for _, module in _imports(p))}
+    assert 'cli.py' in users
+    assert users <= {'cli.py', 'pytest_plugin.py'}
