@@ -150,3 +150,69 @@ def test_progress_bar_shows_eta_on_a_terminal():
     quiet = io.StringIO()
     ProgressBar(stream=quiet)(1, 1)
     assert quiet.getvalue() == ''
+
+
+@pytest.mark.parametrize('option', ['--json', '--report', '--junit', '--html'])
+def test_bad_report_path_is_refused_before_the_run(capsys, tmp_path, scenarios, rover_bag, option):
+    out = tmp_path / 'o.mcap'
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', rover_bag, '-o', out, option,
+                           tmp_path / 'missing' / 'r.txt')
+    assert code == 2
+    assert err.count('\n') == 1 and f'{option} report: folder' in err and 'Traceback' not in err
+    assert not out.exists() and os.listdir(tmp_path) == []  # refused before the run: nothing written
+
+
+@pytest.mark.parametrize('target', ['input', 'scenario', 'output'])
+def test_report_never_replaces_what_the_run_reads_or_writes(capsys, tmp_path, scenarios, rover_bag, target):
+    scenario = tmp_path / 'odom.yaml'
+    shutil.copy(scenarios / 'odom.yaml', scenario)
+    bag = tmp_path / 'in.mcap'
+    shutil.copy(rover_bag, bag)
+    out = tmp_path / 'o.mcap'
+    before = {p.name: tree_digest(p) for p in (scenario, bag)}
+    path = {'input': bag, 'scenario': scenario, 'output': out}[target]
+    code, _, err = run_cli(capsys, 'run', scenario, bag, '-o', out, '--json', path)
+    assert code == 2 and f'would replace the {target}' in err
+    assert {p.name: tree_digest(p) for p in (scenario, bag)} == before
+    assert not out.exists()
+
+
+def test_output_onto_the_scenario_is_refused(capsys, tmp_path, scenarios, rover_bag):
+    scenario = tmp_path / 'odom.yaml'
+    shutil.copy(scenarios / 'odom.yaml', scenario)
+    text = scenario.read_text()
+    code, _, err = run_cli(capsys, 'run', scenario, rover_bag, '-o', scenario)
+    assert code == 2 and 'would replace the scenario' in err
+    assert scenario.read_text() == text
+
+
+def test_a_bug_still_ends_with_exit_2_and_one_line(capsys, tmp_path, scenarios, rover_bag, monkeypatch):
+    from bagfault import api
+
+    def broken(*args, **kwargs):
+        raise RuntimeError('boom')
+
+    monkeypatch.setattr(api, 'run', broken)
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', rover_bag, '-o', tmp_path / 'o.mcap')
+    assert code == 2
+    assert err == 'bagfault: internal error: RuntimeError: boom (a bug in bagfault; --debug shows where)\n'
+    code, _, err = run_cli(capsys, '--debug', 'run', scenarios / 'odom.yaml', rover_bag, '-o', tmp_path / 'o.mcap')
+    assert code == 2 and 'Traceback' in err
+
+
+def test_sigterm_during_a_run_leaves_nothing_behind(tmp_path, scenarios):
+    from helpers import make_bag
+
+    bag = make_bag(tmp_path / 'in.mcap', [('/odom_raw', 'nav_msgs/msg/Odometry', 2000.0)], 120.0)
+    out = tmp_path / 'out.mcap'
+    process = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'run', str(scenarios / 'odom.yaml'), str(bag),
+                                '-o', str(out)], stderr=subprocess.PIPE, text=True)
+    import time
+
+    time.sleep(2.0)
+    assert process.poll() is None  # still running
+    process.terminate()
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 2
+    assert 'interrupted' in err and 'Traceback' not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['in.mcap']
