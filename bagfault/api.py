@@ -198,12 +198,12 @@ def record(
                       stop=stop if stop is not None else StopFlag())
 
 
-def validate(paths: Sequence[str | Path]) -> list[Scenario]:
+def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     scenarios, problems = [], []
     for path in paths:
         try:
-            scenarios.append(load_scenario(path))
+            scenarios.append(load_scenario(path, strict=strict))
         except ScenarioError as exc:
             problems.extend(exc.problems)
     if problems:

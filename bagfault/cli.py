@@ -59,6 +59,7 @@ def _parser() -> argparse.ArgumentParser:
 
     validate = sub.add_parser('validate', help='check scenario files, report every problem')
     validate.add_argument('scenarios', type=Path, nargs='+', metavar='SCENARIO')
+    _strict_option(validate)
 
     schema = sub.add_parser('schema', help='config keys of injector types')
     schema.add_argument('type', nargs='?', metavar='INJECTOR_TYPE')
@@ -113,10 +114,16 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _report_options(parser: argparse.ArgumentParser) -> None:
+    _strict_option(parser)
     parser.add_argument('--report', type=Path, metavar='R.md', help='markdown report')
     parser.add_argument('--json', type=Path, metavar='R.json', help='machine-readable report (docs/report.md)')
     parser.add_argument('--junit', type=Path, metavar='R.xml', help='JUnit XML, one testcase per assertion')
     parser.add_argument('--html', type=Path, metavar='R.html', help='self-contained HTML report with plots')
+
+
+def _strict_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--strict', action='store_true',
+                        help='treat scenario warnings (what ros2_fault_injection accepts but ignores) as errors')
 
 
 def _reports(args: argparse.Namespace) -> ReportPaths:
@@ -152,7 +159,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     reports = _reports(args)
     reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
-    scenario = api.load_scenario(args.scenario)
+    scenario = api.load_scenario(args.scenario, strict=args.strict)
     bar = ProgressBar()
     collectors = reports.collectors()
     try:
@@ -171,7 +178,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
     reports = _reports(args)
     reports.check(_protected(recording=args.recording, scenario=args.scenario))
-    scenario = api.load_scenario(args.scenario)
+    scenario = api.load_scenario(args.scenario, strict=args.strict)
     bar = ProgressBar()
     collectors = reports.collectors()
     try:
@@ -186,7 +193,7 @@ def _cmd_proxy(args: argparse.Namespace) -> int:
 
     reports = _reports(args)
     reports.check(_protected(scenario=args.scenario, recording=args.record))
-    scenario = api.load_scenario(args.scenario)
+    scenario = api.load_scenario(args.scenario, strict=args.strict)
     result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time)
     return _finish(reports, result)
 
@@ -202,7 +209,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
         raise UsageError('play: give at least one bag after the scenario')
     reports = _reports(args)
     reports.check(_protected(input=items, scenario=scenario_path, recording=args.record))
-    scenario = api.load_scenario(scenario_path) if scenario_path is not None else None
+    scenario = api.load_scenario(scenario_path, strict=args.strict) if scenario_path is not None else None
     result = api.play(scenario, items, rate=args.rate, clock=args.clock, loop=args.loop, record=args.record,
                       seed=args.seed, delay=args.delay)
     return _finish(reports, result)
@@ -250,9 +257,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_validate(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
 
-    for scenario in api.validate(args.scenarios):
+    for scenario in api.validate(args.scenarios, strict=args.strict):
         for warning in scenario.warnings:
-            print(f'{scenario.source}: warning: {warning}', file=sys.stderr)
+            print(f'warning: {warning}', file=sys.stderr)
         print(f'{scenario.source}: ok ({len(scenario.injectors)} injectors, {len(scenario.faults)} faults, '
               f'{len(scenario.assertions)} assertions)')
     return EXIT_OK

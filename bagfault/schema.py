@@ -39,6 +39,7 @@ class ConfigField:
         max: Largest accepted value (numbers only), inclusive.
         required: Every fault of this injector type must set the key.
         choices: The only accepted values (strings), empty when any value goes.
+        finite: Numbers must be finite (False: inf and nan are accepted, as ros2_fault_injection accepts them).
 
     """
 
@@ -50,10 +51,11 @@ class ConfigField:
     max: float | None = None
     required: bool = False
     choices: tuple[str, ...] = ()
+    finite: bool = True
 
     def coerce(self, value: object) -> Any:
         """Return value converted to the field's type, or raise FieldValueError."""
-        coerced = _COERCE[self.type](value)
+        coerced = _to_number(value) if self.type == 'double' and not self.finite else _COERCE[self.type](value)
         if isinstance(coerced, (int, float)) and not isinstance(coerced, bool):
             if self.min is not None and coerced < self.min:
                 raise FieldValueError(f'{_show(value)} is below the minimum {_show(self.min)}')
@@ -77,6 +79,7 @@ class ConfigField:
             'max': self.max,
             'required': self.required,
             'choices': list(self.choices),
+            'finite': self.finite,
         }
 
 
@@ -102,6 +105,15 @@ def _to_double(value: object) -> float:
             raise FieldValueError(f'{_show(value)} is not a finite number')
         return parsed
     raise FieldValueError(f'{_show(value)} is not a number')
+
+
+def _to_number(value: object) -> float:
+    """A double that may be inf or nan (the anchor's std::stod reads 'inf' and 'nan')."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return value
+    if isinstance(value, str) and value.strip().lower() in SPECIAL_FLOATS:
+        return SPECIAL_FLOATS[value.strip().lower()]
+    return _to_double(value)
 
 
 def _to_int(value: object) -> int:
@@ -195,9 +207,9 @@ def probability(key: str, description: str) -> ConfigField:
     return ConfigField(key, 'double', description, 0.0, min=0.0, max=1.0)
 
 
-def stddev(key: str, description: str) -> ConfigField:
+def stddev(key: str, description: str, **kw: Any) -> ConfigField:
     """Declare a non-negative standard deviation."""
-    return ConfigField(key, 'double', description, 0.0, min=0.0)
+    return ConfigField(key, 'double', description, 0.0, min=0.0, **kw)
 
 
 DROP_PROBABILITY = probability(

@@ -56,6 +56,7 @@ class RunResult:
     seed: int
     stats: RunStats
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
     assertions: list[AssertionResult] = field(default_factory=list)
     assertion_events: list[AssertionEvent | ScenarioStatus] = field(default_factory=list)
     mode: Mode = 'run'

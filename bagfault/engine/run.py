@@ -110,6 +110,7 @@ class Run:
         self.catalog = catalog
         self.stats = RunStats()
         self.notes: list[str] = []
+        self.warnings: list[str] = []
         self.oracles = Oracles(scenario, schemas, catalog, self.write_event, blackbox_base, blackbox_numbers)
         self.observers: list[Observer] = [*self.oracles.observers, *observers]
         self._events: dict[str, tuple[OutputChannel, Codec]] = {}
@@ -225,8 +226,8 @@ class Run:
     def result(self, mode: Mode, inputs: Sequence[Path], output: Path | None, seed: int,
                stats: RunStats | None = None) -> RunResult:
         """The verdicts, fault table and notes of this pass (with `stats` of several passes if given)."""
-        result = RunResult(self.scenario, list(inputs), output, seed, stats or self.stats,
-                           [*self.scenario.warnings, *self.notes], mode=mode)
+        result = RunResult(self.scenario, list(inputs), output, seed, stats or self.stats, list(self.notes),
+                           [*self.scenario.warnings, *self.warnings], mode=mode)
         self.oracles.fill(result)
         return result
 

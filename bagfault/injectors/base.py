@@ -122,6 +122,11 @@ class Injector:
         """Cross-field checks of one fault config; raise InjectorConfigError."""
 
     @classmethod
+    def config_warnings(cls, config: dict[str, Any]) -> list[str]:
+        """What a fault config asks for that has no effect (as in ros2_fault_injection): warnings, not errors."""
+        return []
+
+    @classmethod
     def field(cls, key: str) -> ConfigField | None:
         """Schema entry for a fault config key."""
         return next((x for x in cls.fields if x.key == key), None)

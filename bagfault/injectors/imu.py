@@ -34,12 +34,14 @@ class ImuInjector(Injector):
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
-        double('angular_velocity_z_bias', 'Added to angular_velocity.z, in rad/s.'),
-        stddev('angular_velocity_z_noise_stddev', 'Gaussian noise on angular_velocity.z, stddev in rad/s.'),
-        *(double(f'linear_acceleration_{a}_bias', f'Added to linear_acceleration.{a}, in m/s^2.') for a in AXES),
+        double('angular_velocity_z_bias', 'Added to angular_velocity.z, in rad/s.', finite=False),
+        stddev('angular_velocity_z_noise_stddev', 'Gaussian noise on angular_velocity.z, stddev in rad/s.',
+               finite=False),
+        *(double(f'linear_acceleration_{a}_bias', f'Added to linear_acceleration.{a}, in m/s^2.', finite=False)
+          for a in AXES),
         *(
             stddev(f'linear_acceleration_{a}_noise_stddev',
-                   f'Gaussian noise on linear_acceleration.{a}, stddev in m/s^2.')
+                   f'Gaussian noise on linear_acceleration.{a}, stddev in m/s^2.', finite=False)
             for a in AXES
         ),
     )

@@ -27,8 +27,8 @@ class JointStateInjector(Injector):
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
-        double('velocity_bias', 'Added to every velocity entry, in rad/s (or m/s for prismatic joints).'),
-        stddev('velocity_noise_stddev', 'Gaussian noise on every velocity entry, stddev in rad/s.'),
+        double('velocity_bias', 'Added to every velocity entry, in rad/s (or m/s for prismatic joints).', finite=False),
+        stddev('velocity_noise_stddev', 'Gaussian noise on every velocity entry, stddev in rad/s.', finite=False),
     )
 
     def mutate(self, message: Any, time: int, active: Sequence[ActiveFault]) -> None:

@@ -7,7 +7,6 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from bagfault.errors import InjectorConfigError
 from bagfault.faults.combine import total
 from bagfault.faults.noise import gaussian
 from bagfault.injectors.base import Injector
@@ -29,9 +28,11 @@ class ScanInjector(Injector):
     fields: ClassVar[tuple[ConfigField, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
-        double('range_bias', 'Added to every finite range, in metres, then clamped to [range_min, range_max].'),
+        double('range_bias', 'Added to every finite range, in metres, then clamped to [range_min, range_max].',
+               finite=False),
         stddev('range_noise_stddev',
-               'Gaussian noise on every finite range, stddev in metres, clamped to [range_min, range_max].'),
+               'Gaussian noise on every finite range, stddev in metres, clamped to [range_min, range_max].',
+               finite=False),
         double('sector_min_deg', 'Start angle of the blind sector, in degrees in the scan frame.'),
         double('sector_max_deg', 'End angle of the blind sector, in degrees in the scan frame.'),
         ConfigField('sector_value', 'special_float', 'Range written inside the sector, in metres, or inf, -inf, nan.',
@@ -39,14 +40,15 @@ class ScanInjector(Injector):
     )
 
     @classmethod
-    def check_fault(cls, config: dict[str, Any], options: dict[str, Any]) -> None:
-        """A sector needs both bounds."""
-        has = {k for k in ('sector_min_deg', 'sector_max_deg') if k in config}
+    def config_warnings(cls, config: dict[str, Any]) -> list[str]:
+        """A sector needs both bounds; with one (or only sector_value) no beam is blanked, as in the anchor."""
+        has = sorted(k for k in ('sector_min_deg', 'sector_max_deg') if k in config)
         if len(has) == 1:
-            missing = ({'sector_min_deg', 'sector_max_deg'} - has).pop()
-            raise InjectorConfigError(f'{has.pop()} needs {missing} as well')
+            missing = ({'sector_min_deg', 'sector_max_deg'} - set(has)).pop()
+            return [f'{has[0]} without {missing}: no sector is blanked (ros2_fault_injection skips it too)']
         if 'sector_value' in config and not has:
-            raise InjectorConfigError('sector_value needs sector_min_deg and sector_max_deg')
+            return ['sector_value without sector_min_deg and sector_max_deg: no sector is blanked']
+        return []
 
     def mutate(self, message: Any, time: int, active: Sequence[ActiveFault]) -> None:
         """Bias, noise, then each active sector (anchor order)."""
@@ -88,10 +90,11 @@ class ScanInjector(Injector):
 
 
 def _wrap_scalar(degrees: float) -> float:
-    while degrees > 180.0:
-        degrees -= 360.0
-    while degrees < -180.0:
-        degrees += 360.0
+    """Into (-180, 180] as the anchor's loop does, without looping (huge angles must not hang)."""
+    if degrees > 180.0:
+        degrees -= 360.0 * math.ceil((degrees - 180.0) / 360.0)
+    elif degrees < -180.0:
+        degrees += 360.0 * math.ceil((-180.0 - degrees) / 360.0)
     return degrees
 
 

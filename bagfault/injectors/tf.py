@@ -35,12 +35,12 @@ class TfInjector(Injector):
             min=0.0, max=1.0
         ),
         DELAY_MS,
-        double('x_bias', 'Added to transform.translation.x, in metres.'),
-        double('y_bias', 'Added to transform.translation.y, in metres.'),
-        double('z_bias', 'Added to transform.translation.z, in metres.'),
-        double('roll_bias_deg', 'Added to the roll of transform.rotation, in degrees.'),
-        double('pitch_bias_deg', 'Added to the pitch of transform.rotation, in degrees.'),
-        double('yaw_bias_deg', 'Added to the yaw of transform.rotation, in degrees.'),
+        double('x_bias', 'Added to transform.translation.x, in metres.', finite=False),
+        double('y_bias', 'Added to transform.translation.y, in metres.', finite=False),
+        double('z_bias', 'Added to transform.translation.z, in metres.', finite=False),
+        double('roll_bias_deg', 'Added to the roll of transform.rotation, in degrees.', finite=False),
+        double('pitch_bias_deg', 'Added to the pitch of transform.rotation, in degrees.', finite=False),
+        double('yaw_bias_deg', 'Added to the yaw of transform.rotation, in degrees.', finite=False),
     )
     stream_keys = frozenset({'delay_ms', 'parent_frame', 'child_frame'})
 

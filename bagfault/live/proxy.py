@@ -42,8 +42,8 @@ def run_proxy(
         proxy.close()
     session = proxy.session
     if session is None:
-        return RunResult(scenario, [], None, seed, RunStats(),
-                         [*scenario.warnings, f'stopped ({stop.reason}) before the proxy started'], mode='proxy')
+        return RunResult(scenario, [], None, seed, RunStats(), [f'stopped ({stop.reason}) before the proxy started'],
+                         list(scenario.warnings), mode='proxy')
     result = session.run.result('proxy', [], record, seed)
     for topic in session.topics:
         result.notes.append(f'{topic.input_topic} -> {topic.output_topic}: {topic.received} received, '

@@ -90,4 +90,5 @@ def build(result: RunResult) -> dict[str, Any]:
         ],
         'final_status': statuses[-1].state if statuses else None,
         'notes': list(result.notes),
+        'warnings': list(result.warnings),
     }

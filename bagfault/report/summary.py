@@ -42,6 +42,8 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
                   file=out)
     for note in result.notes:
         print(f'note: {note}', file=out)
+    for warning in result.warnings:
+        print(f'warning: {warning}', file=out)
     if not result.assertions:
         return
     width = max(len(r.id) for r in result.assertions)

@@ -26,22 +26,33 @@ SERVICE_KEYS = {'proxy_service', 'target_service'}
 FAULT_KEYS = {'id', 'injector_id', 'active_on_startup', 'active', 'start', 'duration', 'config',
               'repeat', 'probability_per_second', 'hold', 'after', 'report'}
 SEED_MAX = 2**64 - 1
+MAX_SECONDS = 1e7  # any time in a scenario (about 115 days): far beyond a bag, far below int64 nanoseconds
 
 
 class _Collector:
-    """Accumulates problems with their YAML positions."""
+    """Accumulates problems (errors) and warnings with their YAML positions."""
 
     def __init__(self, file: str, located: LocatedYaml) -> None:
         self.file = file
         self.located = located
-        self.problems: list[Any] = []
+        self.problems: list[Problem] = []
+        self.warnings: list[Problem] = [Problem(file, where, format_path(path), message)
+                                        for where, path, message in located.warnings]
 
     def add(self, path: PathKey, message: str) -> None:
+        """An error: the scenario cannot be used."""
         self.problems.append(Problem(self.file, self.located.where(path), format_path(path), message))
 
+    def warn(self, path: PathKey, message: str) -> None:
+        """Something ros2_fault_injection accepts (and ignores or reads its own way); an error with --strict."""
+        self.warnings.append(Problem(self.file, self.located.where(path), format_path(path), message))
 
-def load_scenario(path: str | Path, *, validate: bool = True) -> Scenario:
-    """Load and (by default) validate a scenario file; raise ScenarioError listing all problems."""
+
+def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = False) -> Scenario:
+    """Load and (by default) validate a scenario file; raise ScenarioError listing all problems.
+
+    With `strict`, warnings (what ros2_fault_injection accepts but ignores) are errors too.
+    """
 
     file = Path(path)
     try:
@@ -52,11 +63,12 @@ def load_scenario(path: str | Path, *, validate: bool = True) -> Scenario:
         raise ScenarioError(f'{file}: is a directory, not a scenario file') from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f'{file}: cannot read scenario file: {exc}') from None
-    return parse_scenario(text, source=file, validate=validate)
+    return parse_scenario(text, source=file, validate=validate, strict=strict)
 
 
-def parse_scenario(text: str, *, source: Path | None = None, validate: bool = True) -> Scenario:
-    """Parse scenario text; raise ScenarioError listing every problem found."""
+def parse_scenario(text: str, *, source: Path | None = None, validate: bool = True,
+                   strict: bool = False) -> Scenario:
+    """Parse scenario text; raise ScenarioError listing every problem found (and every warning with `strict`)."""
     from bagfault.scenario.validator import validate_scenario  # noqa: PLC0415
 
     name = str(source) if source else '<scenario>'
@@ -72,8 +84,12 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
     scenario.located = located
     if validate:
         validate_scenario(scenario, out)
-    if out.problems:
-        raise ScenarioError(sorted(out.problems, key=_position))
+    warnings = sorted(out.warnings, key=_position)
+    scenario.warnings = [str(w) for w in warnings]
+    problems = out.problems + ([Problem(w.file, w.where, w.path, f'{w.message} (a warning, an error with --strict)')
+                                for w in warnings] if strict else [])
+    if problems:
+        raise ScenarioError(sorted(problems, key=_position))
     return scenario
 
 
@@ -90,10 +106,11 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
         return scenario
     for key in root:
         if key not in TOP_KEYS:
-            out.add((key,), f'unknown top-level key {key!r} (known: {", ".join(sorted(TOP_KEYS))})')
+            out.warn((key,), f'unknown top-level key {key!r} is ignored (known: {", ".join(sorted(TOP_KEYS))})')
 
     if 'injectors' in root and 'injector' in root:
-        out.add(('injector',), "use either 'injector' or 'injectors', not both")
+        out.warn(('injector',), "both 'injector' and 'injectors' are given; 'injectors' is used, as "
+                                'ros2_fault_injection does')
     if 'injectors' in root:
         items = root['injectors']
         if not isinstance(items, list):
@@ -153,17 +170,31 @@ def _text(node: dict[str, Any], key: str, path: PathKey, out: _Collector, *, req
     return text
 
 
-def _number(value: object, path: PathKey, out: _Collector, *, minimum: float | None = 0.0) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+def seconds(value: object, path: PathKey, out: _Collector, *, positive: bool = False,
+            minimum: float = 0.0) -> float | None:
+    """A time in seconds: a number (or a quoted one, as yaml-cpp reads it), finite, 0..MAX_SECONDS."""
+    number: float | None = None
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        number = float(value)
+    elif isinstance(value, str):
+        try:
+            number = float(value.strip())
+        except ValueError:
+            number = None
+    if number is None:
         out.add(path, f'{value!r} is not a number of seconds')
         return None
-    if not math.isfinite(value):
-        out.add(path, f'{value} is not a finite number')
+    if not math.isfinite(number) or number > MAX_SECONDS:
+        out.add(path, f'{value} is not a time bagfault can schedule (0 to {MAX_SECONDS:g} s)')
         return None
-    if minimum is not None and value < minimum:
-        out.add(path, f'{value} is negative' if minimum == 0.0 else f'{value} is below {minimum}')
+    if number < minimum or (positive and number <= 0):
+        if positive:
+            out.add(path, f'{value} must be greater than 0' if minimum == 0 else f'{value} is below the minimum '
+                                                                                f'{minimum:g} s')
+        else:
+            out.add(path, f'{value} is negative')
         return None
-    return float(value)
+    return number
 
 
 def _bool(value: object, path: PathKey, out: _Collector) -> bool:
@@ -197,7 +228,7 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
             if cls is None and injector_type:
                 continue  # unknown type: its keys cannot be judged; the type itself is reported
             known = sorted(INJECTOR_KEYS | option_keys)
-            out.add((*path, key), f'unknown injector key {key!r} (known: {", ".join(known)})')
+            out.warn((*path, key), f'unknown injector key {key!r} is ignored (known: {", ".join(known)})')
         elif key in option_keys:
             spec.options[key] = node[key]
 
@@ -224,9 +255,11 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
             return spec
         for key in endpoint:
             if key not in ENDPOINT_KEYS:
-                out.add((*endpoint_path, key), f'unknown topic key {key!r} (known: {", ".join(sorted(ENDPOINT_KEYS))})')
-        for key in ENDPOINT_KEYS & set(node):
-            out.add((*path, key), f"{key!r} is given both here and inside 'topic'")
+                out.warn((*endpoint_path, key),
+                         f'unknown topic key {key!r} is ignored (known: {", ".join(sorted(ENDPOINT_KEYS))})')
+        for key in sorted(ENDPOINT_KEYS & set(node)):
+            out.warn((*path, key), f"{key!r} is given here and in 'topic'; the one in 'topic' is used, "
+                                   'as ros2_fault_injection does')
     spec.input_topic = _topic(endpoint, 'input_topic', endpoint_path, out)
     spec.output_topic = _topic(endpoint, 'output_topic', endpoint_path, out)
     if 'qos_depth' in endpoint:
@@ -253,14 +286,14 @@ def _fault(node: object, path: PathKey, out: _Collector, located: LocatedYaml) -
                       path=path)
     for key in node:
         if key not in FAULT_KEYS:
-            out.add((*path, key), f'unknown fault key {key!r} (known: {", ".join(sorted(FAULT_KEYS))})')
+            out.warn((*path, key), f'unknown fault key {key!r} is ignored (known: {", ".join(sorted(FAULT_KEYS))})')
     if 'active_on_startup' in node:
         fault.active_on_startup = _bool(node['active_on_startup'], (*path, 'active_on_startup'), out)
     if 'active' in node:  # deprecated alias kept by the anchor
         fault.active_on_startup = fault.active_on_startup or _bool(node['active'], (*path, 'active'), out)
     for key in ('start', 'duration'):
         if key in node and node[key] is not None:
-            setattr(fault, key, _number(node[key], (*path, key), out))
+            setattr(fault, key, seconds(node[key], (*path, key), out))
     config = node.get('config', {})
     if config is None:
         config = {}
@@ -283,6 +316,8 @@ def _assertion(node: object, path: PathKey, out: _Collector) -> AssertionSpec | 
         return None
     spec = AssertionSpec(id=_text(node, 'id', path, out) or '', type=_text(node, 'type', path, out) or '', path=path)
     if 'within' in node and node['within'] is not None:
-        spec.within = _number(node['within'], (*path, 'within'), out)
-    spec.params = {k: v for k, v in node.items() if k not in {'id', 'type', 'within'}}
+        spec.within = seconds(node['within'], (*path, 'within'), out)
+    if 'duration' in node and node['duration'] is not None:  # parsed and checked by the anchor, used by nothing
+        spec.duration = seconds(node['duration'], (*path, 'duration'), out)
+    spec.params = {k: v for k, v in node.items() if k not in {'id', 'type', 'within', 'duration'}}
     return spec

@@ -97,6 +97,7 @@ class AssertionSpec:
     id: str
     type: str
     within: float | None = None
+    duration: float | None = None  # accepted as ros2_fault_injection does (checked, otherwise unused)
     params: dict[str, Any] = field(default_factory=dict)
     path: PathKey = ()
 

@@ -8,12 +8,13 @@ ignores (`start` with `active_on_startup`, `duration` without `start`).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from typing import TYPE_CHECKING, Any
 
 from bagfault.assertions.registry import ASSERTION_TYPES
 from bagfault.errors import FieldValueError, InjectorConfigError
-from bagfault.injectors.base import ServiceInjector
+from bagfault.injectors.base import Injector, ServiceInjector
 from bagfault.injectors.registry import get_injector_type, injector_types
 from bagfault.schema import ConfigField
 
@@ -23,8 +24,7 @@ if TYPE_CHECKING:
 
 
 def validate_scenario(scenario: Scenario, out: _Collector) -> None:
-    """Check everything; append problems to `out`, warnings to scenario.warnings."""
-    scenario.warnings = []
+    """Check everything; append problems and warnings to `out`."""
     _duplicates(scenario, out)
     for injector in scenario.injectors:
         _check_injector(injector, out)
@@ -96,10 +96,10 @@ def _check_outputs(scenario: Scenario, out: _Collector) -> None:
 
 def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
     if fault.active_on_startup and fault.start is not None:
-        scenario.warnings.append(f'fault {fault.id!r} has active_on_startup and start; start is ignored')
+        out.warn((*fault.path, 'start'), f'fault {fault.id!r} has active_on_startup and start; start is ignored')
     if (not fault.active_on_startup and fault.duration is not None and fault.start is None
             and fault.after is None and fault.repeat is None and fault.probability_per_second is None):
-        scenario.warnings.append(f'fault {fault.id!r} has duration but no start; duration is ignored')
+        out.warn((*fault.path, 'duration'), f'fault {fault.id!r} has duration but no start; duration is ignored')
     if not fault.injector_id:
         return
     injector = scenario.injector(fault.injector_id)
@@ -116,10 +116,15 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
         field = cls.field(str(key))
         if field is None:
             hint = _closest(str(key), keys)
-            out.add(path, f'unknown key {key!r} for injector type {injector.type!r}'
-                          + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+            out.warn(path, f'unknown key {key!r} for injector type {injector.type!r} is ignored'
+                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+            del fault.config[key]  # still shown in the fault's event details, as the anchor shows it
             continue
         fault.config[key] = _coerce(field, value, path, out)
+        coerced = fault.config[key]
+        if isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double':
+            out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '
+                           'it too)')
     for field in cls.fields:
         if field.required and field.key not in fault.config:
             out.add((*fault.path, 'config'), f'missing required key {field.key!r} for injector type {injector.type!r}')
@@ -128,6 +133,9 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
             cls.check_fault(fault.config, injector.options)
         except InjectorConfigError as exc:
             out.add((*fault.path, 'config'), str(exc))
+        if issubclass(cls, Injector):
+            for warning in cls.config_warnings(fault.config):
+                out.warn((*fault.path, 'config'), warning)
 
 
 def _check_chains(scenario: Scenario, out: _Collector) -> None:

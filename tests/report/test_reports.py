@@ -86,7 +86,7 @@ def test_json_report_has_stable_documented_keys(reports):
     assert set(data) == {
         'schema_version', 'tool', 'mode', 'verdict', 'scenario', 'seed', 'inputs', 'output', 'time', 'messages',
         'fault_events', 'fault_windows', 'injectors', 'assertions', 'assertion_counts', 'assertion_events',
-        'final_status', 'notes'}
+        'final_status', 'notes', 'warnings'}
     documented = (FIXTURES.parent.parent / 'docs' / 'report.md').read_text()
     for key in data:
         assert f'`{key}`' in documented
