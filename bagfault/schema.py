@@ -232,6 +232,7 @@ LIVE_OPTIONS = (
                 'early, and tells live mode the type before any publisher appears.'),
     choice('reliability', 'QoS reliability of the live subscription and publisher.', ('reliable', 'best_effort')),
     choice('durability', 'QoS durability of the live subscription and publisher.', ('volatile', 'transient_local')),
-    choice('on_malformed', 'Live mode: what to do with a message that cannot be decoded (it is counted and logged).',
-           ('forward', 'drop')),
+    choice('on_malformed', 'A message an active fault cannot take (truncated, inconsistent sizes): forward it '
+                           'untouched, drop it, or stop with an error; counted in the summary and report.',
+           ('forward', 'drop', 'error')),
 )

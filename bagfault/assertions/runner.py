@@ -54,6 +54,7 @@ class AssertionRunner:
         self._sequence = itertools.count()
         self._listeners: dict[str, list[AssertionType]] = {}
         self._codecs: dict[str, Any] = {}
+        self.undecodable: dict[str, int] = {}  # topic -> messages the assertions could not decode (skipped)
         problems = []
         for check in self.checks:
             try:
@@ -133,7 +134,13 @@ class AssertionRunner:
         if not listeners:
             return
         codec = self._codecs.get(topic)
-        message = codec.decode(data) if codec is not None else data
+        message = data
+        if codec is not None:
+            try:
+                message = codec.decode(data)
+            except Exception:  # noqa: BLE001 - a malformed message cannot be judged: counted, not a verdict
+                self.undecodable[topic] = self.undecodable.get(topic, 0) + 1
+                return
         for check in listeners:
             if check.pending:
                 check.on_message(topic, time, message)

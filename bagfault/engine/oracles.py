@@ -65,3 +65,7 @@ class Oracles:
             result.assertions, result.assertion_events = self.runner.results, self.runner.events
         if self.fault_manager is not None:
             result.fault_manager = self.fault_manager.summary()
+        for who, observer in (('the assertions', self.runner), ('the fault manager', self.fault_manager)):
+            for topic, count in sorted(getattr(observer, 'undecodable', {}).items()):
+                result.notes.append(f'{count} message{"s" if count != 1 else ""} on {topic} could not be decoded; '
+                                    f'{who} skipped them')

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from bagfault.engine.merge import COPY_RANK, EVENT_RANK, TimeOrderedMerge
 from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
+from bagfault.errors import MalformedMessageError
 from bagfault.events import FaultEvent
 from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 
@@ -184,9 +185,32 @@ class Pipeline:
             if injector.tracks_history:
                 injector.watch(messages)
             return messages
-        if self.batch:
-            return injector.process_batch(messages, runtime.active)
-        return [out for m in messages for out in injector.process(m, runtime.active)]
+        try:
+            if self.batch:
+                return injector.process_batch(messages, runtime.active)
+            return [out for m in messages for out in injector.process(m, runtime.active)]
+        except Exception:  # noqa: BLE001 - a message that cannot take the fault: judged one by one below
+            return [out for m in messages for out in self._one(runtime, m)]
+
+    def _one(self, runtime: InjectorRuntime, message: RawMessage) -> list[RawMessage]:
+        try:
+            return runtime.injector.process(message, runtime.active)
+        except Exception as exc:  # noqa: BLE001 - malformed data is the input's problem: the on_malformed policy
+            return self._malformed(runtime, message, exc)
+
+    def _malformed(self, runtime: InjectorRuntime, message: RawMessage, exc: Exception) -> list[RawMessage]:
+        """on_malformed: forward the message untouched (default), drop it, or stop the run; counted either way."""
+        policy = runtime.spec.options.get('on_malformed', 'forward')
+        topic = runtime.spec.input_topic or ''
+        reason = f'{type(exc).__name__}: {exc}'
+        stats = self.run.stats
+        stats.malformed[topic] = stats.malformed.get(topic, 0) + 1
+        stats.malformed_first.setdefault(topic, (message.log_time, reason))
+        if policy == 'error':
+            seconds = (message.log_time - (stats.origin or 0)) / 1e9
+            raise MalformedMessageError(f'{topic}: message at {seconds:.3f} s cannot take the fault of injector '
+                                        f'{runtime.spec.id!r} ({reason}); on_malformed is error') from None
+        return [] if policy == 'drop' else [message]
 
     def _roundtrip(self, index: int) -> Callable[[Data], Data]:
         """Reference path: decode and re-encode a channel's messages (unchanged when undecodable)."""

@@ -28,6 +28,8 @@ class RunStats:
     replaced_topics: list[str] = field(default_factory=list)
     max_buffered: int = 0
     last_output_time: int | None = None
+    malformed: dict[str, int] = field(default_factory=dict)  # input topic -> messages that could not take a fault
+    malformed_first: dict[str, tuple[int, str]] = field(default_factory=dict)  # input topic -> (time, reason)
 
     def add(self, other: RunStats) -> None:
         """Fold a later pass (play --loop) into these totals; the first pass keeps the origin."""
@@ -42,6 +44,10 @@ class RunStats:
         for topic, count in other.per_topic_out.items():
             self.per_topic_out[topic] = self.per_topic_out.get(topic, 0) + count
         self.events.extend(other.events)
+        for topic, count in other.malformed.items():
+            self.malformed[topic] = self.malformed.get(topic, 0) + count
+        for topic, first in other.malformed_first.items():
+            self.malformed_first.setdefault(topic, first)
         self.max_buffered = max(self.max_buffered, other.max_buffered)
         self.replaced_topics = list(dict.fromkeys([*self.replaced_topics, *other.replaced_topics]))
 

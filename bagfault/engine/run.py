@@ -226,7 +226,14 @@ class Run:
     def result(self, mode: Mode, inputs: Sequence[Path], output: Path | None, seed: int,
                stats: RunStats | None = None) -> RunResult:
         """The verdicts, fault table and notes of this pass (with `stats` of several passes if given)."""
-        result = RunResult(self.scenario, list(inputs), output, seed, stats or self.stats, list(self.notes),
+        stats = stats or self.stats
+        notes = list(self.notes)
+        for topic, count in sorted(stats.malformed.items()):
+            time, reason = stats.malformed_first[topic]
+            seconds = (time - (stats.origin or time)) / 1e9
+            notes.append(f'{count} message{"s" if count != 1 else ""} on {topic} could not take a fault and followed '
+                         f'on_malformed (first at {seconds:.3f} s: {reason})')
+        result = RunResult(self.scenario, list(inputs), output, seed, stats, notes,
                            [*self.scenario.warnings, *self.warnings], mode=mode)
         self.oracles.fill(result)
         return result

@@ -32,6 +32,8 @@ if TYPE_CHECKING:
     from bagfault.scenario.model import FaultSpec, Scenario
 
 NS = 1_000_000_000
+NS_PER_MS = 1_000_000
+MAX_SECONDS = 1e7  # as bagfault.scenario.loader.MAX_SECONDS
 
 
 def seconds_to_ns(seconds: float) -> int:
@@ -59,12 +61,30 @@ class Activation:
             duration = float(duration_text) if plus else None
         except ValueError:
             raise ValueError(f'{text!r}: START and DURATION must be seconds, e.g. imu_bias@5+10') from None
-        if start < 0 or (duration is not None and duration < 0) or not math.isfinite(start):
-            raise ValueError(f'{text!r}: times must be 0 or more seconds')
+        for value in (start, duration):
+            if value is not None and not (math.isfinite(value) and 0 <= value <= MAX_SECONDS):
+                raise ValueError(f'{text!r}: times must be from 0 to {MAX_SECONDS:g} seconds')
         return cls(fault_id, start, duration)
 
 
+def _ms(seconds: float) -> int:
+    """Whole milliseconds, truncated toward zero, as the anchor's static_cast<int64_t>(seconds * 1000)."""
+    return int(seconds * 1000.0)
+
+
+def _anchor_window(fault: FaultSpec) -> tuple[int, int | None]:
+    """`active_on_startup` / `start` + `duration` as ros2_fault_injection schedules them: whole milliseconds,
+    and timers of at least 1 ms (a `start: 0` fault activates 1 ms after time zero)."""
+    if fault.active_on_startup:
+        end = None if fault.duration is None else max(_ms(fault.duration), 1) * NS_PER_MS
+        return 0, end
+    start = _ms(fault.start or 0.0)
+    end = None if fault.duration is None else max(start + _ms(fault.duration), 1) * NS_PER_MS
+    return max(start, 1) * NS_PER_MS, end
+
+
 def _window(fault: FaultSpec) -> tuple[int, int | None]:
+    """The start/duration window of the extended schedules (repeat, random), in exact nanoseconds."""
     begin = 0 if fault.active_on_startup else seconds_to_ns(fault.start or 0.0)
     end = None if fault.duration is None else begin + seconds_to_ns(fault.duration)
     return begin, end
@@ -141,9 +161,9 @@ class FaultScheduler:
             elif fault.probability_per_second is not None:
                 self._add(fault.id, _random(fault, self.random[fault.id]), 'scheduled')
             elif fault.active_on_startup:
-                self._add(fault.id, _plain(*_window(fault)), 'startup')
+                self._add(fault.id, _plain(*_anchor_window(fault)), 'startup')
             elif fault.start is not None:
-                self._add(fault.id, _plain(*_window(fault)), 'scheduled')
+                self._add(fault.id, _plain(*_anchor_window(fault)), 'scheduled')
 
     @staticmethod
     def _windows(windows: list[Activation]) -> Iterator[tuple[int, bool]]:
@@ -174,6 +194,8 @@ class FaultScheduler:
         events = []
         while self._heap and self._heap[0][0] <= now:
             time, _, _, fault_id, state, source = heapq.heappop(self._heap)
+            if source == 'startup' and not state:
+                source = 'scheduled'  # the end of a startup fault's duration is a timer, as in the anchor
             if fault_id in self._sequences:
                 self._pull(fault_id)
             event = self.set_state(fault_id, state, time, source)

@@ -54,6 +54,7 @@ class FaultManagerObserver:
         self.injected = InjectedReports(config.reports, scenario, set(types))
         self.snapshots = SnapshotRecorder(config.snapshots, channels, catalog, blackbox_base, blackbox_numbers)
         self._codecs: dict[str, Any] = {}
+        self.undecodable: dict[str, int] = {}  # topic -> messages the oracle could not decode (skipped)
         self._conditions: dict[str, list[tuple[Any, FieldPath]]] = {}
         self._clears = sorted(config.clears, key=lambda c: c.at)
         if config.diagnostics_topic and config.diagnostics_topic in types:
@@ -123,7 +124,11 @@ class FaultManagerObserver:
             self.manager.report(report)
         codec = self._codecs.get(topic)
         if codec is not None:
-            message = codec.decode(data)
+            try:
+                message = codec.decode(data)
+            except Exception:  # noqa: BLE001 - a malformed message cannot be judged: counted, not a report
+                self.undecodable[topic] = self.undecodable.get(topic, 0) + 1
+                return
             if topic == self.config.diagnostics_topic:
                 for report in diagnostics_reports(message, time, self.config.diagnostics_codes):
                     self.manager.report(report)

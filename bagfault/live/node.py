@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from bagfault import __version__
-from bagfault.errors import ReloadError, ScenarioError
+from bagfault.errors import BagfaultError, MalformedMessageError, ReloadError, ScenarioError
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
 from bagfault.live.delay import DelayLine
@@ -75,6 +75,7 @@ class ProxyNode:
         self._warned: set[tuple[str, str]] = set()
         self._last_diagnostics = 0.0
         self.unsent = 0
+        self.failure: BagfaultError | None = None  # raised once the proxy has stopped cleanly
 
     # -- time -------------------------------------------------------------------------------
     def now(self) -> int:
@@ -134,7 +135,13 @@ class ProxyNode:
     def _on_message(self, topic: LiveTopic, data: bytes) -> None:
         assert self.session is not None and self.delay is not None
         before = topic.malformed
-        outputs = self.session.receive(topic, data)
+        try:
+            outputs = self.session.receive(topic, data)
+        except MalformedMessageError as exc:
+            self.logger.error(str(exc))
+            self.failure = exc
+            self.stop.set('a malformed message (on_malformed: error)')
+            return
         if topic.malformed != before and (topic.malformed == 1 or topic.malformed % MALFORMED_LOG_EVERY == 0):
             action = topic.spec.options.get('on_malformed', 'forward')
             self.logger.warning(f'{topic.input_topic}: malformed message #{topic.malformed} ({topic.last_error}); '

@@ -40,6 +40,8 @@ def run_proxy(
         finally:
             executor.shutdown()
         proxy.close()
+    if proxy.failure is not None:
+        raise proxy.failure
     session = proxy.session
     if session is None:
         return RunResult(scenario, [], None, seed, RunStats(), [f'stopped ({stop.reason}) before the proxy started'],

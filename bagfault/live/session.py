@@ -18,7 +18,14 @@ from typing import TYPE_CHECKING, Any
 from bagfault.engine.routing import build_injector
 from bagfault.engine.run import NullSink, Run
 from bagfault.engine.scheduler import FaultScheduler
-from bagfault.errors import EngineError, FieldValueError, InjectorConfigError, LiveError, ReloadError
+from bagfault.errors import (
+    EngineError,
+    FieldValueError,
+    InjectorConfigError,
+    LiveError,
+    MalformedMessageError,
+    ReloadError,
+)
 from bagfault.events import FaultEvent
 from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 from bagfault.injectors.registry import get_injector_type
@@ -192,12 +199,17 @@ class LiveSession:
                 return [message]
             try:
                 return injector.process(message, topic.active)
-            except Exception as exc:  # noqa: BLE001 - a malformed message must never stop the proxy
+            except Exception as exc:  # noqa: BLE001 - a malformed message follows on_malformed, never a crash
                 topic.malformed += 1
                 topic.last_error = f'{type(exc).__name__}: {exc}'
-                if topic.spec.options.get('on_malformed', 'forward') == 'drop':
-                    return []
-                return [message]
+                self.run.stats.malformed[topic.input_topic] = topic.malformed
+                self.run.stats.malformed_first.setdefault(topic.input_topic, (now, topic.last_error))
+                policy = topic.spec.options.get('on_malformed', 'forward')
+                if policy == 'error':
+                    raise MalformedMessageError(
+                        f'{topic.input_topic}: a message cannot take the fault of injector {topic.spec.id!r} '
+                        f'({topic.last_error}); on_malformed is error') from None
+                return [] if policy == 'drop' else [message]
 
     def sent(self, topic: LiveTopic, data: bytes | memoryview) -> int:
         """A message was published on the output topic: record and observe it; return its time."""

@@ -70,7 +70,8 @@ def build(result: RunResult) -> dict[str, Any]:
             'duration_s': seconds(stats.last_time, stats.first_time),
         },
         'messages': {'read': stats.input_messages, 'written': stats.output_messages,
-                     'per_topic_written': dict(sorted(stats.per_topic_out.items()))},
+                     'per_topic_written': dict(sorted(stats.per_topic_out.items())),
+                     'malformed': dict(sorted(stats.malformed.items()))},
         'fault_events': [
             {'t_s': seconds(e.time, origin), 'stamp_ns': e.time, 'fault_id': e.fault_id,
              'injector_id': e.injector_id, 'state': e.state, 'source': e.source, 'details': e.details}

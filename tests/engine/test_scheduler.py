@@ -36,7 +36,7 @@ def test_startup_scheduled_and_manual_faults():
     assert sched.next_time() == ORIGIN
     assert timeline(sched, 100) == [
         (0.0, 'boot', 'active', 'startup'),
-        (2.0, 'boot', 'inactive', 'startup'),
+        (2.0, 'boot', 'inactive', 'scheduled'),  # the anchor's stop timer says scheduled (fault_scheduler.cpp)
         (5.0, 'win', 'active', 'scheduled'),
         (7.5, 'open', 'active', 'scheduled'),
         (15.0, 'win', 'inactive', 'scheduled'),

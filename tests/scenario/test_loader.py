@@ -260,7 +260,7 @@ def test_live_injector_keys_are_checked_like_the_rest():
     assert ('injectors[0].reliability', "'fast' is not one of reliable, best_effort") in found
     assert ('injectors[1]', "message_type sensor_msgs/msg/Imu does not fit injector type 'odom', "
                             'which takes nav_msgs/msg/Odometry') in found
-    assert ('injectors[2].on_malformed', "'ignore' is not one of forward, drop") in found
+    assert ('injectors[2].on_malformed', "'ignore' is not one of forward, drop, error") in found
     assert len(found) == 3
     ok = parse_scenario('injector: {id: s, type: topic, input_topic: /e, output_topic: /f, '
                         'reliability: best_effort, durability: transient_local, message_type: std_msgs/msg/String}\n'
