@@ -215,8 +215,10 @@ def stddev(key: str, description: str, **kw: Any) -> ConfigField:
 DROP_PROBABILITY = probability(
     'drop_probability', 'Probability that an incoming message is dropped (0..1).'
 )
+MAX_DELAY_MS = 3_600_000  # an hour: delayed messages wait in memory (delay x rate of them)
 DELAY_MS = integer(
-    'delay_ms', 'Delay added before the message is forwarded, in milliseconds.', 0, min=0
+    'delay_ms', 'Delay added before the message is forwarded, in milliseconds (at most an hour).', 0, min=0,
+    max=MAX_DELAY_MS,
 )
 
 

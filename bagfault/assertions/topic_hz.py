@@ -1,4 +1,10 @@
-"""`topic_hz`: the rate over a rolling window reaches `min_hz` (anchor meaning)."""
+"""`topic_hz`: the rate over a rolling window reaches `min_hz`, sampled as ros2_fault_injection samples it.
+
+The anchor's runner looks every 100 ms (from its start) at the messages
+received in the last `window` seconds and passes when count / window >=
+min_hz; it fails at the first look after `within`. Here the looks are at
+bag time zero + k x 100 ms, each counting the messages of (t - window, t].
+"""
 
 from __future__ import annotations
 
@@ -13,6 +19,7 @@ if TYPE_CHECKING:
     from bagfault.scenario.model import AssertionSpec, Scenario
 
 NS = 1_000_000_000
+TICK = 100_000_000  # the anchor's assertion timer, 100 ms
 
 
 class TopicHzAssertion(AssertionType):
@@ -55,28 +62,31 @@ class TopicHzAssertion(AssertionType):
             self.wrong_type = have
 
     def deadline(self) -> int | None:
-        """With a type mismatch the assertion fails at once."""
-        return self.runner.origin - 1 if self.wrong_type else super().deadline()
+        """The first look (or at once, with a type mismatch)."""
+        return self.runner.origin - 1 if self.wrong_type else self.runner.origin + TICK
 
     def on_deadline(self, time: int) -> None:
-        """Type mismatch, or rate never reached in time."""
+        """A look: pass when the rate is reached, fail after `within`, else look again 100 ms later."""
         if self.wrong_type:
             self.fail(self.runner.origin, f"topic {self.params['topic']} carries {self.wrong_type}, "
                                           f"not {self.params['message_type']}")
-        else:
-            super().on_deadline(time)
-
-    def on_message(self, topic: str, time: int, message: Any) -> None:
-        """Slide the window; pass when the rate reaches min_hz."""
+            return
         times = self.times
-        times.append(time)
-        while time - times[0] > self.window:
+        while times and times[0] <= time - self.window:
             times.popleft()
         rate = len(times) / self.params['window']
         self.best = max(self.best, rate)
         if rate >= self.params['min_hz']:
-            self.passed(time, f"{topic} at {rate:.2f} Hz over {self.params['window']:g} s at {self.runner.t(time)} "
-                              f"(min {self.params['min_hz']:g} Hz)")
+            self.passed(time, f"{self.params['topic']} at {rate:.2f} Hz over {self.params['window']:g} s at "
+                              f"{self.runner.t(time)} (min {self.params['min_hz']:g} Hz)")
+        elif self.spec.within is not None and time - self.runner.origin > round(self.spec.within * NS):
+            self.fail(time, f'{self.waiting_for()} within {self.spec.within:g} s (looked at {self.runner.t(time)})')
+        else:
+            self.runner.schedule(self, time + TICK)
+
+    def on_message(self, topic: str, time: int, message: Any) -> None:
+        """Counted at the next look."""
+        self.times.append(time)
 
     def waiting_for(self) -> str:
         """Failure text with the best rate seen."""

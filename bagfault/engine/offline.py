@@ -66,6 +66,7 @@ def replay(
     run = Run(scenario, sink, catalog, routing.schemas, observers=observers, blackbox_base=blackbox_base,
               blackbox_numbers=blackbox_numbers)
     run.notes += routing.notes
+    run.warnings += routing.warnings
     run.stats.replaced_topics = list(routing.replaced)
     pipeline = Pipeline(inputs, run, routing.routes, routing.copies, seed=seed, activations=activations,
                         start_offset=start_offset, batch=batch, progress=progress)

@@ -21,6 +21,8 @@ from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
+    from collections.abc import Collection
+
     from bagfault.engine.run import Sink
     from bagfault.io.channel import Channel
     from bagfault.io.sources import InputSet
@@ -37,6 +39,7 @@ class Routing:
     routes: dict[int, list[InjectorRuntime]] = field(default_factory=dict)
     copies: dict[int, OutputChannel] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
     replaced: list[str] = field(default_factory=list)
     schemas: dict[str, tuple[str, str, str]] = field(default_factory=dict)
 
@@ -64,28 +67,28 @@ def _schema(channel: Channel, catalog: TypeCatalog) -> tuple[str, str]:
 
 @dataclass(frozen=True)
 class _Wired:
-    """A topic injector whose input topic is in the bag."""
+    """A topic injector whose input topic is in the bag, with both topic names as the bag spells them."""
 
     spec: InjectorSpec
     cls: type[Injector]
     channels: list[Channel]
+    input_topic: str
+    output_topic: str
 
-    @property
-    def input_topic(self) -> str:
-        assert self.spec.input_topic is not None  # topic injectors have both endpoints (validated)
-        return self.spec.input_topic
 
-    @property
-    def output_topic(self) -> str:
-        assert self.spec.output_topic is not None
-        return self.spec.output_topic
+def bag_name(name: str, topics: Collection[str]) -> str:
+    """A scenario's topic name as the bag spells it: `/scan` and `scan` are one topic of the root namespace."""
+    if name in topics:
+        return name
+    other = name[1:] if name.startswith('/') else '/' + name
+    return other if other in topics else name
 
 
 def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink) -> Routing:
     """Check the scenario against the bag and register every output channel."""
     _check_encodings(inputs)
     routing = Routing()
-    wired = _wire(inputs, scenario, routing.notes)
+    wired = _wire(inputs, scenario, routing)
     _check_no_chains(scenario, wired)
     _register(inputs, scenario, catalog, sink, wired, routing)
     return routing
@@ -100,7 +103,7 @@ def _check_encodings(inputs: InputSet) -> None:
             )
 
 
-def _wire(inputs: InputSet, scenario: Scenario, notes: list[str]) -> list[_Wired]:
+def _wire(inputs: InputSet, scenario: Scenario, routing: Routing) -> list[_Wired]:
     """The topic injectors that can run on this bag; the others are noted (as the anchor runs the rest)."""
     topics = inputs.topics()
     wired = []
@@ -108,16 +111,18 @@ def _wire(inputs: InputSet, scenario: Scenario, notes: list[str]) -> list[_Wired
         cls = get_injector_type(spec.type)
         assert cls is not None
         if not issubclass(cls, Injector):
-            notes.append(f'injector {spec.id!r} ({spec.type}) proxies a service: live mode only, '
-                         'its faults have no effect offline')
+            routing.notes.append(f'injector {spec.id!r} ({spec.type}) proxies a service: live mode only, '
+                                 'its faults have no effect offline')
             continue
-        assert spec.input_topic is not None
-        found = topics.get(spec.input_topic)
+        assert spec.input_topic is not None and spec.output_topic is not None  # validated
+        input_topic = bag_name(spec.input_topic, topics)
+        found = topics.get(input_topic)
         if not found:
-            raise EngineError(f'{scenario.name}: injector {spec.id!r}: input topic {spec.input_topic} is not in '
-                              'the bag; ' + _topics_listing(inputs))
+            routing.warnings.append(f'{scenario.name}: injector {spec.id!r}: input topic {spec.input_topic} is not '
+                                    f'in the bag, so its faults have no effect; {_topics_listing(inputs)}')
+            continue
         _check_types(scenario, spec, cls, found)
-        wired.append(_Wired(spec, cls, found))
+        wired.append(_Wired(spec, cls, found, input_topic, bag_name(spec.output_topic, topics)))
     return wired
 
 

@@ -91,6 +91,7 @@ class Injector:
         self.codec = codec
         self.faults = list(faults)
         self.tracks_history = False
+        self._released = 0  # when the last delayed message goes out: delayed messages leave in order
 
     @property
     def busy(self) -> bool:
@@ -217,14 +218,19 @@ class Injector:
         messages: list[RawMessage],
         active: Sequence[ActiveFault],
     ) -> list[RawMessage]:
-        """Shift log and publish time by the longest active delay."""
+        """Shift log and publish time by the longest active delay (see `delayed`)."""
         delay_ms, _ = strongest(active, 'delay_ms')
         if delay_ms <= 0:
             return messages
         shift = int(delay_ms) * 1_000_000
-        return [
-            RawMessage(m.log_time + shift, m.publish_time + shift, m.data, m.order) for m in messages
-        ]
+        return [self.delayed(m, shift) for m in messages]
+
+    def delayed(self, message: RawMessage, shift: int) -> RawMessage:
+        """The message `shift` ns later, but never before the previous delayed one: the anchor's delay queue
+        is first in, first out, so a delay that shrinks while messages wait never reorders them."""
+        due = max(message.log_time + shift, self._released)
+        self._released = due
+        return RawMessage(due, message.publish_time + (due - message.log_time), message.data, message.order)
 
 
 class ServiceInjector:

@@ -53,6 +53,12 @@ class OdomInjector(Injector):
                     min=0.0, finite=False),
     )
 
+    @classmethod
+    def config_warnings(cls, config: dict[str, Any]) -> list[str]:
+        """Scales below 1 do nothing: covariance is only ever inflated (the anchor takes max(1.0, scales))."""
+        return [f'{key} {config[key]:g} is below 1 and changes nothing: ros2_fault_injection only inflates covariance'
+                for key in ('pose_covariance_scale', 'twist_covariance_scale') if config.get(key, 1.0) < 1.0]
+
     def mutate(self, message: Any, time: int, active: Sequence[ActiveFault]) -> None:
         """Apply bias, noise, yaw bias, yaw noise, covariance (anchor order)."""
         position = message.pose.pose.position
@@ -73,11 +79,10 @@ class OdomInjector(Injector):
 
 
 def inflate_covariance(holder: Any, active: Sequence[ActiveFault], prefix: str) -> None:
-    """covariance = max(scale * covariance, floor) when a scale or floor is active."""
-    scale, scale_owner = strongest(active, f'{prefix}_covariance_scale', 1.0)
-    floor, _ = strongest(active, f'{prefix}_covariance_floor', 0.0)
-    if scale_owner is None and floor <= 0.0:
-        return
+    """covariance = max(scale * covariance, floor), the scale being the largest of 1.0 and the active scales
+    (the anchor's active_max_double with fallback 1.0: covariance is only ever inflated)."""
+    scale = max(1.0, strongest(active, f'{prefix}_covariance_scale', 1.0)[0])
+    floor = max(0.0, strongest(active, f'{prefix}_covariance_floor', 0.0)[0])
     if scale == 1.0 and floor <= 0.0:
         return
     holder.covariance = np.maximum(np.asarray(holder.covariance, dtype=np.float64) * scale, floor)

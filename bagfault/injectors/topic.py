@@ -20,7 +20,7 @@ from bagfault.faults.combine import strongest, total
 from bagfault.faults.drop import should_drop
 from bagfault.faults.header import has_header, shift_stamp
 from bagfault.injectors.base import Injector, RawMessage
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, boolean, integer, probability
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, MAX_DELAY_MS, ConfigField, boolean, integer, probability
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -28,6 +28,8 @@ if TYPE_CHECKING:
     from bagfault.injectors.base import ActiveFault
 
 NS_PER_MS = 1_000_000
+MAX_STAMP_OFFSET_MS = 86_400_000 * 366  # a year either way
+MIN_THROTTLE_HZ = 0.001
 SIMPLE = frozenset({'drop_probability', 'delay_ms'})
 
 
@@ -44,12 +46,15 @@ class TopicInjector(Injector):
         integer('burst_period', '... out of every this many messages (counted from the fault start).', 0, min=0),
         boolean('blackout', 'Drop every message.'),
         DELAY_MS,
-        integer('jitter_ms', 'Extra delay drawn uniformly from [0, jitter_ms] per message, in milliseconds.', 0, min=0),
+        integer('jitter_ms', 'Extra delay drawn uniformly from [0, jitter_ms] per message, in milliseconds.', 0, min=0,
+                max=MAX_DELAY_MS),
         probability('duplicate_probability', 'Probability that a message is delivered twice (0..1).'),
         integer('reorder_window', 'Release messages in groups of this many, shuffled (deterministic).', 0, min=0),
-        ConfigField('throttle_hz', 'double', 'Keep at most this many messages per second, in Hz.', 0.0, min=0.0),
+        ConfigField('throttle_hz', 'double', 'Keep at most this many messages per second, in Hz (0: off, else at '
+                    'least 0.001).', 0.0, min=0.0),
         boolean('freeze', 'Repeat the last message received before the fault, at the original times.'),
-        integer('stamp_offset_ms', 'Shift header.stamp by this many milliseconds (header only is touched).', 0),
+        integer('stamp_offset_ms', 'Shift header.stamp by this many milliseconds (header only is touched).', 0,
+                min=-MAX_STAMP_OFFSET_MS, max=MAX_STAMP_OFFSET_MS),
         probability('corrupt_probability', 'Probability that a message gets bits flipped after the CDR header.'),
         integer('corrupt_bits', 'How many bits to flip in a corrupted message.', 1, min=1),
     )
@@ -66,6 +71,9 @@ class TopicInjector(Injector):
             raise InjectorConfigError('reorder_window of 1 reorders nothing; use 2 or more')
         if 'corrupt_bits' in config and 'corrupt_probability' not in config:
             raise InjectorConfigError('corrupt_bits needs corrupt_probability')
+        if 0 < config.get('throttle_hz', 0) < MIN_THROTTLE_HZ:
+            raise InjectorConfigError(f'throttle_hz {config["throttle_hz"]:g} is below {MIN_THROTTLE_HZ:g} Hz '
+                                      '(one message in over 16 minutes); use blackout to drop everything')
 
     @classmethod
     def decodes(cls, faults: Sequence[Any]) -> bool:
@@ -196,8 +204,7 @@ class TopicInjector(Injector):
             shift = base
             if owner is not None and jitter_ms > 0:
                 shift += round(owner.random.stream('jitter_ms').random() * jitter_ms * NS_PER_MS)
-            out.append(message if shift == 0 else
-                       RawMessage(message.log_time + shift, message.publish_time + shift, message.data, message.order))
+            out.append(message if shift == 0 else self.delayed(message, shift))
         return out
 
     def _release(self, time: int, order: int, owner: ActiveFault | None = None) -> list[RawMessage]:

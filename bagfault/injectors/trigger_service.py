@@ -17,7 +17,7 @@ class TriggerServiceInjector(ServiceInjector):
     fields: ClassVar[tuple[ConfigField, ...]] = (
         ConfigField('delay_ms', 'int', 'Delay before the response is returned, in milliseconds.', 0, min=0),
         boolean('force_failure', 'Answer success=false without calling the target service.'),
-        string('failure_message', 'Response message used while force_failure is active.', 'Injected failure'),
+        string('failure_message', 'Response message used while force_failure is active.', 'Injected service failure'),
     )
 
 

@@ -20,6 +20,7 @@ class DelayLine:
         self.clock = clock
         self.publish = publish
         self._heap: list[tuple[int, int, LiveTopic, bytes]] = []
+        self._last: dict[int, int] = {}  # topic -> due time of its last queued message
         self._counter = itertools.count()
         self._condition = threading.Condition()
         self._stopped = False
@@ -27,8 +28,11 @@ class DelayLine:
         self._thread.start()
 
     def put(self, due: int, topic: LiveTopic, data: bytes) -> None:
-        """Publish `data` on the topic's output at ROS time `due` (ns)."""
+        """Publish `data` on the topic's output at ROS time `due` (ns), never before what the topic queued earlier
+        (first in, first out per topic, as the anchor's delay queue: a shrinking delay keeps the order)."""
         with self._condition:
+            due = max(due, self._last.get(id(topic), due))
+            self._last[id(topic)] = due
             heapq.heappush(self._heap, (due, next(self._counter), topic, data))
             self._condition.notify()
 

@@ -24,6 +24,10 @@ if TYPE_CHECKING:
 
 TARGET_WAIT = 0.1  # seconds to wait for the target to be discovered
 TARGET_TIMEOUT = 2.0  # seconds to wait for the target's answer
+# The anchor's response texts (trigger_service_fault_injector.cpp), so clients that match on them keep working.
+DEFAULT_FAILURE = 'Injected service failure'
+UNAVAILABLE = 'Trigger service unavailable'
+TIMEOUT = 'Trigger service timeout'
 
 
 class TriggerProxy:
@@ -67,13 +71,14 @@ class TriggerProxy:
         failing = next((f for f in active if f.config.get('force_failure')), None)
         if failing is not None:
             response.success = False
-            response.message = str(failing.config.get('failure_message', 'Injected failure'))
+            response.message = str(failing.config.get('failure_message', DEFAULT_FAILURE))
             return response
         if not self.client.service_is_ready():
             await self._after(TARGET_WAIT)
         if not self.client.service_is_ready():
             response.success = False
-            response.message = f'target service {self.spec.target_service} is not available'
+            self.node.get_logger().warning(f'Trigger service {self.spec.target_service!r} is not available')
+            response.message = UNAVAILABLE
             return response
         answer = self.client.call_async(request)
         done = Future()
@@ -82,7 +87,8 @@ class TriggerProxy:
         timeout.add_done_callback(lambda _f: done.done() or done.set_result('timeout'))
         if await done == 'timeout':
             response.success = False
-            response.message = f'target service {self.spec.target_service} did not answer within {TARGET_TIMEOUT:g} s'
+            self.node.get_logger().warning(f'Trigger service {self.spec.target_service!r} did not respond in time')
+            response.message = TIMEOUT
             return response
         timeout.cancel()
         reply = answer.result()

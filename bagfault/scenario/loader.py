@@ -160,10 +160,10 @@ def _text(node: dict[str, Any], key: str, path: PathKey, out: _Collector, *, req
             out.add(path, f'missing required key {key!r}')
         return None
     value = node[key]
-    if not isinstance(value, (str, int, float)) or isinstance(value, bool):
+    if isinstance(value, (dict, list)):
         out.add((*path, key), f'{value!r} is not a string')
         return None
-    text = str(value)
+    text = value if isinstance(value, str) else out.located.raw_text((*path, key), value)  # as written: `id: on`
     if not text:
         out.add((*path, key), 'must not be empty')
         return None
@@ -272,10 +272,8 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
 
 
 def _topic(node: dict[str, Any], key: str, path: PathKey, out: _Collector) -> str | None:
-    name = _text(node, key, path, out)
-    if name is not None and not name.startswith('/'):
-        name = '/' + name
-    return name
+    """A topic name as written: a bag may hold names without the leading slash (ROS 1 bags, test bags)."""
+    return _text(node, key, path, out)
 
 
 def _fault(node: object, path: PathKey, out: _Collector, located: LocatedYaml) -> FaultSpec | None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from bagfault.scenario.loader import seconds
 from bagfault.scenario.model import After, FaultSpec, Repeat
 
 if TYPE_CHECKING:
@@ -17,14 +18,9 @@ if TYPE_CHECKING:
     from bagfault.scenario.yamlnodes import PathKey
 
 
-def _seconds(value: object, path: PathKey, out: _Collector, *, positive: bool) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
-        out.add(path, f'{value!r} is not a number of seconds')
-        return None
-    if value < 0 or (positive and value == 0):
-        out.add(path, f'{value} must be {"greater than 0" if positive else "0 or more"}')
-        return None
-    return float(value)
+MIN_PERIOD = 0.01  # seconds: a repeat faster than 100 Hz toggles faster than any sensor it acts on
+MIN_SPAN = 0.001  # seconds: the shortest `on` and `hold`, the anchor's timer resolution
+MAX_RATE = 100.0  # random activations per second at most
 
 
 def parse_extended_schedule(fault: FaultSpec, node: dict[str, Any], path: PathKey, out: _Collector) -> None:
@@ -34,8 +30,8 @@ def parse_extended_schedule(fault: FaultSpec, node: dict[str, Any], path: PathKe
         if not isinstance(value, dict) or set(value) != {'period', 'on'}:
             out.add(where, 'must be a mapping {period: S, on: S}')
         else:
-            period = _seconds(value['period'], (*where, 'period'), out, positive=True)
-            on = _seconds(value['on'], (*where, 'on'), out, positive=True)
+            period = seconds(value['period'], (*where, 'period'), out, positive=True, minimum=MIN_PERIOD)
+            on = seconds(value['on'], (*where, 'on'), out, positive=True, minimum=MIN_SPAN)
             if period is not None and on is not None:
                 if on > period:
                     out.add((*where, 'on'), f'{on} is longer than the period {period}')
@@ -43,13 +39,15 @@ def parse_extended_schedule(fault: FaultSpec, node: dict[str, Any], path: PathKe
                     fault.repeat = Repeat(period=period, on=on)
     if 'probability_per_second' in node:
         where = (*path, 'probability_per_second')
-        rate = _seconds(node['probability_per_second'], where, out, positive=True)
-        if rate is not None:
+        rate = seconds(node['probability_per_second'], where, out, positive=True)
+        if rate is not None and rate > MAX_RATE:
+            out.add(where, f'{rate:g} activations per second is more than {MAX_RATE:g}')
+        elif rate is not None:
             fault.probability_per_second = rate
         if 'hold' not in node:
             out.add(where, "needs 'hold': how long each random activation lasts, in seconds")
     if 'hold' in node:
-        fault.hold = _seconds(node['hold'], (*path, 'hold'), out, positive=True)
+        fault.hold = seconds(node['hold'], (*path, 'hold'), out, positive=True, minimum=MIN_SPAN)
         if 'probability_per_second' not in node:
             out.add((*path, 'hold'), "only makes sense with 'probability_per_second'")
     if 'after' in node:
@@ -57,7 +55,7 @@ def parse_extended_schedule(fault: FaultSpec, node: dict[str, Any], path: PathKe
         if not isinstance(value, dict) or 'fault' not in value or not set(value) <= {'fault', 'delay'}:
             out.add(where, 'must be a mapping {fault: ID, delay: S}')
         else:
-            delay = _seconds(value.get('delay', 0.0), (*where, 'delay'), out, positive=False)
+            delay = seconds(value.get('delay', 0.0), (*where, 'delay'), out)
             if delay is not None:
                 fault.after = After(fault=str(value['fault']), delay=delay)
     kinds = [k for k in ('repeat', 'probability_per_second', 'after') if node.get(k) is not None]

@@ -133,6 +133,7 @@ class _Converter:
 
     def mapping(self, node: yaml.MappingNode, path: PathKey) -> dict[Any, Any]:
         mapping: dict[Any, Any] = {}
+        lines: dict[Any, int] = {}
         merged: list[yaml.MappingNode] = []
         for key_node, value_node in node.value:
             if key_node.tag == 'tag:yaml.org,2002:merge' or (isinstance(key_node, yaml.ScalarNode)
@@ -143,12 +144,12 @@ class _Converter:
             key = key_node.value if isinstance(key_node, yaml.ScalarNode) else str(self.convert(key_node, path))
             if key in mapping:
                 line = key_node.start_mark.line + 1
-                first = self.out.marks.get((*path, key), (0, 0))[0]
                 self.out.warnings.append((
                     f'{line}:{key_node.start_mark.column + 1}', (*path, key),
-                    f'key given twice (first on line {first}); the first value is used, as ros2_fault_injection '
+                    f'key given twice (first on line {lines[key]}); the first value is used, as ros2_fault_injection '
                     'reads it'))
                 continue
+            lines[key] = key_node.start_mark.line + 1
             mapping[key] = self.convert(value_node, (*path, key))
         for source in merged:  # merge keys fill in what the mapping does not set itself
             for key, value in self.mapping(source, path).items():

@@ -5,9 +5,10 @@ from __future__ import annotations
 import textwrap
 
 import pytest
-from helpers import FIXTURES
+from helpers import FIXTURES, NS, make_bag, run_inline
 
 from bagfault import api
+from bagfault.demo.synthetic import DEFAULT_START as START
 from bagfault.errors import AssertionSetupError
 from bagfault.scenario import ScenarioError, parse_scenario
 
@@ -157,3 +158,14 @@ def test_bad_field_path_stops_the_run_naming_the_closest_path(tmp_path):
     assert "'pose.pose.postion.x' is not a field of nav_msgs/msg/Odometry" in text
     assert 'closest valid path: pose.pose.position.x' in text
     assert not (tmp_path / 'out.mcap').exists()
+
+
+@pytest.mark.parametrize(('min_hz', 'state', 'at'), [(50.0, 'passed', 3.0), (50.2, 'failed', 8.1)])
+def test_topic_hz_looks_every_100_ms_as_the_anchor_does(tmp_path, min_hz, state, at):
+    """A 50 Hz topic holds 150 messages in any 3 s (t - 3, t]: 50 Hz exactly, never 50.2 (anchor runner, 100 ms timer)."""
+    bag = make_bag(tmp_path / 'odom.mcap', [('/odom', 'nav_msgs/msg/Odometry', 50.0)], 20.0)
+    text = (f'injectors: []\nassertions:\n  - {{id: hz, type: topic_hz, topic: /odom, message_type: nav_msgs/msg/Odometry, '
+            f'min_hz: {min_hz}, window: 3.0, within: 8.0}}\n')
+    _, result = run_inline(tmp_path, text, bag)
+    [hz] = result.assertions
+    assert (hz.state, (hz.time - START) / NS) == (state, at)  # failed at the first look after within (8.0 s)
