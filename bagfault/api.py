@@ -95,10 +95,13 @@ def run(
     batch: bool = True,
     progress: Progress | None = None,
     observers: Sequence[Observer] = (),
+    salvage: bool = False,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP.
 
-    `observers` see every output record in time order (report collectors).
+    `observers` see every output record in time order (report collectors). Corruption the file formats
+    detect (CRCs, record lengths, impossible rows) stops the run; with `salvage` what can be read is copied
+    and every skipped part is a warning.
     """
     loaded = scenario_of(scenario)
     paths = _paths(inputs)
@@ -106,7 +109,7 @@ def run(
     _check_output(out, 'output', paths, loaded)
     return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
                        start_offset=_seconds('--start', start_offset), compression=compression, batch=batch,
-                       progress=progress, observers=observers)
+                       progress=progress, observers=observers, salvage=salvage)
 
 
 def check(
@@ -116,10 +119,11 @@ def check(
     start_offset: float = 0.0,
     observers: Sequence[Observer] = (),
     progress: Progress | None = None,
+    salvage: bool = False,
 ) -> RunResult:
     """Evaluate the scenario's assertions (and fault manager) on an existing recording; inject nothing."""
     return check_recording(scenario_of(scenario), Path(recording), start_offset=_seconds('--start', start_offset),
-                           observers=observers, progress=progress)
+                           observers=observers, progress=progress, salvage=salvage)
 
 
 def proxy(

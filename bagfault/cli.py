@@ -48,6 +48,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument('--start', type=float, default=0.0, metavar='SECONDS',
                      help='bag time zero is this many seconds after the first message')
     run.add_argument('--compression', choices=['none', 'lz4', 'zstd'], default='zstd')
+    _salvage_option(run)
     _report_options(run)
 
     check = sub.add_parser('check', help="evaluate a scenario's assertions on an existing recording")
@@ -55,6 +56,7 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument('recording', type=Path, metavar='RECORDED.mcap')
     check.add_argument('--start', type=float, default=0.0, metavar='SECONDS',
                        help='bag time zero is this many seconds after the first message')
+    _salvage_option(check)
     _report_options(check)
 
     validate = sub.add_parser('validate', help='check scenario files, report every problem')
@@ -121,6 +123,12 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--html', type=Path, metavar='R.html', help='self-contained HTML report with plots')
 
 
+def _salvage_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--salvage', action='store_true',
+                        help='on corruption the file format detects (CRCs, record lengths), copy what can be read '
+                             'and list what could not, instead of stopping')
+
+
 def _strict_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--strict', action='store_true',
                         help='treat scenario warnings (what ros2_fault_injection accepts but ignores) as errors')
@@ -166,6 +174,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         result = api.run(
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
             start_offset=args.start, compression=args.compression, progress=bar, observers=collectors,
+            salvage=args.salvage,
         )
     finally:
         bar.close()
@@ -182,7 +191,8 @@ def _cmd_check(args: argparse.Namespace) -> int:
     bar = ProgressBar()
     collectors = reports.collectors()
     try:
-        result = api.check(scenario, args.recording, start_offset=args.start, observers=collectors, progress=bar)
+        result = api.check(scenario, args.recording, start_offset=args.start, observers=collectors, progress=bar,
+                           salvage=args.salvage)
     finally:
         bar.close()
     return _finish(reports, result, collectors)

@@ -42,6 +42,11 @@ def begin_progress(progress: Progress | None, inputs: InputSet) -> None:
         begin(inputs.start_time, inputs.end_time, inputs.message_count)
 
 
+def input_warnings(inputs: InputSet) -> list[str]:
+    """What the readers worked around, and what salvage could not read."""
+    return [*inputs.warnings, *(f'salvage skipped {loss}' for loss in inputs.losses)]
+
+
 def replay(
     inputs: InputSet,
     scenario: Scenario,
@@ -80,6 +85,7 @@ def replay(
     except BaseException:
         run.close(ok=False)
         raise
+    run.warnings += input_warnings(inputs)
     return run, stopped
 
 
@@ -95,9 +101,10 @@ def run_to_file(
     batch: bool = True,
     progress: Progress | None = None,
     observers: Sequence[Observer] = (),
+    salvage: bool = False,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing)."""
-    inputs = InputSet(paths)
+    inputs = InputSet(paths, salvage=salvage)
     try:
         begin_progress(progress, inputs)
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
@@ -136,6 +143,7 @@ def check_recording(
     start_offset: float = 0.0,
     observers: Sequence[Observer] = (),
     progress: Progress | None = None,
+    salvage: bool = False,
 ) -> RunResult:
     """Judge a recording with the scenario's assertions and fault manager; inject nothing.
 
@@ -143,7 +151,7 @@ def check_recording(
     assertions, `during` windows and reports; bag time zero is the
     recording's first message (plus `start_offset` seconds).
     """
-    inputs = InputSet([path])
+    inputs = InputSet([path], salvage=salvage)
     try:
         begin_progress(progress, inputs)
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
@@ -164,6 +172,7 @@ def check_recording(
             if progress is not None and run.stats.input_messages % 4096 == 0:
                 progress(run.stats.input_messages, log_time)
         run.end(run.stats.last_time if run.stats.last_time is not None else 0)
+        run.warnings += input_warnings(inputs)
     finally:
         inputs.close()
     run.close(ok=True)

@@ -1,9 +1,15 @@
-"""MCAP input, read chunk by chunk in log-time order.
+"""MCAP input, read chunk by chunk in log-time order, with every record checked.
 
 The `mcap` library parses the summary and metadata; chunks are read and
 split here so that messages come out as zero-copy slices of one
 decompressed buffer, channels found only inside chunks are still known,
 and overlapping chunks are merged by log time.
+
+What the format lets a reader detect is checked: chunk CRCs and sizes,
+record lengths, records that refer to channels nobody defined, chunk
+indexes that point outside the file. Such corruption is an `InputError`
+naming the file and the offset; with `salvage` the readable messages are
+kept and every skipped part is listed in `losses`.
 """
 
 from __future__ import annotations
@@ -11,11 +17,13 @@ from __future__ import annotations
 import heapq
 import io
 import struct
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import lz4.frame
+import yaml
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, SeekingReader
@@ -31,15 +39,24 @@ if TYPE_CHECKING:
 
 
 MAGIC = b'\x89MCAP0\r\n'
-OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x03, 0x04, 0x05
+OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x03, 0x04, 0x05, 0x06
 _U16 = struct.Struct('<H')
 _U32 = struct.Struct('<I')
 _U64 = struct.Struct('<Q')
 _REC = struct.Struct('<BQ')
 _MSG = struct.Struct('<HIQQ')
 _CHUNK_HEAD = struct.Struct('<QQQI')
+MESSAGE_HEAD = 22  # channel id, sequence, log time, publish time
+MAX_CHUNK = 1 << 32  # the mcap library's record size limit
+READ_ERRORS = (McapError, struct.error, ValueError, KeyError, EOFError, zstandard.ZstdError, RuntimeError,
+               UnicodeDecodeError, OSError, IndexError, MemoryError, zlib.error)
 
 RawItem = tuple[int, int, int, memoryview]  # channel index, log_time, publish_time, data
+Split = tuple[int, int, int, int, memoryview]  # log, publish, mcap channel id, position, data
+
+
+class Corrupt(Exception):  # noqa: N818 - a signal inside this module, turned into InputError or a loss
+    """A part of the file cannot be read."""
 
 
 @dataclass
@@ -50,104 +67,159 @@ class _Chunk:
 
 
 def _decompress(compression: str, data: bytes | memoryview, size: int) -> memoryview:
+    if size > MAX_CHUNK:
+        raise Corrupt(f'chunk claims {size} uncompressed bytes')
     if compression == '':
         return memoryview(data)
     if compression == 'zstd':
         return memoryview(zstandard.ZstdDecompressor().decompress(data, max_output_size=size))
     if compression == 'lz4':
         return memoryview(lz4.frame.decompress(bytes(data)))
-    msg = f'unsupported chunk compression {compression!r}'
-    raise InputError(msg)
+    raise InputError(f'unsupported chunk compression {compression!r}')
 
 
-def _string(buf: memoryview, pos: int) -> tuple[str, int]:
+def _string(buf: memoryview, pos: int, end: int) -> tuple[str, int]:
     (length,) = _U32.unpack_from(buf, pos)
     pos += 4
+    if pos + length > end:
+        raise Corrupt(f'a string of {length} bytes runs past its record')
     return bytes(buf[pos : pos + length]).decode(), pos + length
 
 
 class McapSource:
     """Messages of one MCAP file in log-time order."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, *, salvage: bool = False) -> None:
         self.path = path
+        self.salvage = salvage
         self.channels: list[Channel] = []
         self.ros_distro: str | None = None
         self.message_count: int | None = None
         self.start_time: int | None = None
         self.end_time: int | None = None
+        self.losses: list[str] = []
+        self.warnings: list[str] = []
         self._ids: dict[int, int] = {}
         self._schemas: dict[int, tuple[str, str, str]] = {}
         self._pending_channels: dict[int, tuple[int, str, str, dict[str, str]]] = {}
         self._chunks: list[_Chunk] = []
+        self._memory: list[Split] = []
         self._indexed = False
         try:
             self._file = path.open('rb')
         except OSError as exc:
             raise InputError(f'{path}: cannot open: {exc.strerror}') from None
+        self._size = path.stat().st_size
         try:
             self._open()
         except InputError:
             self._file.close()
             raise
-        except (McapError, struct.error, ValueError, KeyError, EOFError, zstandard.ZstdError, RuntimeError) as exc:
+        except Corrupt as exc:
+            self._file.close()
+            raise InputError(f'{path}: corrupt MCAP file: {exc}') from None
+        except READ_ERRORS as exc:
             self._file.close()
             raise InputError(f'{path}: corrupt or truncated MCAP file ({exc or type(exc).__name__})') from None
 
+    # -- corruption -------------------------------------------------------------------------
+    def _lost(self, where: str, reason: str) -> None:
+        """A part that cannot be read: an error, or (salvage) a listed loss."""
+        if not self.salvage:
+            raise InputError(f'{self.path}: corrupt MCAP file: {where}: {reason} (--salvage copies what can be read)')
+        self.losses.append(f'{self.path}: {where}: {reason}')
+
+    # -- opening ------------------------------------------------------------------------------
     def _open(self) -> None:
         head = self._file.read(8)
         if head != MAGIC:
             raise InputError(f'{self.path}: not an MCAP file (bad magic bytes)')
-        self._file.seek(0, io.SEEK_END)
-        if self._file.tell() < 8 + 9 + 20 + 8:
+        if self._size < 8 + 9 + 20 + 8:
             raise InputError(f'{self.path}: truncated MCAP file')
         self._file.seek(-8, io.SEEK_END)
         if self._file.read(8) != MAGIC:
             raise InputError(f'{self.path}: truncated MCAP file (no closing magic; was the recording stopped cleanly?)')
+        self._check_summary_crc()
         self._file.seek(0)
-        reader = SeekingReader(self._file)
+        reader = SeekingReader(self._file, validate_crcs=True)
         summary = reader.get_summary()
         for record in reader.iter_metadata():
             if record.name == 'rosbag2':
                 self._read_rosbag2_metadata(record.metadata)
-        if summary is not None and summary.chunk_indexes:
-            self._indexed = True
-            for schema in summary.schemas.values():
-                self._schemas[schema.id] = (schema.name, schema.encoding, schema.data.decode(errors='replace'))
-            for channel in summary.channels.values():
-                self._pending_channels[channel.id] = (channel.schema_id, channel.topic, channel.message_encoding,
-                                                      dict(channel.metadata))
-            self._chunks = sorted(
-                (_Chunk(c.message_start_time, c.message_end_time, c.chunk_start_offset) for c in summary.chunk_indexes),
-                key=lambda c: (c.start, c.offset),
-            )
-            known = set(self._pending_channels)
-            referenced = {cid for c in summary.chunk_indexes for cid in c.message_index_offsets}
-            if not known or referenced - known:
-                for chunk in self._chunks:
-                    self._split(self._read_chunk(chunk))
-            if summary.statistics is not None:
-                self.message_count = summary.statistics.message_count
-                if summary.statistics.message_count:
-                    self.start_time = summary.statistics.message_start_time
-                    self.end_time = summary.statistics.message_end_time
-            else:
-                self.start_time = self._chunks[0].start
-                self.end_time = max(c.end for c in self._chunks)
-            for channel_id in sorted(self._pending_channels):
-                self._register(channel_id)
-        else:
+        if summary is None or not summary.chunk_indexes:
             self._scan_unindexed()
+            return
+        self._indexed = True
+        for schema in summary.schemas.values():
+            self._schemas[schema.id] = (schema.name, schema.encoding, schema.data.decode(errors='replace'))
+        for channel in summary.channels.values():
+            self._pending_channels[channel.id] = (channel.schema_id, channel.topic, channel.message_encoding,
+                                                  dict(channel.metadata))
+        for index in summary.chunk_indexes:
+            if index.chunk_start_offset + index.chunk_length > self._size or index.chunk_start_offset < 8:
+                raise Corrupt(f'a chunk index points outside the file (offset {index.chunk_start_offset})')
+        self._chunks = sorted(
+            (_Chunk(c.message_start_time, c.message_end_time, c.chunk_start_offset) for c in summary.chunk_indexes),
+            key=lambda c: (c.start, c.offset),
+        )
+        referenced = {cid for c in summary.chunk_indexes for cid in c.message_index_offsets}
+        missing_schemas = {s for s, _, _, _ in self._pending_channels.values() if s and s not in self._schemas}
+        if not self._pending_channels or referenced - set(self._pending_channels) or missing_schemas:
+            self._scan_definitions()  # a valid layout may keep schemas (or channels) in the data section only
+        if summary.statistics is not None:
+            self.message_count = summary.statistics.message_count
+            if summary.statistics.message_count:
+                self.start_time = summary.statistics.message_start_time
+                self.end_time = summary.statistics.message_end_time
+        else:
+            self.start_time = self._chunks[0].start
+            self.end_time = max(c.end for c in self._chunks)
+        for channel_id in sorted(self._pending_channels):
+            self._register(channel_id)
+
+    def _check_summary_crc(self) -> None:
+        """The footer's summary CRC covers the summary section and the footer up to the CRC itself."""
+        footer = self._size - 8 - 29
+        self._file.seek(footer)
+        opcode, _, summary_start, _, crc = struct.unpack('<BQQQI', self._file.read(29))
+        if opcode != 0x02:
+            raise Corrupt(f'no footer record before the closing magic (found type {opcode:#x})')
+        if not crc or not summary_start:
+            return
+        if not 8 < summary_start < footer:
+            raise Corrupt(f'the footer points the summary at offset {summary_start}, outside the file')
+        self._file.seek(summary_start)
+        computed = zlib.crc32(self._file.read(footer + 25 - summary_start))
+        if computed != crc:
+            raise Corrupt(f'summary CRC mismatch (stored {crc:#010x}, computed {computed:#010x})')
+
+    def _scan_definitions(self) -> None:
+        """Schemas and channels from the data section: top-level records, and inside chunks."""
+        position = 8
+        while position + 9 <= self._size - 8:
+            self._file.seek(position)
+            opcode, length = _REC.unpack(self._file.read(9))
+            if position + 9 + length > self._size:
+                raise Corrupt(f'record at offset {position} claims {length} bytes, past the end of the file')
+            if opcode == 0x0F:  # data end: the summary follows
+                return
+            if opcode == OP_CHUNK:
+                data = self._chunk_at(position)
+                if data is not None:
+                    self._split(data, position)
+            elif opcode in (OP_SCHEMA, OP_CHANNEL) and length <= MAX_CHUNK:
+                body = memoryview(self._file.read(length))
+                self._definition(opcode, body, 0, len(body))
+            position += 9 + length
 
     def _read_rosbag2_metadata(self, metadata: dict[str, str]) -> None:
-        import yaml  # noqa: PLC0415
-
         try:
             info = yaml.safe_load(metadata.get('serialized_metadata', '')) or {}
-            stored = info.get('rosbag2_bagfile_information', {}).get('ros_distro')
-            self.ros_distro = stored or metadata.get('ROS_DISTRO')
+            stored = info.get('rosbag2_bagfile_information', {}).get('ros_distro') if isinstance(info, dict) else None
         except yaml.YAMLError:
-            self.ros_distro = metadata.get('ROS_DISTRO')
+            stored = None
+        distro = stored or metadata.get('ROS_DISTRO')
+        self.ros_distro = distro if isinstance(distro, str) else None
 
     def _register(self, channel_id: int) -> int:
         index = self._ids.get(channel_id)
@@ -168,76 +240,111 @@ class McapSource:
         self._ids[channel_id] = len(self.channels) - 1
         return self._ids[channel_id]
 
-    def _read_chunk(self, chunk: _Chunk) -> memoryview:
-        self._file.seek(chunk.offset)
+    # -- chunks -------------------------------------------------------------------------------
+    def _chunk_at(self, offset: int) -> memoryview | None:
+        """The decompressed records of the chunk at `offset`, checked; None when salvage skips it."""
+        try:
+            return self._read_chunk(offset)
+        except Corrupt as exc:
+            self._lost(f'chunk at offset {offset}', str(exc))
+        except (zstandard.ZstdError, RuntimeError, ValueError, zlib.error, struct.error, MemoryError) as exc:
+            self._lost(f'chunk at offset {offset}', f'cannot decompress ({exc or type(exc).__name__})')
+        return None
+
+    def _read_chunk(self, offset: int) -> memoryview:
+        self._file.seek(offset)
         opcode, length = _REC.unpack(self._file.read(9))
-        if opcode != 0x06:
-            raise InputError(f'{self.path}: chunk index points at a record of type {opcode:#x}, not a chunk')
+        if opcode != OP_CHUNK:
+            raise Corrupt(f'the index points at a record of type {opcode:#x}, not a chunk')
+        if offset + 9 + length > self._size:
+            raise Corrupt(f'the chunk claims {length} bytes, past the end of the file')
         body = memoryview(self._file.read(length))
-        if len(body) < length:
-            raise InputError(f'{self.path}: truncated chunk at offset {chunk.offset}')
-        _, _, size, _ = _CHUNK_HEAD.unpack_from(body, 0)
-        compression, pos = _string(body, _CHUNK_HEAD.size)
+        _, _, size, crc = _CHUNK_HEAD.unpack_from(body, 0)
+        compression, pos = _string(body, _CHUNK_HEAD.size, len(body))
         (records_len,) = _U64.unpack_from(body, pos)
         pos += 8
-        return _decompress(compression, body[pos : pos + records_len], size)
+        if pos + records_len > len(body):
+            raise Corrupt(f'the chunk claims {records_len} bytes of records, more than it holds')
+        data = _decompress(compression, body[pos : pos + records_len], size)
+        if len(data) != size:
+            raise Corrupt(f'the chunk holds {len(data)} bytes of records, its header says {size}')
+        if crc and zlib.crc32(data) != crc:
+            raise Corrupt(f'CRC mismatch (stored {crc:#010x}, computed {zlib.crc32(data):#010x})')
+        return data
 
-    def _split(self, data: memoryview) -> list[tuple[int, int, int, int, memoryview]]:
-        """Messages of a decompressed chunk as (log, pub, mcap channel id, position, data)."""
+    def _definition(self, opcode: int, data: memoryview, body: int, end: int) -> None:
+        """A schema or channel record (inside a chunk or at the top level): known from here on."""
+        if opcode == OP_SCHEMA:
+            (schema_id,) = _U16.unpack_from(data, body)
+            name, p = _string(data, body + 2, end)
+            encoding, p = _string(data, p, end)
+            (size,) = _U32.unpack_from(data, p)
+            if p + 4 + size > end:
+                raise Corrupt('a schema runs past its record')
+            self._schemas.setdefault(schema_id, (name, encoding, bytes(data[p + 4 : p + 4 + size]).decode(
+                errors='replace')))
+            return
+        channel_id, schema_id = struct.unpack_from('<HH', data, body)
+        topic, p = _string(data, body + 4, end)
+        encoding, p = _string(data, p, end)
+        (map_len,) = _U32.unpack_from(data, p)
+        p += 4
+        stop, metadata = p + map_len, {}
+        if stop > end:
+            raise Corrupt('a channel runs past its record')
+        while p < stop:
+            key, p = _string(data, p, stop)
+            value, p = _string(data, p, stop)
+            metadata[key] = value
+        self._pending_channels.setdefault(channel_id, (schema_id, topic, encoding, metadata))
+
+    def _split(self, data: memoryview, offset: int) -> list[Split]:
+        """Messages of a decompressed chunk; a record that cannot be read ends the chunk (an error or a loss)."""
         out = []
         pos, end = 0, len(data)
         unpack_rec, unpack_msg = _REC.unpack_from, _MSG.unpack_from
-        while pos + 9 <= end:
-            opcode, length = unpack_rec(data, pos)
-            body = pos + 9
-            if opcode == OP_MESSAGE:
-                channel_id, _seq, log_time, publish_time = unpack_msg(data, body)
-                out.append((log_time, publish_time, channel_id, pos, data[body + 22 : body + length]))
-            elif opcode == OP_SCHEMA:
-                (schema_id,) = _U16.unpack_from(data, body)
-                name, p = _string(data, body + 2)
-                encoding, p = _string(data, p)
-                (size,) = _U32.unpack_from(data, p)
-                self._schemas.setdefault(
-                    schema_id, (name, encoding, bytes(data[p + 4 : p + 4 + size]).decode(errors='replace'))
-                )
-            elif opcode == OP_CHANNEL:
-                channel_id, schema_id = struct.unpack_from('<HH', data, body)
-                topic, p = _string(data, body + 4)
-                encoding, p = _string(data, p)
-                (map_len,) = _U32.unpack_from(data, p)
-                p += 4
-                stop, metadata = p + map_len, {}
-                while p < stop:
-                    key, p = _string(data, p)
-                    value, p = _string(data, p)
-                    metadata[key] = value
-                self._pending_channels.setdefault(channel_id, (schema_id, topic, encoding, metadata))
+        while pos < end:
+            try:
+                if pos + 9 > end:
+                    raise Corrupt(f'{end - pos} stray bytes after the last record')
+                opcode, length = unpack_rec(data, pos)
+                body = pos + 9
+                if body + length > end:
+                    raise Corrupt(f'record at {pos} claims {length} bytes, past the end of the chunk')
+                if opcode == OP_MESSAGE:
+                    if length < MESSAGE_HEAD:
+                        raise Corrupt(f'message record at {pos} is {length} bytes, shorter than its header')
+                    channel_id, _seq, log_time, publish_time = unpack_msg(data, body)
+                    out.append((log_time, publish_time, channel_id, pos, data[body + MESSAGE_HEAD : body + length]))
+                elif opcode in (OP_SCHEMA, OP_CHANNEL):
+                    self._definition(opcode, data, body, body + length)
+            except (Corrupt, struct.error, UnicodeDecodeError) as exc:
+                self._lost(f'chunk at offset {offset}', f'{exc}; {len(out)} messages before it are kept')
+                return out
             pos = body + length
         return out
 
     def _scan_unindexed(self) -> None:
         """Files without chunk index: read every record once, keep messages in memory."""
         self._file.seek(0)
-        messages: list[tuple[int, int, int, int, memoryview]] = []
-        order = 0
-        for record in StreamReader(self._file, skip_magic=False).records:
-            if isinstance(record, Chunk):
-                parts = list(breakup_chunk(record))
-            else:
-                parts = [record]
-            for part in parts:
-                if isinstance(part, Schema):
-                    self._schemas.setdefault(part.id, (part.name, part.encoding, part.data.decode(errors='replace')))
-                elif isinstance(part, McapChannel):
-                    self._pending_channels.setdefault(
-                        part.id, (part.schema_id, part.topic, part.message_encoding, dict(part.metadata))
-                    )
-                elif isinstance(part, Metadata) and part.name == 'rosbag2':
-                    self._read_rosbag2_metadata(part.metadata)
-                elif isinstance(part, Message):
-                    messages.append((part.log_time, part.publish_time, part.channel_id, order, memoryview(part.data)))
-                    order += 1
+        messages: list[Split] = []
+        try:
+            for record in StreamReader(self._file, skip_magic=False, validate_crcs=True).records:
+                parts = list(breakup_chunk(record, validate_crc=True)) if isinstance(record, Chunk) else [record]
+                for part in parts:
+                    if isinstance(part, Schema):
+                        self._schemas.setdefault(part.id, (part.name, part.encoding,
+                                                           part.data.decode(errors='replace')))
+                    elif isinstance(part, McapChannel):
+                        self._pending_channels.setdefault(
+                            part.id, (part.schema_id, part.topic, part.message_encoding, dict(part.metadata)))
+                    elif isinstance(part, Metadata) and part.name == 'rosbag2':
+                        self._read_rosbag2_metadata(part.metadata)
+                    elif isinstance(part, Message):
+                        messages.append((part.log_time, part.publish_time, part.channel_id, len(messages),
+                                         memoryview(part.data)))
+        except READ_ERRORS as exc:
+            self._lost(f'after {len(messages)} messages', f'{exc or type(exc).__name__}')
         messages.sort(key=lambda m: (m[0], m[3]))
         for channel_id in sorted(self._pending_channels):
             self._register(channel_id)
@@ -246,42 +353,50 @@ class McapSource:
         if messages:
             self.start_time, self.end_time = messages[0][0], messages[-1][0]
 
+    # -- messages -----------------------------------------------------------------------------
     def messages(self) -> Iterator[RawItem]:
         """(channel index, log_time, publish_time, data) in log-time order."""
         try:
-            if not self._indexed:
-                ids = self._ids
-                for log_time, publish_time, channel_id, _, data in self._memory:
-                    if channel_id in ids:
-                        yield ids[channel_id], log_time, publish_time, data
-                return
-            yield from self._indexed_messages()
-        except (struct.error, zstandard.ZstdError, RuntimeError, ValueError) as exc:
-            raise InputError(f'{self.path}: corrupt chunk data ({exc})') from None
+            if self._indexed:
+                yield from self._indexed_messages()
+            else:
+                yield from self._known(self._memory)
+        except Corrupt as exc:
+            raise InputError(f'{self.path}: corrupt MCAP file: {exc}') from None
+        except READ_ERRORS as exc:
+            raise InputError(f'{self.path}: corrupt chunk data ({exc or type(exc).__name__})') from None
+
+    def _known(self, items: list[Split]) -> Iterator[RawItem]:
+        """Messages whose channel is defined; one that refers to no channel is corrupt."""
+        ids, pending, register = self._ids, self._pending_channels, self._register
+        for log_time, publish_time, channel_id, _, data in items:
+            index = ids.get(channel_id)
+            if index is None:
+                if channel_id not in pending:
+                    self._lost(f'message at {log_time} ns', f'refers to channel {channel_id}, which no record '
+                                                            'defines')
+                    continue
+                index = register(channel_id)
+            yield index, log_time, publish_time, data
 
     def _indexed_messages(self) -> Iterator[RawItem]:
-        ids, register = self._ids, self._register
         pending: list[tuple[int, int, int, int, int, memoryview]] = []
         chunks = self._chunks
         for number, chunk in enumerate(chunks):
-            items = self._split(self._read_chunk(chunk))
+            data = self._chunk_at(chunk.offset)
+            items = self._split(data, chunk.offset) if data is not None else []
             horizon = chunks[number + 1].start if number + 1 < len(chunks) else None
             in_order = all(items[i][0] <= items[i + 1][0] for i in range(len(items) - 1))
             if not pending and in_order and (horizon is None or not items or items[-1][0] <= horizon):
-                for log_time, publish_time, channel_id, _, data in items:
-                    index = ids.get(channel_id)
-                    if index is None:
-                        index = register(channel_id)
-                    yield index, log_time, publish_time, data
+                yield from self._known(items)
                 continue
-            for log_time, publish_time, channel_id, pos, data in items:
-                heapq.heappush(pending, (log_time, number, pos, publish_time, channel_id, data))
+            for log_time, publish_time, channel_id, pos, payload in items:
+                heapq.heappush(pending, (log_time, number, pos, publish_time, channel_id, payload))
+            ready = []
             while pending and (horizon is None or pending[0][0] < horizon):
-                log_time, _, _, publish_time, channel_id, data = heapq.heappop(pending)
-                index = ids.get(channel_id)
-                if index is None:
-                    index = register(channel_id)
-                yield index, log_time, publish_time, data
+                log_time, _, pos, publish_time, channel_id, payload = heapq.heappop(pending)
+                ready.append((log_time, publish_time, channel_id, pos, payload))
+            yield from self._known(ready)
 
     def close(self) -> None:
         """Release the file."""

@@ -21,6 +21,16 @@ class Source(Protocol):
     start_time: int | None
     end_time: int | None
 
+    @property
+    def losses(self) -> list[str]:
+        """What salvage skipped so far (each with its place), empty without salvage."""
+        ...
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the reader noticed and worked around."""
+        ...
+
     def messages(self) -> Iterator[InputMessage]:
         """(channel index, log_time, publish_time, data) in log-time order."""
         ...
@@ -41,6 +51,7 @@ class MergedSource:
     def __init__(self, parts: Sequence[Source], *, adjust: Callable[[Channel], Channel] | None = None,
                  ros_distro: str | None = None) -> None:
         self.parts = list(parts)
+        self.own_warnings: list[str] = []
         self.channels: list[Channel] = []
         self._maps: list[list[int]] = []
         index: dict[tuple[str, str, str], int] = {}
@@ -77,6 +88,16 @@ class MergedSource:
         for log_time, _, channel, publish_time, data in heapq.merge(*streams):
             yield channel, log_time, publish_time, data
 
+    @property
+    def losses(self) -> list[str]:
+        """What salvage skipped in every part so far."""
+        return [loss for part in self.parts for loss in part.losses]
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the readers noticed and worked around."""
+        return [*self.own_warnings, *(warning for part in self.parts for warning in part.warnings)]
+
     def topics(self) -> dict[str, list[Channel]]:
         """Channels by topic name."""
         out: dict[str, list[Channel]] = {}
@@ -85,10 +106,9 @@ class MergedSource:
         return out
 
     def close(self) -> None:
-        """Close every part."""
+        """Close every part (their losses and warnings stay readable)."""
         for part in self.parts:
             part.close()
-        self.parts = []
 
 
 def _keyed(source: Source, number: int, mapping: list[int]) -> Iterator[tuple[int, int, int, int, Data]]:

@@ -8,12 +8,15 @@ ROS 2 data and the output MCAP is ROS 2.
 
 from __future__ import annotations
 
+import struct
+import zlib
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from rosbags.convert.converter import STATIC_MSGTYPE_RENAMES, is_same_wireformat, migrate_bytes
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag1 import ReaderError
+from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
@@ -25,27 +28,39 @@ if TYPE_CHECKING:
     from pathlib import Path
 
 ROS2_DISTRO = 'humble'
+# What rosbags' reader raises on a damaged bag: its own errors, bz2/lz4 failures, and asserts on record headers.
+CONVERT_ERRORS = (SerdeError, TypesysError, struct.error, ValueError, IndexError, KeyError, UnicodeDecodeError)
+READ_ERRORS = (AnyReaderError, ReaderError, TypesysError, SerdeError, AssertionError, OSError, RuntimeError,
+               ValueError, KeyError, IndexError, EOFError, struct.error, zlib.error, UnicodeDecodeError, MemoryError)
 
 
 class Ros1Source:
-    """Messages of a ROS 1 bag as ROS 2 CDR, in time order."""
+    """Messages of a ROS 1 bag as ROS 2 CDR, in time order.
 
-    def __init__(self, path: Path) -> None:
+    A chunk that cannot be decompressed or a record that cannot be parsed is
+    an error naming the file; a message that cannot be converted is an
+    error too, or (salvage) a listed loss.
+    """
+
+    def __init__(self, path: Path, *, salvage: bool = False) -> None:
         self.path = path
+        self.salvage = salvage
         self.ros_distro: str | None = ROS2_DISTRO
         self.channels: list[Channel] = []
+        self.losses: list[str] = []
+        self.warnings: list[str] = []
         self._converters: list[Callable[[Any], Any]] = []
         self._ids: dict[int, int] = {}
         try:
             self._reader = AnyReader([path])
             self._reader.open()
-        except (AnyReaderError, ReaderError, TypesysError, ValueError, OSError) as exc:
-            raise InputError(f'{path}: cannot read ROS 1 bag ({exc})') from None
+        except READ_ERRORS as exc:
+            raise InputError(f'{path}: cannot read ROS 1 bag ({exc or type(exc).__name__})') from None
         try:
             self._setup()
-        except (TypesysError, KeyError, ValueError) as exc:
+        except READ_ERRORS as exc:
             self._reader.close()
-            raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({exc})') from None
+            raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({exc or type(exc).__name__})') from None
         connections = self._reader.connections
         self.message_count: int | None = sum(c.msgcount for c in connections)
         self.start_time = self._reader.start_time if self.message_count else None
@@ -89,9 +104,17 @@ class Ros1Source:
         try:
             for connection, timestamp, raw in self._reader.messages():
                 key = id(connection)
-                yield ids[key], timestamp, timestamp, converters[by_connection[key]](raw)
-        except (AnyReaderError, ReaderError, TypesysError, ValueError) as exc:
-            raise InputError(f'{self.path}: corrupt ROS 1 bag ({exc})') from None
+                try:
+                    converted = converters[by_connection[key]](raw)
+                except CONVERT_ERRORS as exc:
+                    problem = f'{connection.topic} at {timestamp} ns: cannot convert the message ({exc})'
+                    if not self.salvage:
+                        raise InputError(f'{self.path}: {problem} (--salvage copies what can be read)') from None
+                    self.losses.append(f'{self.path}: {problem}')
+                    continue
+                yield ids[key], timestamp, timestamp, converted
+        except READ_ERRORS as exc:
+            raise InputError(f'{self.path}: corrupt ROS 1 bag ({exc or type(exc).__name__})') from None
 
     def close(self) -> None:
         """Close the bag."""

@@ -37,15 +37,18 @@ def _is_storage(path: Path) -> bool:
 class Rosbag2Source(MergedSource):
     """A rosbag2 bag made of one or more storage files, merged by time (files in listed order on ties)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, *, salvage: bool = False) -> None:
         self.path = path
+        self.salvage = salvage
         self.metadata: dict[str, Any] = {}
+        notes: list[str] = []
+        self._notes = notes
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         parts: list[Source] = []
         distro: str | None = None
         try:
             files = self._files()
-            distro = self.metadata.get('ros_distro')
+            distro = self.metadata.get('ros_distro') if isinstance(self.metadata.get('ros_distro'), str) else None
             for file in files:
                 parts.append(self._open_part(file))
         except BaseException:
@@ -54,6 +57,7 @@ class Rosbag2Source(MergedSource):
             self._cleanup()
             raise
         super().__init__(parts, adjust=self._declared(), ros_distro=distro)
+        self.own_warnings += notes
 
     def _files(self) -> list[Path]:
         if self.path.is_file():
@@ -66,17 +70,26 @@ class Rosbag2Source(MergedSource):
             return files
         try:
             info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
-            version = int(info['version'])
-            names = [PurePath(x).name for x in info['relative_file_paths']]
+            version = info['version']
+            listed = info['relative_file_paths']
+            if not isinstance(version, int) or isinstance(version, bool):
+                raise ValueError(f'version {version!r} is not an integer')
+            if not isinstance(listed, list) or not all(isinstance(x, str) for x in listed):
+                raise ValueError(f'relative_file_paths {listed!r} is not a list of file names')
+            names = [PurePath(x).name for x in listed]
         except (yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
             raise InputError(f'{meta}: not a rosbag2 metadata file ({exc})') from None
         except OSError as exc:
             raise InputError(f'{meta}: cannot read: {exc.strerror}') from None
         if version > 9:
             raise InputError(f'{meta}: metadata version {version} is newer than bagfault knows (1-9)')
+        if len(set(names)) < len(names):
+            repeated = sorted({n for n in names if names.count(n) > 1})
+            self._notes.append(f'{meta}: {", ".join(repeated)} listed more than once; each file is read once')
+            names = list(dict.fromkeys(names))
         self.metadata = info
-        fmt = (info.get('compression_format') or '').lower()
-        mode = (info.get('compression_mode') or '').lower()
+        fmt = _text(info.get('compression_format')).lower()
+        mode = _text(info.get('compression_mode')).lower()
         if mode and mode != 'none' and fmt not in {'', 'zstd'}:
             raise InputError(f'{meta}: compression format {fmt!r} is not supported (zstd only)')
         files = [self.path / name for name in names]
@@ -87,16 +100,12 @@ class Rosbag2Source(MergedSource):
     def _open_part(self, file: Path) -> McapSource | SqliteSource:
         if file.name.endswith('.zstd'):
             file = self._expand(file)
-        if file.suffix == '.mcap':
-            return McapSource(file)
-        if file.suffix == '.db3':
-            return SqliteSource(file)
         with file.open('rb') as stream:
             head = stream.read(16)
-        if head.startswith(b'\x89MCAP'):
-            return McapSource(file)
-        if head.startswith(b'SQLite format 3'):
-            return SqliteSource(file)
+        if head.startswith(b'\x89MCAP') or (file.suffix == '.mcap' and not head.startswith(b'SQLite format 3')):
+            return McapSource(file, salvage=self.salvage)
+        if head.startswith(b'SQLite format 3') or file.suffix == '.db3':
+            return SqliteSource(file, salvage=self.salvage)
         raise InputError(f'{file}: unknown storage format (not .db3 or .mcap)')
 
     def _expand(self, file: Path) -> Path:
@@ -113,8 +122,9 @@ class Rosbag2Source(MergedSource):
 
     def _declared(self) -> Callable[[Channel], Channel]:
         """What metadata.yaml declares of a topic: its QoS (when the storage has none) and its format."""
+        listed = self.metadata.get('topics_with_message_count')
         declared = [
-            t['topic_metadata'] for t in self.metadata.get('topics_with_message_count', [])
+            t['topic_metadata'] for t in (listed if isinstance(listed, list) else [])
             if isinstance(t, dict) and isinstance(t.get('topic_metadata'), dict)
         ]
         qos = {t.get('name'): t.get('offered_qos_profiles', '') for t in declared}
@@ -145,3 +155,8 @@ class Rosbag2Source(MergedSource):
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
+
+
+def _text(value: object) -> str:
+    """A metadata value expected to be text; anything else counts as absent."""
+    return value if isinstance(value, str) else ''

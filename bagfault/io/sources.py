@@ -25,12 +25,12 @@ class InputFile:
     sha256: str
 
 
-def open_source(path: Path) -> Source:
+def open_source(path: Path, *, salvage: bool = False) -> Source:
     """Open an MCAP file, a rosbag2 directory or storage file, or a ROS 1 bag."""
     if not path.exists():
         raise InputError(f'{path}: no such file or directory')
     if path.is_dir():
-        return Rosbag2Source(path)
+        return Rosbag2Source(path, salvage=salvage)
     try:
         with path.open('rb') as stream:
             head = stream.read(16)
@@ -39,16 +39,16 @@ def open_source(path: Path) -> Source:
     if not head:
         raise InputError(f'{path}: file is empty')
     if head.startswith(b'\x89MCAP'):
-        return McapSource(path)
+        return McapSource(path, salvage=salvage)
     if head.startswith(b'#ROSBAG V2.0'):
         from bagfault.io.ros1_source import Ros1Source  # noqa: PLC0415
 
-        return Ros1Source(path)
+        return Ros1Source(path, salvage=salvage)
     if head.startswith(b'#ROSBAG'):
         version = head[1:12].decode(errors='replace')
         raise InputError(f'{path}: ROS 1 bag format {version!r} is not supported (V2.0 only)')
     if head.startswith(b'SQLite format 3') or path.name.endswith('.zstd'):
-        return Rosbag2Source(path)
+        return Rosbag2Source(path, salvage=salvage)
     raise InputError(f'{path}: not a bag (expected MCAP, rosbag2 .db3, a rosbag2 directory or a ROS 1 .bag)')
 
 
@@ -74,12 +74,12 @@ def fingerprint(path: Path) -> list[InputFile]:
 class InputSet(MergedSource):
     """The inputs of a run (files and rosbag2 directories) seen as one bag."""
 
-    def __init__(self, paths: Sequence[Path]) -> None:
+    def __init__(self, paths: Sequence[Path], *, salvage: bool = False) -> None:
         self.paths = list(paths)
         sources: list[Source] = []
         try:
             for path in self.paths:
-                sources.append(open_source(path))
+                sources.append(open_source(path, salvage=salvage))
         except BaseException:
             for source in sources:
                 source.close()
