@@ -96,6 +96,7 @@ def run(
     progress: Progress | None = None,
     observers: Sequence[Observer] = (),
     salvage: bool = False,
+    msg_paths: Sequence[str | Path] = (),
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP.
 
@@ -109,7 +110,8 @@ def run(
     _check_output(out, 'output', paths, loaded)
     return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
                        start_offset=_seconds('--start', start_offset), compression=compression, batch=batch,
-                       progress=progress, observers=observers, salvage=salvage)
+                       progress=progress, observers=observers, salvage=salvage,
+                       msg_paths=[Path(p) for p in msg_paths])
 
 
 def check(
@@ -120,10 +122,12 @@ def check(
     observers: Sequence[Observer] = (),
     progress: Progress | None = None,
     salvage: bool = False,
+    msg_paths: Sequence[str | Path] = (),
 ) -> RunResult:
     """Evaluate the scenario's assertions (and fault manager) on an existing recording; inject nothing."""
     return check_recording(scenario_of(scenario), Path(recording), start_offset=_seconds('--start', start_offset),
-                           observers=observers, progress=progress, salvage=salvage)
+                           observers=observers, progress=progress, salvage=salvage,
+                           msg_paths=[Path(p) for p in msg_paths])
 
 
 def proxy(

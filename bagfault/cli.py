@@ -127,6 +127,9 @@ def _salvage_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--salvage', action='store_true',
                         help='on corruption the file format detects (CRCs, record lengths), copy what can be read '
                              'and list what could not, instead of stopping')
+    parser.add_argument('--msg-path', type=Path, action='append', default=[], metavar='DIR',
+                        help='a folder of <package>/msg/<Name>.msg or .idl definitions for types the bag does not '
+                             'carry; repeatable')
 
 
 def _strict_option(parser: argparse.ArgumentParser) -> None:
@@ -174,7 +177,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         result = api.run(
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
             start_offset=args.start, compression=args.compression, progress=bar, observers=collectors,
-            salvage=args.salvage,
+            salvage=args.salvage, msg_paths=args.msg_path,
         )
     finally:
         bar.close()
@@ -192,7 +195,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     collectors = reports.collectors()
     try:
         result = api.check(scenario, args.recording, start_offset=args.start, observers=collectors, progress=bar,
-                           salvage=args.salvage)
+                           salvage=args.salvage, msg_paths=args.msg_path)
     finally:
         bar.close()
     return _finish(reports, result, collectors)

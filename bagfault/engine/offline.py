@@ -18,6 +18,7 @@ from bagfault.engine.run import NullSink, Observer, OutputChannel, Run
 from bagfault.engine.scheduler import seconds_to_ns
 from bagfault.engine.stop import Stopped
 from bagfault.events import FaultEvent
+from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
@@ -102,13 +103,15 @@ def run_to_file(
     progress: Progress | None = None,
     observers: Sequence[Observer] = (),
     salvage: bool = False,
+    msg_paths: Sequence[Path] = (),
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing)."""
+    definitions = load_definitions([*msg_paths, *scenario.msg_paths])
     inputs = InputSet(paths, salvage=salvage)
     try:
         begin_progress(progress, inputs)
-        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
-        sink = McapSink(output, compression=compression)
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
+        sink = McapSink(output, compression=compression, ros_distro=catalog.distro)
         try:
             sink.add_metadata('bagfault', provenance(scenario, paths, seed, activations, start_offset))
             sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
@@ -144,6 +147,7 @@ def check_recording(
     observers: Sequence[Observer] = (),
     progress: Progress | None = None,
     salvage: bool = False,
+    msg_paths: Sequence[Path] = (),
 ) -> RunResult:
     """Judge a recording with the scenario's assertions and fault manager; inject nothing.
 
@@ -151,10 +155,11 @@ def check_recording(
     assertions, `during` windows and reports; bag time zero is the
     recording's first message (plus `start_offset` seconds).
     """
+    definitions = load_definitions([*msg_paths, *scenario.msg_paths])
     inputs = InputSet([path], salvage=salvage)
     try:
         begin_progress(progress, inputs)
-        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
         schemas = {c.topic: (c.msgtype, c.schema_encoding, c.schema_text) for c in inputs.channels}
         sink = NullSink()
         run = Run(scenario, sink, catalog, schemas, observers=observers)

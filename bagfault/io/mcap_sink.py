@@ -1,17 +1,34 @@
-"""Output MCAP (profile ros2), written to a temporary name and renamed when complete."""
+"""Output MCAP (profile ros2) with rosbag2's conventions, written to a temporary name and renamed when complete.
+
+As rosbag2's MCAP storage writes it: a type without a definition gets a
+schema with an empty encoding and text, every channel carries
+`offered_qos_profiles` (the default profile when the input had none), and a
+`rosbag2` metadata record describes the bag, so `ros2 bag info` and
+`ros2 bag play` read it as one of theirs. A disk that fills up, or any
+other failed write, is an `OutputError`; nothing is left under the name.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import struct
 import tempfile
 from pathlib import Path
+
+import yaml
 
 from bagfault.errors import OutputError
 from bagfault.io.mcap_writer import McapWriter
 from bagfault.io.outputs import current_umask
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')
+INFINITE = {'sec': 9223372036, 'nsec': 854775807}  # rmw's "infinite" duration, as Jazzy's recorder writes it
+DEFAULT_QOS = yaml.safe_dump([{
+    'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
+    'deadline': INFINITE, 'lifespan': INFINITE, 'liveliness': 'automatic',
+    'liveliness_lease_duration': INFINITE, 'avoid_ros_namespace_conventions': False,
+}], sort_keys=False)
 
 
 class McapSink:
@@ -21,8 +38,10 @@ class McapSink:
     removes the partial file.
     """
 
-    def __init__(self, path: Path, *, compression: str = 'zstd', chunk_size: int = 1 << 20) -> None:
+    def __init__(self, path: Path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
+                 ros_distro: str = 'jazzy') -> None:
         self.path = path
+        self.ros_distro = ros_distro
         if compression not in COMPRESSIONS:
             raise OutputError(f'{path}: unknown compression {compression!r} (none, lz4, zstd)')
         directory = path.parent if str(path.parent) else Path('.')
@@ -40,6 +59,7 @@ class McapSink:
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
                                   library=f'bagfault {_version()}')
         self._schemas: dict[tuple[str, str, str], int] = {}
+        self._topics: list[tuple[str, str, str, str]] = []  # topic, type, encoding, QoS of each channel id - 1
 
     def add_channel(
         self,
@@ -51,46 +71,66 @@ class McapSink:
         metadata: dict[str, str] | None = None,
     ) -> int:
         """Register a channel (and its schema once); return its id."""
-        key = (msgtype, schema_encoding or 'ros2msg', schema_text)
-        schema_id = self._schemas.get(key)
-        if schema_id is None:
-            schema_id = self._writer.register_schema(msgtype, key[1], schema_text.encode())
-            self._schemas[key] = schema_id
-        return self._writer.register_channel(topic, message_encoding, schema_id, dict(metadata or {}))
+        key = (msgtype, schema_encoding if schema_text else '', schema_text)
+        channel_metadata = dict(metadata or {})
+        channel_metadata.setdefault('offered_qos_profiles', DEFAULT_QOS)
+        try:
+            schema_id = self._schemas.get(key)
+            if schema_id is None:
+                schema_id = self._writer.register_schema(msgtype, key[1], schema_text.encode())
+                self._schemas[key] = schema_id
+            channel_id = self._writer.register_channel(topic, message_encoding, schema_id, channel_metadata)
+        except OSError as exc:
+            raise self._failed(exc) from None
+        self._topics.append((topic, msgtype, message_encoding, channel_metadata['offered_qos_profiles']))
+        return channel_id
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Append one message."""
-        self._writer.add_message(channel_id, log_time, data, publish_time)
+        try:
+            self._writer.add_message(channel_id, log_time, data, publish_time)
+        except struct.error:
+            raise OutputError(f'{self.path}: time {log_time} ns cannot be written (MCAP times are 0 to 2^64 - 1 '
+                              'ns)') from None
+        except OSError as exc:
+            raise self._failed(exc) from None
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """Append a metadata record."""
-        self._writer.add_metadata(name, data)
+        try:
+            self._writer.add_metadata(name, data)
+        except OSError as exc:
+            raise self._failed(exc) from None
 
     def add_attachment(self, name: str, media_type: str, data: bytes, log_time: int = 0) -> None:
         """Append an attachment (create_time 0 keeps output reproducible)."""
-        self._writer.add_attachment(create_time=0, log_time=log_time, name=name, media_type=media_type, data=data)
+        try:
+            self._writer.add_attachment(create_time=0, log_time=log_time, name=name, media_type=media_type,
+                                        data=data)
+        except OSError as exc:
+            raise self._failed(exc) from None
 
     def finish(self) -> None:
-        """Write the summary and move the file to its final name."""
+        """Write the rosbag2 metadata, the summary, and move the file to its final name."""
         self.close_unpublished()
         self.publish()
 
     def close_unpublished(self) -> None:
         """Complete the file under its temporary name (published later, or aborted)."""
         try:
+            self._writer.flush()
+            self._writer.add_metadata('rosbag2', self._rosbag2_metadata())
             self._writer.finish()
             self._stream.close()
         except OSError as exc:
-            self.abort()
-            raise OutputError(f'{self.path}: cannot write: {exc.strerror}') from None
+            raise self._failed(exc) from None
 
     def publish(self) -> None:
         """Move the completed file to its final name."""
         try:
             os.replace(self._tmp, self.path)
         except OSError as exc:
-            self.abort()
-            raise OutputError(f'{self.path}: cannot write: {exc.strerror}') from None
+            raise self._failed(exc) from None
 
     def abort(self) -> None:
         """Drop the partial output."""
@@ -99,11 +139,49 @@ class McapSink:
             self._stream.close()
         self._tmp.unlink(missing_ok=True)
 
+    def _failed(self, exc: OSError) -> OutputError:
+        """A write failed (a full disk, a lost mount): drop the partial file and say why."""
+        self.abort()
+        return OutputError(f'{self.path}: cannot write: {exc.strerror or exc}')
+
+    def _rosbag2_metadata(self) -> dict[str, str]:
+        """The `rosbag2` metadata record of rosbag2's MCAP storage (metadata version 9)."""
+        counts, (start, end) = self._writer.counts, self._writer.time_range
+        total = sum(counts.values())
+        span = {'nanoseconds': end - start if total else 0}
+        first = {'nanoseconds_since_epoch': start if total else 0}
+        topics = [{
+            'topic_metadata': {'name': topic, 'type': msgtype, 'serialization_format': encoding,
+                               'offered_qos_profiles': _profiles(qos), 'type_description_hash': ''},
+            'message_count': counts.get(number, 0),
+        } for number, (topic, msgtype, encoding, qos) in enumerate(self._topics, start=1)]
+        info = {
+            'version': 9, 'storage_identifier': 'mcap', 'duration': span, 'starting_time': first,
+            'message_count': total, 'topics_with_message_count': topics, 'compression_format': '',
+            'compression_mode': '', 'relative_file_paths': [], 'files': [],  # rosbag2's reader fills these in
+            'custom_data': {}, 'ros_distro': self.ros_distro,
+        }
+        text = yaml.dump({'rosbag2_bagfile_information': info}, Dumper=_PlainDumper, sort_keys=False)
+        return {'serialized_metadata': text, 'ROS_DISTRO': self.ros_distro}
+
+
+class _PlainDumper(yaml.SafeDumper):
+    """Writes repeated values out in full (no &anchors), as rosbag2 does."""
+
+    def ignore_aliases(self, data: object) -> bool:
+        return True
+
+
+def _profiles(text: str) -> object:
+    """offered_qos_profiles as a YAML sequence (metadata version 9), or the text as recorded when it is not one."""
+    try:
+        profiles = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    return profiles if isinstance(profiles, list) else text
+
 
 def _version() -> str:
     from bagfault import __version__  # noqa: PLC0415
 
     return __version__
-
-
-

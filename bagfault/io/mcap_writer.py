@@ -31,7 +31,6 @@ from mcap.records import (
     Chunk,
     ChunkIndex,
     DataEnd,
-    Footer,
     Header,
     Metadata,
     MetadataIndex,
@@ -90,6 +89,7 @@ class McapWriter:
         self._metadata_count = 0
         self._attachment_count = 0
         self._chunk = _OpenChunk()
+        self._summary_crc: int | None = None  # running CRC of the summary section, once it starts
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='mcap-compress')
         self._pending: deque[tuple[_OpenChunk, Future[tuple[bytes, int]], int]] = deque()
         self._stream.write(MAGIC)
@@ -104,6 +104,8 @@ class McapWriter:
         start = self._offset
         self._stream.write(data)
         self._offset += len(data)
+        if self._summary_crc is not None:
+            self._summary_crc = zlib.crc32(data, self._summary_crc)
         return start
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
@@ -208,6 +210,21 @@ class McapWriter:
             chunk_length=chunk_length, message_index_offsets=offsets, message_index_length=self._offset - index_start,
             compression=self._compression, compressed_size=len(compressed), uncompressed_size=size))
 
+    def flush(self) -> None:
+        """Write the open chunk and every pending one (counts and times are then complete)."""
+        self._flush_chunk()
+        self._drain(wait=True)
+
+    @property
+    def counts(self) -> dict[int, int]:
+        """Messages written per channel id so far (chunks completed)."""
+        return dict(self._counts)
+
+    @property
+    def time_range(self) -> tuple[int, int]:
+        """First and last log time written so far (chunks completed)."""
+        return self._start, self._end
+
     # -- end ------------------------------------------------------------------------
     def finish(self) -> None:
         """Last chunk, data end, summary, summary offsets, footer."""
@@ -218,6 +235,7 @@ class McapWriter:
             self._pool.shutdown(wait=True)
         self._record(DataEnd(data_section_crc=0))
         summary_start = self._offset
+        self._summary_crc = 0
         groups = []
         for opcode, records in (
             (Opcode.SCHEMA, self._schemas),
@@ -242,7 +260,12 @@ class McapWriter:
         summary_offset_start = self._offset
         for group in groups:
             self._record(group)
-        self._record(Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=0))
+        # The footer's CRC covers the summary and the footer itself up to the CRC field.
+        head = struct.pack('<BQQQ', Opcode.FOOTER, 8 + 8 + 4, summary_start, summary_offset_start)
+        crc = zlib.crc32(head, self._summary_crc or 0)
+        self._summary_crc = None
+        self._stream.write(head + struct.pack('<I', crc))
+        self._offset += len(head) + 4
         self._stream.write(MAGIC)
 
     def abandon(self) -> None:

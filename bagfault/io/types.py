@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
     from bagfault.io.channel import Channel
+    from bagfault.io.definitions import Definitions
 
 DISTROS = {
     'dashing': Stores.ROS2_DASHING,
@@ -62,7 +63,7 @@ def _parse(msgtype: str, encoding: str, text: str) -> dict[str, Any]:
 class TypeCatalog:
     """Resolves message types to codecs and to output schema text."""
 
-    def __init__(self, channels: list[Channel], distro: str | None) -> None:
+    def __init__(self, channels: list[Channel], distro: str | None, definitions: Definitions | None = None) -> None:
         self.distro = (distro or DEFAULT_DISTRO).lower()
         store_name = DISTROS.get(self.distro, DISTROS[DEFAULT_DISTRO])
         self.standard = get_typestore(store_name)
@@ -70,6 +71,7 @@ class TypeCatalog:
         for channel in channels:
             if channel.schema_text and channel.msgtype and channel.schema_encoding in {'ros2msg', 'ros2idl'}:
                 self._stored.setdefault(channel.msgtype, (channel.schema_encoding, channel.schema_text))
+        self._user = {k: v for k, v in (definitions or {}).items() if k not in self._stored}
         self._extra: dict[str, tuple[str, str]] = {}
         self._store: Typestore | None = None
         self._store_types: frozenset[str] = frozenset()
@@ -84,13 +86,14 @@ class TypeCatalog:
 
     def _build(self, wanted: set[str]) -> Typestore:
         types: dict[str, Any] = {}
-        for msgtype, (encoding, text) in (*self._stored.items(), *self._extra.items()):
-            if msgtype in wanted or msgtype in self._extra:
+        for msgtype, (encoding, text) in (*self._stored.items(), *self._user.items(), *self._extra.items()):
+            if msgtype in wanted or msgtype in self._extra or msgtype in self._user:
                 try:
                     for name, definition in _parse(msgtype, encoding, text).items():
                         types.setdefault(name, definition)
                 except (TypesysError, ValueError, IndexError) as exc:
-                    self._errors[msgtype] = f'stored definition does not parse: {exc}'
+                    where = 'given' if msgtype in self._user else 'stored'
+                    self._errors[msgtype] = f'{where} definition does not parse: {exc}'
         missing = [x for x in wanted if x not in types]
         while missing:
             name = missing.pop()
@@ -133,15 +136,20 @@ class TypeCatalog:
         return self._errors.get(msgtype, 'type not found in the bag or the standard types of ' + self.distro)
 
     def schema(self, msgtype: str) -> tuple[str, str]:
-        """(encoding, text) to write as output schema; ('ros2msg', '') when nothing is known."""
+        """(encoding, text) to write as output schema: the bag's, the user's (--msg-path), the distro's; ('', '')
+        when nothing is known, as rosbag2 writes a type without definition."""
         if msgtype in self._stored:
             return self._stored[msgtype]
         if msgtype in self._extra:
             return self._extra[msgtype]
+        if msgtype in self._user:
+            codec = self.codec(msgtype)
+            if codec is not None:
+                return 'ros2msg', codec.store.generate_msgdef(msgtype, ros_version=2)[0]
         if msgtype in self.standard.fielddefs:
             text, _ = self.standard.generate_msgdef(msgtype, ros_version=2)
             return 'ros2msg', text
-        return 'ros2msg', ''
+        return '', ''
 
 
 def _references(desc: Any) -> list[str]:

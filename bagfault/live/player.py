@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from bagfault.engine.offline import replay
 from bagfault.engine.provenance import provenance
 from bagfault.engine.result import RunStats
+from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
@@ -53,7 +54,7 @@ def run_play(
     last: Run | None = None
     with ros_context(stop) as context:
         node = Node('bagfault_player', context=context)
-        recording = McapSink(record) if record is not None else None
+        recording = McapSink(record, ros_distro=_distro(inputs)) if record is not None else None
         try:
             if recording is not None:
                 recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'})
@@ -91,10 +92,19 @@ def _pass(scenario: Scenario, inputs: list[Path], sink: LiveSink, *, seed: int, 
     """One pass over the bag; its black boxes are named before the next pass begins."""
     input_set = InputSet(inputs)
     try:
-        catalog = TypeCatalog(input_set.channels, input_set.ros_distro)
+        catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
         run, stopped = replay(input_set, scenario, catalog, sink, seed=seed, blackbox_base=record,
                               blackbox_numbers=numbers)
     finally:
         input_set.close()
     run.close(ok=True)
     return run, stopped
+
+
+def _distro(inputs: list[Path]) -> str:
+    """The distro whose definitions the recording will carry (that of the bag, as offline)."""
+    input_set = InputSet(inputs)
+    try:
+        return TypeCatalog(input_set.channels, input_set.ros_distro).distro
+    finally:
+        input_set.close()

@@ -18,7 +18,8 @@ from bagfault.errors import Problem, ScenarioError
 from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 from bagfault.scenario.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
 
-TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager'}
+TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager',
+            'msg_paths'}
 INJECTOR_KEYS = {'id', 'type', 'topic', 'input_topic', 'output_topic', 'qos_depth', 'trigger_service',
                  'proxy_service', 'target_service', 'seed'}
 ENDPOINT_KEYS = {'input_topic', 'output_topic', 'qos_depth'}
@@ -80,6 +81,8 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
     out = _Collector(name, located)
     scenario = _build(located, out)
     scenario.source = source
+    if source is not None:
+        scenario.msg_paths = [source.parent / p for p in scenario.msg_paths]
     scenario.text = text
     scenario.located = located
     if validate:
@@ -145,6 +148,12 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
 
     if 'seed' in root:
         scenario.seed = _seed(root['seed'], ('seed',), out)
+    if 'msg_paths' in root:
+        paths = root['msg_paths']
+        if not isinstance(paths, list) or not all(isinstance(p, str) and p for p in paths):
+            out.add(('msg_paths',), 'must be a list of folders holding <package>/msg/<Name>.msg or .idl files')
+        else:
+            scenario.msg_paths = [Path(p) for p in paths]
     if 'fault_manager' in root:
         section = root['fault_manager']
         if section is not None and not isinstance(section, dict):

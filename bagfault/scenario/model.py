@@ -113,6 +113,7 @@ class Scenario:
     fault_manager: dict[str, Any] | None = None
     fault_manager_config: Any = None
     warnings: list[str] = field(default_factory=list)
+    msg_paths: list[Path] = field(default_factory=list)  # folders of .msg/.idl definitions (relative to the file)
     source: Path | None = None
     text: str = ''
     located: LocatedYaml = field(default_factory=lambda: LocatedYaml(None))
