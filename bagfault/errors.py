@@ -32,6 +32,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
+def one_line(exc: BaseException) -> str:
+    """Another library's exception as one line of text (YAML and parser messages span several)."""
+    return ' '.join(str(exc).split()) or type(exc).__name__
+
+
 class BagfaultError(Exception):
     """A problem with the user's input, scenario, options or environment: exit code 2, one line."""
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from bagfault.errors import InputError
+from bagfault.errors import InputError, one_line
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -32,5 +32,5 @@ def load_definitions(folders: Sequence[Path]) -> Definitions:
             try:
                 found[msgtype] = (SUFFIXES[path.suffix], path.read_text(encoding='utf-8'))
             except (OSError, UnicodeDecodeError) as exc:
-                raise InputError(f'{path}: cannot read message definition ({exc})') from None
+                raise InputError(f'{path}: cannot read message definition ({one_line(exc)})') from None
     return found

@@ -31,7 +31,7 @@ from mcap.records import Channel as McapChannel
 from mcap.records import Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 
-from bagfault.errors import InputError
+from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel, normalize_msgtype
 
 if TYPE_CHECKING:
@@ -117,10 +117,10 @@ class McapSource:
             raise
         except Corrupt as exc:
             self._file.close()
-            raise InputError(f'{path}: corrupt MCAP file: {exc}') from None
+            raise InputError(f'{path}: corrupt MCAP file: {one_line(exc)}') from None
         except READ_ERRORS as exc:
             self._file.close()
-            raise InputError(f'{path}: corrupt or truncated MCAP file ({exc or type(exc).__name__})') from None
+            raise InputError(f'{path}: corrupt or truncated MCAP file ({one_line(exc)})') from None
 
     # -- corruption -------------------------------------------------------------------------
     def _lost(self, where: str, reason: str) -> None:
@@ -248,7 +248,7 @@ class McapSource:
         except Corrupt as exc:
             self._lost(f'chunk at offset {offset}', str(exc))
         except (zstandard.ZstdError, RuntimeError, ValueError, zlib.error, struct.error, MemoryError) as exc:
-            self._lost(f'chunk at offset {offset}', f'cannot decompress ({exc or type(exc).__name__})')
+            self._lost(f'chunk at offset {offset}', f'cannot decompress ({one_line(exc)})')
         return None
 
     def _read_chunk(self, offset: int) -> memoryview:
@@ -319,7 +319,7 @@ class McapSource:
                 elif opcode in (OP_SCHEMA, OP_CHANNEL):
                     self._definition(opcode, data, body, body + length)
             except (Corrupt, struct.error, UnicodeDecodeError) as exc:
-                self._lost(f'chunk at offset {offset}', f'{exc}; {len(out)} messages before it are kept')
+                self._lost(f'chunk at offset {offset}', f'{one_line(exc)}; {len(out)} messages before it are kept')
                 return out
             pos = body + length
         return out
@@ -344,7 +344,7 @@ class McapSource:
                         messages.append((part.log_time, part.publish_time, part.channel_id, len(messages),
                                          memoryview(part.data)))
         except READ_ERRORS as exc:
-            self._lost(f'after {len(messages)} messages', f'{exc or type(exc).__name__}')
+            self._lost(f'after {len(messages)} messages', f'{one_line(exc)}')
         messages.sort(key=lambda m: (m[0], m[3]))
         for channel_id in sorted(self._pending_channels):
             self._register(channel_id)
@@ -362,9 +362,9 @@ class McapSource:
             else:
                 yield from self._known(self._memory)
         except Corrupt as exc:
-            raise InputError(f'{self.path}: corrupt MCAP file: {exc}') from None
+            raise InputError(f'{self.path}: corrupt MCAP file: {one_line(exc)}') from None
         except READ_ERRORS as exc:
-            raise InputError(f'{self.path}: corrupt chunk data ({exc or type(exc).__name__})') from None
+            raise InputError(f'{self.path}: corrupt chunk data ({one_line(exc)})') from None
 
     def _known(self, items: list[Split]) -> Iterator[RawItem]:
         """Messages whose channel is defined; one that refers to no channel is corrupt."""

@@ -20,7 +20,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
-from bagfault.errors import InputError
+from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel
 
 if TYPE_CHECKING:
@@ -55,12 +55,12 @@ class Ros1Source:
             self._reader = AnyReader([path])
             self._reader.open()
         except READ_ERRORS as exc:
-            raise InputError(f'{path}: cannot read ROS 1 bag ({exc or type(exc).__name__})') from None
+            raise InputError(f'{path}: cannot read ROS 1 bag ({one_line(exc)})') from None
         try:
             self._setup()
         except READ_ERRORS as exc:
             self._reader.close()
-            raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({exc or type(exc).__name__})') from None
+            raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({one_line(exc)})') from None
         connections = self._reader.connections
         self.message_count: int | None = sum(c.msgcount for c in connections)
         self.start_time = self._reader.start_time if self.message_count else None
@@ -107,14 +107,14 @@ class Ros1Source:
                 try:
                     converted = converters[by_connection[key]](raw)
                 except CONVERT_ERRORS as exc:
-                    problem = f'{connection.topic} at {timestamp} ns: cannot convert the message ({exc})'
+                    problem = f'{connection.topic} at {timestamp} ns: cannot convert the message ({one_line(exc)})'
                     if not self.salvage:
                         raise InputError(f'{self.path}: {problem} (--salvage copies what can be read)') from None
                     self.losses.append(f'{self.path}: {problem}')
                     continue
                 yield ids[key], timestamp, timestamp, converted
         except READ_ERRORS as exc:
-            raise InputError(f'{self.path}: corrupt ROS 1 bag ({exc or type(exc).__name__})') from None
+            raise InputError(f'{self.path}: corrupt ROS 1 bag ({one_line(exc)})') from None
 
     def close(self) -> None:
         """Close the bag."""

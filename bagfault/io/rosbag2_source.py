@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import yaml
 import zstandard
 
-from bagfault.errors import InputError
+from bagfault.errors import InputError, one_line
 from bagfault.io.mcap_source import McapSource
 from bagfault.io.merged import MergedSource, Source
 from bagfault.io.sqlite_source import SqliteSource
@@ -78,7 +78,7 @@ class Rosbag2Source(MergedSource):
                 raise ValueError(f'relative_file_paths {listed!r} is not a list of file names')
             names = [PurePath(x).name for x in listed]
         except (yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
-            raise InputError(f'{meta}: not a rosbag2 metadata file ({exc})') from None
+            raise InputError(f'{meta}: not a rosbag2 metadata file ({one_line(exc)})') from None
         except OSError as exc:
             raise InputError(f'{meta}: cannot read: {exc.strerror}') from None
         if version > 9:
@@ -117,7 +117,7 @@ class Rosbag2Source(MergedSource):
             with file.open('rb') as src, target.open('wb') as dst:
                 shutil.copyfileobj(zstandard.ZstdDecompressor().stream_reader(src), dst)
         except zstandard.ZstdError as exc:
-            raise InputError(f'{file}: corrupt zstd file ({exc})') from None
+            raise InputError(f'{file}: corrupt zstd file ({one_line(exc)})') from None
         return target
 
     def _declared(self) -> Callable[[Channel], Channel]:

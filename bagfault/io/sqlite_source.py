@@ -25,7 +25,7 @@ from urllib.parse import quote
 
 import zstandard
 
-from bagfault.errors import InputError
+from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel, normalize_msgtype
 
 if TYPE_CHECKING:
@@ -56,7 +56,7 @@ class SqliteSource:
             self._load()
         except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
             self._cleanup()
-            raise InputError(f'{self.display}: corrupt rosbag2 database ({exc})') from None
+            raise InputError(f'{self.display}: corrupt rosbag2 database ({one_line(exc)})') from None
         except OSError as exc:
             self._cleanup()
             raise InputError(f'{self.display}: cannot open: {exc.strerror}') from None
@@ -142,11 +142,11 @@ class SqliteSource:
                         try:
                             data = decompress().decompress(data)
                         except zstandard.ZstdError as exc:
-                            self._bad(row_id, f'corrupt zstd message ({exc})')
+                            self._bad(row_id, f'corrupt zstd message ({one_line(exc)})')
                             continue
                     yield index, timestamp, timestamp, data
         except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
-            raise InputError(f'{self.display}: corrupt rosbag2 database ({exc})') from None
+            raise InputError(f'{self.display}: corrupt rosbag2 database ({one_line(exc)})') from None
 
     def close(self) -> None:
         """Close the database (and remove a private copy)."""

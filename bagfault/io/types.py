@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING, Any
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
+from bagfault.errors import one_line
+
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
@@ -93,7 +95,7 @@ class TypeCatalog:
                         types.setdefault(name, definition)
                 except (TypesysError, ValueError, IndexError) as exc:
                     where = 'given' if msgtype in self._user else 'stored'
-                    self._errors[msgtype] = f'{where} definition does not parse: {exc}'
+                    self._errors[msgtype] = f'{where} definition does not parse: {one_line(exc)}'
         missing = [x for x in wanted if x not in types]
         while missing:
             name = missing.pop()
@@ -122,7 +124,7 @@ class TypeCatalog:
             self._store.get_msgdef(msgtype)
             codec: Codec | None = Codec(msgtype, self._store)
         except (TypesysError, KeyError, ValueError) as exc:
-            self._errors.setdefault(msgtype, f'no usable definition ({exc})')
+            self._errors.setdefault(msgtype, f'no usable definition ({one_line(exc)})')
             codec = None
         # Rebuilding the store invalidates earlier codecs' store; re-point them.
         for known in self._codecs.values():

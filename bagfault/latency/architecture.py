@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from bagfault.errors import LatencyError
+from bagfault.errors import LatencyError, one_line
 
 UNDEFINED = 'UNDEFINED'
 CONTEXT_TYPES = ('use_latest_message', 'inherit_unique_stamp', 'callback_chain', 'tilde', UNDEFINED)
@@ -158,9 +158,9 @@ def load_architecture(path: str | Path) -> Architecture:
     except FileNotFoundError:
         raise LatencyError(f'{file}: architecture file not found') from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise LatencyError(f'{file}: cannot read: {exc}') from None
+        raise LatencyError(f'{file}: cannot read: {one_line(exc)}') from None
     except yaml.YAMLError as exc:
-        raise LatencyError(f'{file}: invalid YAML: {exc}') from None
+        raise LatencyError(f'{file}: invalid YAML: {one_line(exc)}') from None
     if not isinstance(data, dict):
         raise LatencyError(f'{file}: Failed to parse yaml: not a mapping')
     try:
@@ -168,7 +168,7 @@ def load_architecture(path: str | Path) -> Architecture:
         executors = _required(data, 'executors', 'architecture')
         raw_nodes = _required(data, 'nodes', 'architecture')
     except LatencyError as exc:
-        raise LatencyError(f'{file}: {exc}') from None
+        raise LatencyError(f'{file}: {one_line(exc)}') from None
     warnings: list[str] = []
     nodes: dict[str, Node] = {}
     skipped: dict[str, str] = {}
@@ -179,7 +179,7 @@ def load_architecture(path: str | Path) -> Architecture:
         except LatencyError as exc:
             name = raw.get('node_name') if isinstance(raw, dict) else None
             skipped[str(name)] = str(exc)
-            warnings.append(f'{exc}; node skipped')
+            warnings.append(f'{one_line(exc)}; node skipped')
             continue
         if names.count(node.name) > 1:
             skipped[node.name] = f'node {node.name} is defined {names.count(node.name)} times'
@@ -194,7 +194,7 @@ def load_architecture(path: str | Path) -> Architecture:
                               _topic(e.get('subscribe_topic_name')), _topic(e.get('publish_topic_name')))
                      for i, e in enumerate(_required(raw, 'node_chain', f'path {name}'))]
         except LatencyError as exc:
-            raise LatencyError(f'{file}: {exc}') from None
+            raise LatencyError(f'{file}: {one_line(exc)}') from None
         named = NamedPath(name, chain)
         for element in chain:
             if element.node_name in skipped:

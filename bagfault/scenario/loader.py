@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from bagfault.errors import Problem, ScenarioError
+from bagfault.errors import Problem, ScenarioError, one_line
 from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 from bagfault.scenario.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
 
@@ -63,7 +63,7 @@ def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = Fal
     except IsADirectoryError:
         raise ScenarioError(f'{file}: is a directory, not a scenario file') from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f'{file}: cannot read scenario file: {exc}') from None
+        raise ScenarioError(f'{file}: cannot read scenario file: {one_line(exc)}') from None
     return parse_scenario(text, source=file, validate=validate, strict=strict)
 
 

@@ -39,11 +39,11 @@ def parse_extended_schedule(fault: FaultSpec, node: dict[str, Any], path: PathKe
                     fault.repeat = Repeat(period=period, on=on)
     if 'probability_per_second' in node:
         where = (*path, 'probability_per_second')
-        rate = seconds(node['probability_per_second'], where, out, positive=True)
-        if rate is not None and rate > MAX_RATE:
-            out.add(where, f'{rate:g} activations per second is more than {MAX_RATE:g}')
-        elif rate is not None:
-            fault.probability_per_second = rate
+        rate = node['probability_per_second']
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate <= MAX_RATE:
+            out.add(where, f'{rate!r} must be a rate above 0 and at most {MAX_RATE:g} activations per second')
+        else:
+            fault.probability_per_second = float(rate)
         if 'hold' not in node:
             out.add(where, "needs 'hold': how long each random activation lasts, in seconds")
     if 'hold' in node:

@@ -1,0 +1,522 @@
+"""Bad data is never a verdict, nothing is lost in silence, inputs are never touched.
+
+A seeded mutator damages small inputs of every format and scenario files,
+and every case must end in one of two ways: a `BagfaultError` (exit 2, one
+line) with no output file, or a run in which every message an independent
+reader finds in the input went through. The cases found by hand are kept
+below as regression tests.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import shutil
+import signal
+import sqlite3
+import struct
+import subprocess
+import sys
+import textwrap
+import time
+from collections import Counter
+from pathlib import Path
+
+import pytest
+import yaml
+from helpers import counts, raw_messages, run_inline, tree_digest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Rosbag2Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.typesys import Stores, get_typestore
+
+from bagfault import api
+from bagfault.cli import main
+from bagfault.demo import synthetic
+from bagfault.errors import BagfaultError, InputError, MalformedMessageError, ScenarioError
+from bagfault.scenario import parse_scenario
+
+STREAMS = [synthetic.Stream('/imu', 'sensor_msgs/msg/Imu', 100.0), synthetic.Stream('/odom', 'nav_msgs/msg/Odometry', 20.0)]
+SCENARIO = parse_scenario(textwrap.dedent("""
+    injectors:
+      - {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}
+      - {id: odom, type: topic, input_topic: /odom, output_topic: /odom_out}
+    faults:
+      - {id: bias, injector_id: imu, active_on_startup: true, config: {angular_velocity_z_bias: 1.0}}
+      - {id: late, injector_id: odom, start: 0.5, config: {delay_ms: 50}}
+"""))
+ROS2 = synthetic.store()
+
+
+def mcap_bag(path: Path, compression: CompressionType) -> Path:
+    synthetic.write_mcap(path, synthetic.messages(STREAMS, 2.0), compression=compression, chunk_size=4096)
+    return path
+
+
+def rosbag2_bag(path: Path, plugin: StoragePlugin, compression: CompressionMode | None = None) -> Path:
+    writer = Rosbag2Writer(path, version=9, storage_plugin=plugin)
+    if compression is not None:
+        writer.set_compression(compression, CompressionFormat.ZSTD)
+    with writer:
+        connections = {}
+        for stream, time_ns, message in synthetic.messages(STREAMS, 2.0, ts=ROS2):
+            if stream.topic not in connections:
+                connections[stream.topic] = writer.add_connection(stream.topic, stream.msgtype, typestore=ROS2)
+            writer.write(connections[stream.topic], time_ns, ROS2.serialize_cdr(message, stream.msgtype))
+    return path
+
+
+def ros1_bag(path: Path, compression: str | None) -> Path:
+    sys.path.insert(0, str(Path(__file__).parent / 'io'))
+    from rosbags.rosbag1 import Writer as Ros1Writer
+    from test_own_formats import ROS1, _to_ros1
+
+    writer = Ros1Writer(path)
+    if compression:
+        writer.set_compression(Ros1Writer.CompressionFormat[compression.upper()])
+    writer.open()
+    connections = {}
+    for stream, time_ns, message in synthetic.messages(STREAMS, 2.0, ts=ROS2):
+        if stream.topic not in connections:
+            connections[stream.topic] = writer.add_connection(stream.topic, stream.msgtype, typestore=ROS1)
+        writer.write(connections[stream.topic], time_ns, ROS1.serialize_ros1(_to_ros1(message, stream.msgtype),
+                                                                             stream.msgtype))
+    writer.close()
+    return path
+
+
+def independent_count(path: Path) -> int | None:
+    """Messages another reader finds (mcap with CRC checks, rosbags); None when it refuses the file."""
+    try:
+        if path.suffix == '.mcap':
+            with path.open('rb') as stream:
+                return sum(1 for _ in make_reader(stream, validate_crcs=True).iter_messages())
+        with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+            return sum(1 for _ in reader.messages())
+    except Exception:
+        return None
+
+
+def damage(data: bytes, rng: random.Random) -> bytes:
+    out = bytearray(data)
+    kind = rng.choice(['flip', 'overwrite', 'truncate', 'length'])
+    if kind == 'flip':
+        for _ in range(rng.randint(1, 6)):
+            position = rng.randrange(len(out))
+            out[position] ^= 1 << rng.randrange(8)
+    elif kind == 'overwrite':
+        position, size = rng.randrange(len(out)), rng.randint(1, 64)
+        out[position:position + size] = bytes(rng.randrange(256) for _ in range(size))[:len(out) - position]
+    elif kind == 'truncate':
+        out = out[:rng.randrange(len(out))]
+    else:
+        position = rng.randrange(max(1, len(out) - 9))
+        out[position + 1:position + 9] = rng.choice([b'\xff' * 8, (2**40).to_bytes(8, 'little'),
+                                                     (7).to_bytes(8, 'little')])
+    return bytes(out)
+
+
+def judge(case: Path, tmp_path: Path, reference: int) -> str:
+    """Run one damaged input; return 'error' or 'ok', asserting the rules either way."""
+    out = tmp_path / 'out.mcap'
+    before = tree_digest(case)
+    try:
+        result = api.run(SCENARIO, [case], out)
+    except BagfaultError:
+        assert not out.exists()
+        verdict = 'error'
+    else:
+        # every message went through: the copies, and each faulted topic's outputs
+        found = counts(out)
+        read = result.stats.input_messages
+        assert found['/imu'] + found['/odom'] == read
+        assert found['/imu_out'] == found['/imu'] and found['/odom_out'] == found['/odom']
+        if reference is not None and not result.warnings:
+            assert read == reference  # nothing lost in silence
+        out.unlink()
+        verdict = 'ok'
+    assert tree_digest(case) == before  # the input is never touched
+    assert not list(tmp_path.rglob('*.partial'))
+    return verdict
+
+
+FORMATS = ['mcap-zstd', 'mcap-none', 'mcap-lz4', 'rosbag2-sqlite3', 'rosbag2-mcap', 'rosbag2-zstd-file',
+           'ros1-none', 'ros1-bz2', 'ros1-lz4']
+
+
+def make_input(kind: str, folder: Path) -> Path:
+    if kind.startswith('mcap-'):
+        return mcap_bag(folder / 'bag.mcap', getattr(CompressionType, kind[5:].upper()))
+    if kind.startswith('ros1-'):
+        return ros1_bag(folder / 'bag.bag', None if kind == 'ros1-none' else kind[5:])
+    plugin = StoragePlugin.MCAP if kind == 'rosbag2-mcap' else StoragePlugin.SQLITE3
+    return rosbag2_bag(folder / 'bag', plugin, CompressionMode.FILE if kind.endswith('zstd-file') else None)
+
+
+@pytest.mark.parametrize('kind', FORMATS)
+def test_damaged_inputs_are_an_error_or_go_through_whole(tmp_path, kind):
+    rng = random.Random(f'bagfault-{kind}')
+    (tmp_path / 'source').mkdir()
+    source = make_input(kind, tmp_path / 'source')
+    verdicts: Counter[str] = Counter()
+    for number in range(24):
+        case_dir = tmp_path / f'case{number}'
+        case_dir.mkdir()
+        if source.is_dir():
+            case = case_dir / 'bag'
+            shutil.copytree(source, case)
+            storage = next(p for p in case.iterdir() if p.name != 'metadata.yaml')
+            target = rng.choice([storage, storage, case / 'metadata.yaml'])
+        else:
+            case = target = case_dir / source.name
+            shutil.copy(source, case)
+        target.write_bytes(damage(target.read_bytes(), rng))
+        reference = independent_count(case)
+        verdicts[judge(case, case_dir, reference)] += 1
+        shutil.rmtree(case_dir)
+    assert verdicts['error'] > 0  # the mutator does damage what it touches
+    assert sum(verdicts.values()) == 24
+
+
+SCENARIO_TEXT = textwrap.dedent("""\
+    injectors:
+      - {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}
+      - id: odom
+        type: topic
+        input_topic: /odom
+        output_topic: /odom_out
+    faults:
+      - id: bias
+        injector_id: imu
+        start: 0.2
+        duration: 1.0
+        config: {angular_velocity_z_bias: 1.0, linear_acceleration_x_noise_stddev: 0.1}
+      - {id: flicker, injector_id: odom, repeat: {period: 0.5, on: 0.1}, config: {drop_probability: 0.5}}
+      - {id: late, injector_id: odom, after: {fault: bias, delay: 0.3}, config: {delay_ms: 40, throttle_hz: 10}}
+    assertions:
+      - {id: on, type: fault_event, fault_id: bias, state: active, within: 1.0}
+      - {id: hz, type: topic_hz, topic: /imu_out, message_type: sensor_msgs/msg/Imu, min_hz: 50, window: 1.0}
+      - {id: range, type: field_range, topic: /imu_out, field: angular_velocity.z, max: 5.0}
+""")
+VALUES = ['-1', '0', '1e300', '.inf', '.nan', '"x"', '[]', '{}', 'null', '1e-9', '999999999999', 'true', '"1.0"',
+          '&a [*a]', '!!binary aGk=', '1:30', '"/imu"', 'imu']
+
+
+def mutate_scenario(text: str, rng: random.Random) -> str:
+    lines = text.splitlines()
+    kind = rng.choice(['value', 'value', 'delete', 'duplicate', 'bytes'])
+    number = rng.randrange(len(lines))
+    if kind == 'value':
+        line = lines[number]
+        spots = [i for i, c in enumerate(line) if c == ':']
+        if spots:
+            at = rng.choice(spots) + 1
+            end = min([i for i in (line.find(',', at), line.find('}', at)) if i > 0], default=len(line))
+            lines[number] = line[:at] + ' ' + rng.choice(VALUES) + line[end:]
+    elif kind == 'delete':
+        del lines[number]
+    elif kind == 'duplicate':
+        lines.insert(number, lines[number])
+    else:
+        data = bytearray('\n'.join(lines).encode())
+        for _ in range(rng.randint(1, 4)):
+            data[rng.randrange(len(data))] = rng.randrange(32, 127)
+        return data.decode(errors='replace')
+    return '\n'.join(lines) + '\n'
+
+
+def test_damaged_scenarios_are_an_error_or_a_run_never_a_crash(tmp_path):
+    bag = mcap_bag(tmp_path / 'bag.mcap', CompressionType.ZSTD)
+    rng = random.Random('bagfault-scenarios')
+    outcomes: Counter[str] = Counter()
+    for number in range(120):
+        text = mutate_scenario(SCENARIO_TEXT, rng)
+        path = tmp_path / f'scenario{number}.yaml'
+        path.write_text(text)
+        out = tmp_path / 'out.mcap'
+        started = time.monotonic()
+        try:
+            result = api.run(path, [bag], out)
+        except ScenarioError as exc:
+            assert all(str(path) in line for line in str(exc).splitlines())
+            outcomes['refused'] += 1
+        except BagfaultError:
+            outcomes['cannot run'] += 1
+        else:
+            outcomes['failed' if result.failed else 'passed'] += 1
+            assert result.stats.input_messages == 240
+            out.unlink()
+        assert time.monotonic() - started < 10  # no schedule may ask for more than the bag holds
+        assert not out.exists() and not list(tmp_path.glob('*.partial'))
+    assert outcomes['refused'] > 10 and outcomes['passed'] > 10
+
+
+# -- regression cases found by hand ---------------------------------------------------------------------
+
+def uncompressed_mcap(path: Path) -> Path:
+    return mcap_bag(path, CompressionType.NONE)
+
+
+def test_a_corrupt_record_length_in_a_chunk_is_an_error_and_salvage_keeps_the_rest(tmp_path):
+    bag = uncompressed_mcap(tmp_path / 'bag.mcap')
+    data = bytearray(bag.read_bytes())
+    first = data.index(b'\x05', data.index(b'\x06', 8) + 60)  # a message record inside the first chunk
+    data[first + 1:first + 9] = (10**9).to_bytes(8, 'little')
+    bag.write_bytes(bytes(data))
+    with pytest.raises(InputError, match='corrupt MCAP file: chunk at offset') as info:
+        api.run(SCENARIO, [bag], tmp_path / 'out.mcap')
+    assert '--salvage' in str(info.value) and not (tmp_path / 'out.mcap').exists()
+    result = api.run(SCENARIO, [bag], tmp_path / 'out.mcap', salvage=True)
+    assert result.stats.input_messages < 240
+    assert any(w.startswith('salvage skipped') and 'chunk at offset' in w for w in result.warnings)
+
+
+def test_a_changed_byte_in_an_uncompressed_chunk_fails_its_crc(tmp_path):
+    bag = uncompressed_mcap(tmp_path / 'bag.mcap')
+    data = bytearray(bag.read_bytes())
+    data[data.index(b'base_link') + 2] ^= 0x20  # inside a message: only the chunk CRC can tell
+    bag.write_bytes(bytes(data))
+    with pytest.raises(InputError, match='CRC mismatch'):
+        api.run(SCENARIO, [bag], tmp_path / 'out.mcap')
+
+
+def test_schemas_kept_only_in_the_data_section_are_found(tmp_path):
+    bag = tmp_path / 'bag.mcap'
+    with bag.open('wb') as stream:  # a valid layout: the summary repeats channels, not schemas
+        writer = Writer(stream, repeat_schemas=False, chunk_size=4096)
+        writer.start('ros2', 'test')
+        channels = {}
+        for stream_spec, time_ns, message in synthetic.messages(STREAMS, 1.0, ts=ROS2):
+            if stream_spec.topic not in channels:
+                text, _ = ROS2.generate_msgdef(stream_spec.msgtype, ros_version=2)
+                schema = writer.register_schema(stream_spec.msgtype, 'ros2msg', text.encode())
+                channels[stream_spec.topic] = writer.register_channel(stream_spec.topic, 'cdr', schema)
+            writer.add_message(channels[stream_spec.topic], time_ns,
+                               bytes(ROS2.serialize_cdr(message, stream_spec.msgtype)), time_ns)
+        writer.finish()
+    out = tmp_path / 'out.mcap'
+    api.run(SCENARIO, [bag], out)
+    with out.open('rb') as stream:
+        schemas = make_reader(stream).get_summary().schemas.values()
+    assert {s.name for s in schemas if s.data} >= {'sensor_msgs/msg/Imu', 'nav_msgs/msg/Odometry'}
+
+
+def sqlite_copy(tmp_path: Path) -> tuple[Path, Path]:
+    bag = rosbag2_bag(tmp_path / 'bag', StoragePlugin.SQLITE3)
+    return bag, next(bag.glob('*.db3'))
+
+
+@pytest.mark.parametrize(('statement', 'problem'), [
+    ("UPDATE messages SET data = 'text' WHERE id = 7", 'messages row 7: data is str, not a blob'),
+    ('UPDATE messages SET timestamp = -5 WHERE id = 3', 'messages row 3: timestamp -5 is not a time'),
+    ("UPDATE messages SET timestamp = 'x' WHERE id = 9", "messages row 9: timestamp 'x' is not a time"),
+    ('UPDATE messages SET topic_id = 99 WHERE id = 11', 'messages row 11: topic_id 99 is not in the topics table'),
+])
+def test_impossible_sqlite_rows_are_errors_naming_the_row(tmp_path, statement, problem):
+    bag, database = sqlite_copy(tmp_path)
+    with sqlite3.connect(database) as connection:
+        connection.execute(statement)
+    with pytest.raises(InputError, match=problem):
+        api.run(SCENARIO, [bag], tmp_path / 'out.mcap')
+    result = api.run(SCENARIO, [bag], tmp_path / 'out.mcap', salvage=True)
+    assert result.stats.input_messages == 239 and problem in result.warnings[0]
+
+
+def test_committed_rows_in_a_wal_journal_are_read_and_the_input_is_untouched(tmp_path):
+    bag, database = sqlite_copy(tmp_path)
+    keeper = sqlite3.connect(database)  # stays open: the journal is not checkpointed into the file
+    keeper.execute('PRAGMA journal_mode=WAL')
+    keeper.execute('PRAGMA wal_autocheckpoint=0')
+    row = keeper.execute('SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp DESC LIMIT 1').fetchone()
+    keeper.executemany('INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)',
+                       [(row[0], row[1] + k * 1000, row[2]) for k in range(1, 21)])
+    keeper.commit()
+    copy = tmp_path / 'copy'  # what a crashed recorder leaves: the database and its -wal beside it
+    copy.mkdir()
+    for file in bag.iterdir():
+        shutil.copy(file, copy / file.name)
+    keeper.close()
+    assert (copy / f'{database.name}-wal').stat().st_size > 0
+    before = tree_digest(copy)
+    result = api.run(SCENARIO, [copy], tmp_path / 'out.mcap')
+    assert result.stats.input_messages == 260
+    assert any('-wal journal' in w for w in result.warnings)
+    assert tree_digest(copy) == before
+
+
+def test_a_file_listed_twice_in_metadata_is_read_once(tmp_path):
+    bag, database = sqlite_copy(tmp_path)
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())
+    meta['rosbag2_bagfile_information']['relative_file_paths'] *= 2
+    (bag / 'metadata.yaml').write_text(yaml.safe_dump(meta))
+    result = api.run(SCENARIO, [bag], tmp_path / 'out.mcap')
+    assert result.stats.input_messages == 240
+    assert any('listed more than once' in w for w in result.warnings)
+
+
+@pytest.mark.parametrize(('key', 'value'), [('version', '.inf'), ('relative_file_paths', '5'),
+                                            ('compression_mode', '5'), ('ros_distro', '[1]')])
+def test_metadata_with_wrong_types_is_a_clean_error_or_ignored(tmp_path, capsys, key, value):
+    bag, _ = sqlite_copy(tmp_path)
+    text = (bag / 'metadata.yaml').read_text()
+    lines = [f'  {key}: {value}' if line.startswith(f'  {key}:') else line for line in text.splitlines()]
+    (bag / 'metadata.yaml').write_text('\n'.join(lines) + '\n')
+    code = main(['run', _scenario_file(tmp_path), str(bag), '-o', str(tmp_path / 'out.mcap')])
+    err = capsys.readouterr().err
+    assert code in (0, 2) and 'Traceback' not in err and 'internal error' not in err
+    if code == 2:
+        assert err.count('\n') == 1 and 'metadata.yaml' in err
+
+
+def _scenario_file(tmp_path: Path) -> str:
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(SCENARIO.text)
+    return str(path)
+
+
+@pytest.mark.parametrize('compression', ['bz2', 'lz4'])
+def test_a_damaged_ros1_chunk_is_a_clean_error(tmp_path, capsys, compression):
+    bag = ros1_bag(tmp_path / 'bag.bag', compression)
+    data = bytearray(bag.read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 32] = bytes(32)
+    bag.write_bytes(bytes(data))
+    code = main(['run', _scenario_file(tmp_path), str(bag), '-o', str(tmp_path / 'out.mcap')])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith(f'bagfault: error: {bag}') and err.count('\n') == 1
+
+
+# -- one malformed message in a valid bag, under an active fault ----------------------------------------
+
+def bag_with(path: Path, topic: str, msgtype: str, good: list[bytes], bad: bytes) -> Path:
+    text, _ = ROS2.generate_msgdef(msgtype, ros_version=2)
+    with path.open('wb') as stream:
+        writer = Writer(stream)
+        writer.start('ros2', 'test')
+        channel = writer.register_channel(topic, 'cdr', writer.register_schema(msgtype, 'ros2msg', text.encode()))
+        for k, data in enumerate([*good[:2], bad, *good[2:]]):
+            writer.add_message(channel, 1_000_000_000 + k * 100_000_000, data, 0)
+        writer.finish()
+    return path
+
+
+def serialized(msgtype: str, count: int) -> list[bytes]:
+    build = synthetic.BUILDERS[msgtype]
+    return [bytes(ROS2.serialize_cdr(build(ROS2, synthetic.DEFAULT_START + k, 0.1 * k), msgtype))
+            for k in range(count)]
+
+
+def image_with_wrong_step() -> bytes:
+    image = synthetic.BUILDERS['sensor_msgs/msg/Image'](ROS2, 0, 0.0)
+    image.step = image.step * 4  # rows longer than the data holds
+    return bytes(ROS2.serialize_cdr(image, 'sensor_msgs/msg/Image'))
+
+
+def cloud_with_wrong_width() -> bytes:
+    cloud = synthetic.BUILDERS['sensor_msgs/msg/PointCloud2'](ROS2, 0, 0.0)
+    cloud.width = cloud.width * 3
+    return bytes(ROS2.serialize_cdr(cloud, 'sensor_msgs/msg/PointCloud2'))
+
+
+MALFORMED = {
+    'truncated imu': ('imu', 'sensor_msgs/msg/Imu', '{angular_velocity_z_bias: 1.0, linear_acceleration_x_bias: 0.5}',
+                      lambda good: good[0][:40]),
+    'image step': ('image', 'sensor_msgs/msg/Image', '{noise_stddev: 5.0}', lambda good: image_with_wrong_step()),
+    'cloud width': ('pointcloud2', 'sensor_msgs/msg/PointCloud2', '{xyz_noise_stddev: 0.1}',
+                    lambda good: cloud_with_wrong_width()),
+}
+
+
+@pytest.mark.parametrize('case', list(MALFORMED))
+@pytest.mark.parametrize('policy', ['forward', 'drop', 'error'])
+def test_a_malformed_message_follows_on_malformed(tmp_path, case, policy):
+    kind, msgtype, config, make_bad = MALFORMED[case]
+    good = serialized(msgtype, 4)
+    bad = make_bad(good)
+    bag = bag_with(tmp_path / 'bag.mcap', '/in', msgtype, good, bad)
+    text = (f'injector: {{id: i, type: {kind}, input_topic: /in, output_topic: /out, on_malformed: {policy}}}\n'
+            f'faults: [{{id: f, injector_id: i, active_on_startup: true, config: {config}}}]\n')
+    if policy == 'error':
+        with pytest.raises(MalformedMessageError, match=r'/in: message at 0\.200 s cannot take the fault'):
+            run_inline(tmp_path, text, bag)
+        assert not (tmp_path / 'out.mcap').exists()
+        return
+    out, result = run_inline(tmp_path, text, bag)
+    written = [d for _, _, d in raw_messages(out)['/out']]
+    assert len(written) == (5 if policy == 'forward' else 4)
+    assert (bad in written) == (policy == 'forward')  # forwarded untouched, or dropped
+    assert result.stats.malformed == {'/in': 1}
+    assert any('1 message on /in could not take a fault and followed on_malformed (first at 0.200 s' in n
+               for n in result.notes)
+
+
+# -- values a scenario or an option may not ask for ------------------------------------------------------
+
+@pytest.mark.parametrize(('fault', 'problem'), [
+    ('start: 1e300', 'is not a time bagfault can schedule'),
+    ('start: .inf', 'is not a time bagfault can schedule'),
+    ('repeat: {period: 1e-9, on: 1e-9}', 'is below the minimum 0.01 s'),
+    ('probability_per_second: 1e9, hold: 1e-9', 'at most 100 activations per second'),
+    ('after: {fault: other, delay: 1e300}', 'is not a time bagfault can schedule'),
+    ('config: {delay_ms: 1000000000000}', 'is above the maximum'),
+    ('config: {throttle_hz: 1e-300}', 'throttle_hz 1e-300 is below 0.001 Hz'),
+    ('config: {stamp_offset_ms: 99999999999999}', 'is above the maximum'),
+])
+def test_schedules_and_values_are_bounded_in_validation(fault, problem):
+    text = ('injector: {id: i, type: topic, input_topic: /a, output_topic: /b}\n'
+            f'faults:\n  - {{id: other, injector_id: i}}\n  - {{id: f, injector_id: i, {fault}}}\n')
+    with pytest.raises(ScenarioError, match=problem):
+        parse_scenario(text)
+
+
+@pytest.mark.parametrize('option', [['--activate', 'bias@5+inf'], ['--start', 'nan'], ['--seed', '-1'],
+                                    ['--start', '1e300']])
+def test_impossible_options_are_exit_2(tmp_path, capsys, option):
+    bag = mcap_bag(tmp_path / 'bag.mcap', CompressionType.ZSTD)
+    code = main(['run', _scenario_file(tmp_path), str(bag), '-o', str(tmp_path / 'out.mcap'), *option])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count('\n') == 1 and 'Traceback' not in err
+    assert not (tmp_path / 'out.mcap').exists()
+
+
+@pytest.mark.parametrize('signal_number', [signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_during_a_run_leaves_no_output_and_no_temporary_copy(tmp_path, signal_number):
+    bag = tmp_path / 'bag'
+    writer = Rosbag2Writer(bag, version=9)
+    writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+    with writer:  # a zstd FILE-compressed bag: bagfault reads it from a decompressed private copy
+        connection = writer.add_connection('/imu', 'sensor_msgs/msg/Imu', typestore=ROS2)
+        for time_ns in synthetic.sample_times(2000.0, 60.0):
+            writer.write(connection, time_ns, bytes(ROS2.serialize_cdr(synthetic.imu(ROS2, time_ns, 0.0),
+                                                                      'sensor_msgs/msg/Imu')))
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text('injector: {id: i, type: imu, input_topic: /imu, output_topic: /imu_out}\n'
+                        'faults: [{id: f, injector_id: i, active_on_startup: true, '
+                        'config: {angular_velocity_z_noise_stddev: 0.1}}]\n')
+    tmp = tmp_path / 'tmp'
+    tmp.mkdir()
+    process = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'run', str(scenario), str(bag), '-o',
+                                str(tmp_path / 'out.mcap')], stderr=subprocess.PIPE, text=True,
+                               env={**os.environ, 'TMPDIR': str(tmp)})
+    deadline = time.monotonic() + 30
+    while not list(tmp.glob('bagfault-*')) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)
+    assert process.poll() is None and list(tmp.glob('bagfault-*'))  # running, with its private copy
+    process.send_signal(signal_number)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 2 and 'interrupted' in err
+    assert list(tmp.iterdir()) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag', 'scenario.yaml', 'tmp']
+
+
+def test_the_output_never_replaces_an_input_given_twice(tmp_path):
+    bag = mcap_bag(tmp_path / 'bag.mcap', CompressionType.ZSTD)
+    before = bag.read_bytes()
+    with pytest.raises(BagfaultError, match='would replace the input'):
+        api.run(SCENARIO, [bag, bag], bag)
+    assert bag.read_bytes() == before
+    assert struct.unpack('<B', before[8:9]) == (1,)  # still an MCAP header record after the magic
