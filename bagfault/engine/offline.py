@@ -9,7 +9,7 @@ messages to the same Run with nothing injected. `run_to_file` wraps
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from bagfault.engine.pipeline import Pipeline
 from bagfault.engine.provenance import provenance
@@ -24,10 +24,12 @@ from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Mapping, Sequence
     from pathlib import Path
 
+    from bagfault.engine.oracles import Schema
     from bagfault.engine.result import RunResult
+    from bagfault.engine.routing import Routing
     from bagfault.engine.run import Sink
     from bagfault.engine.scheduler import Activation
     from bagfault.scenario.model import Scenario
@@ -48,6 +50,27 @@ def input_warnings(inputs: InputSet) -> list[str]:
     return [*inputs.warnings, *(f'salvage skipped {loss}' for loss in inputs.losses)]
 
 
+class PassHooks(Protocol):
+    """What a live pass adds to the loop (`play`, `test`): waiting for the graph, pacing, outside messages."""
+
+    def prepare(self, routing: Routing) -> Mapping[str, Schema]:
+        """Publishers exist (routing registered them): wait for the graph; return topics that will come from
+        outside the bag (a system under test) and that the oracles must be able to decode."""
+        ...
+
+    def begin(self, run: Run) -> None:
+        """The run loop exists; outside messages go into it from here on."""
+        ...
+
+    def gate(self, time: int) -> None:
+        """Before a record at bag time `time` is judged: wait for its wall time, hand over what came before it."""
+        ...
+
+    def finish(self, run: Run) -> None:
+        """After the last record, before the verdicts (a tail of outside messages)."""
+        ...
+
+
 def replay(
     inputs: InputSet,
     scenario: Scenario,
@@ -62,6 +85,7 @@ def replay(
     observers: Sequence[Observer] = (),
     blackbox_base: Path | None = None,
     blackbox_numbers: dict[str, int] | None = None,
+    hooks: PassHooks | None = None,
 ) -> tuple[Run, bool]:
     """One pass of the inputs through the scenario into `sink`; (the run, True if a Stopped ended it early).
 
@@ -69,17 +93,27 @@ def replay(
     closes the run once its own output is complete.
     """
     routing = build_routing(inputs, scenario, catalog, sink)
-    run = Run(scenario, sink, catalog, routing.schemas, observers=observers, blackbox_base=blackbox_base,
-              blackbox_numbers=blackbox_numbers)
+    stopped = False
+    try:
+        outside = hooks.prepare(routing) if hooks is not None else {}
+    except Stopped:
+        stopped, outside = True, {}
+    run = Run(scenario, sink, catalog, {**routing.schemas, **outside}, observers=observers,
+              blackbox_base=blackbox_base, blackbox_numbers=blackbox_numbers)
     run.notes += routing.notes
     run.warnings += routing.warnings
     run.stats.replaced_topics = list(routing.replaced)
     pipeline = Pipeline(inputs, run, routing.routes, routing.copies, seed=seed, activations=activations,
                         start_offset=start_offset, batch=batch, progress=progress)
-    stopped = False
+    if hooks is not None:
+        hooks.begin(run)
+        run.gate = hooks.gate
     try:
         try:
-            pipeline.process()
+            if not stopped:
+                pipeline.process()
+                if hooks is not None:
+                    hooks.finish(run)
         except Stopped:
             stopped = True
         run.end()

@@ -20,7 +20,7 @@ from bagfault.engine.oracles import Oracles
 from bagfault.engine.result import RunResult, RunStats
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable, Mapping, Sequence
+    from collections.abc import Callable, Iterable, Mapping, Sequence
     from pathlib import Path
 
     from bagfault.engine.merge import Record
@@ -113,6 +113,7 @@ class Run:
         self.warnings: list[str] = []
         self.oracles = Oracles(scenario, schemas, catalog, self.write_event, blackbox_base, blackbox_numbers)
         self.observers: list[Observer] = [*self.oracles.observers, *observers]
+        self.gate: Callable[[int], None] | None = None  # called before each merged record is judged (live passes)
         self._events: dict[str, tuple[OutputChannel, Codec]] = {}
         self._topics: dict[str, OutputChannel] = {}
         for kind in self.oracles.event_kinds:
@@ -190,11 +191,13 @@ class Run:
 
     def emit(self, records: Iterable[Record]) -> None:
         """Merged pipeline records in order (the offline hot path of `event` and `message`)."""
-        observers, write, stats = self.observers, self.sink.write, self.stats
+        observers, write, stats, gate = self.observers, self.sink.write, self.stats, self.gate
         per_topic = stats.per_topic_out
         time = None
         for record in records:
             time = record[0]
+            if gate is not None:
+                gate(time)
             if record[2] == EVENT_RANK:
                 self.event(record[4])
                 continue

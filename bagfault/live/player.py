@@ -94,7 +94,7 @@ def _pass(scenario: Scenario, inputs: list[Path], sink: LiveSink, *, seed: int, 
     try:
         catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
         run, stopped = replay(input_set, scenario, catalog, sink, seed=seed, blackbox_base=record,
-                              blackbox_numbers=numbers)
+                              blackbox_numbers=numbers, hooks=sink)
     finally:
         input_set.close()
     run.close(ok=True)

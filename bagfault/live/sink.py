@@ -1,12 +1,14 @@
 """A run-loop sink that publishes on live topics, paced to wall time, and records what it sent.
 
-The offline pipeline hands records over in bag-time order; this sink holds
-each one until its time has come (bag time x 1/rate after the first),
-publishes /clock when asked, publishes the bytes on the record's topic with
-the recorded QoS, and writes the same record to the recording (an MCAP
-sink). Types without Python bindings here (for example bagfault's own
-event types) are recorded but not published. When the stop flag is set it
-raises `Stopped`, which ends the pass.
+The sink is also the pass hooks of the run loop: before the first message
+it waits for the graph (subscribers of named topics, or a settle time);
+before each record is judged (`gate`) it waits until the record's wall
+time (bag time x 1/rate after the first), publishing /clock meanwhile.
+Then it publishes the bytes on the record's topic with the recorded QoS and
+writes the same record to the recording (an MCAP sink). Types without
+Python bindings here (for example bagfault's own event types) are recorded
+but not published. When the stop flag is set it raises `Stopped`, which
+ends the pass.
 """
 
 from __future__ import annotations
@@ -15,9 +17,12 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from bagfault.engine.stop import Stopped
+from bagfault.errors import LiveError
 from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from bagfault.engine.stop import StopFlag
     from bagfault.io.mcap_sink import McapSink
 
@@ -26,18 +31,22 @@ SLICE = 0.05  # longest sleep between checks of the stop flag
 
 
 class LiveSink:
-    """Publishes pipeline records on live topics at their time; see module docstring."""
+    """Publishes pipeline records on live topics at their time (a sink and the pass hooks of the run loop)."""
 
     def __init__(self, node: Any, *, rate: float, clock: bool, stop: StopFlag,
-                 recording: McapSink | None = None, settle: float = 0.0) -> None:
+                 recording: McapSink | None = None, settle: float = 0.0, wait_for: Sequence[str] = (),
+                 wait_timeout: float = 30.0) -> None:
         self.node = node
         self.rate = rate
         self.stop = stop
-        self.settle = settle  # seconds between creating the publishers and the first message, for discovery
         self.recording = recording
+        self.settle = settle  # seconds between creating the publishers and the first message, for discovery
+        self.wait_for = list(wait_for)  # or: topics whose publishers must first have a subscriber
+        self.wait_timeout = wait_timeout
         self.offset = 0  # added to bag times: loops continue the timeline
         self._channels: dict[tuple[str, str], int] = {}
         self._topics: list[tuple[Any, int | None]] = []  # publisher, recording channel id
+        self._publishers: dict[str, Any] = {}
         self._clock = None
         if clock:
             clock_type = interface_class('rosgraph_msgs/msg/Clock')
@@ -45,10 +54,11 @@ class LiveSink:
             self._clock_message = clock_type()
         self._origin: tuple[int, float] | None = None
         self._last_clock = 0.0
-        self._last_clock_value = -1
+        self.clock_value = -1  # the bag time /clock last said (or would have said), ns
         self.published = 0
         self.skipped: dict[str, str] = {}
 
+    # -- sink ---------------------------------------------------------------------------------
     def add_channel(self, topic: str, msgtype: str, schema_encoding: str, schema_text: str,
                     message_encoding: str = 'cdr', metadata: dict[str, str] | None = None) -> int:
         """A publisher (when the type is installed) and a recording channel; same id for a topic seen again."""
@@ -60,52 +70,95 @@ class LiveSink:
         if has_interface(msgtype):
             profile = recorded_qos((metadata or {}).get('offered_qos_profiles', '')) or qos(10)
             publisher = self.node.create_publisher(interface_class(msgtype), topic, profile)
+            self._publishers[topic] = publisher
         elif not topic.startswith(('/fault_injection/', '/fault_manager/')):
             self.skipped[topic] = msgtype
+        return self._register(key, publisher, schema_encoding, schema_text, message_encoding, metadata)
+
+    def record_only(self, topic: str, msgtype: str, schema_encoding: str, schema_text: str,
+                    metadata: dict[str, str] | None = None) -> int:
+        """A channel that is recorded and never published (what the system under test publishes)."""
+        return self._register((topic, msgtype), None, schema_encoding, schema_text, 'cdr', metadata)
+
+    def _register(self, key: tuple[str, str], publisher: Any, schema_encoding: str, schema_text: str,
+                  message_encoding: str, metadata: dict[str, str] | None) -> int:
         recorded = None
         if self.recording is not None:
-            recorded = self.recording.add_channel(topic, msgtype, schema_encoding, schema_text, message_encoding,
+            recorded = self.recording.add_channel(key[0], key[1], schema_encoding, schema_text, message_encoding,
                                                   metadata)
         self._topics.append((publisher, recorded))
         self._channels[key] = len(self._topics) - 1
         return len(self._topics) - 1
 
-    def _publish_clock(self, bag_time: int) -> None:
-        assert self._clock is not None
-        if bag_time <= self._last_clock_value:
-            return
-        self._last_clock_value = bag_time
-        self._clock_message.clock.sec, self._clock_message.clock.nanosec = divmod(bag_time, 1_000_000_000)
-        self._clock.publish(self._clock_message)
-        self._last_clock = time.monotonic()
+    def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
+        """Publish one record (its time has come: `gate` waited for it) and record it."""
+        publisher, recorded = self._topics[channel_id]
+        if publisher is not None:
+            publisher.publish(data if isinstance(data, bytes) else bytes(data))
+            self.published += 1
+        if recorded is not None and self.recording is not None:
+            self.recording.write(recorded, log_time + self.offset, publish_time + self.offset, data)
 
-    def _wait(self, bag_time: int) -> None:
-        """Sleep until the record's wall time, publishing /clock meanwhile."""
-        if self._origin is None:
-            if self.stop.wait(self.settle):
+    # -- pass hooks -------------------------------------------------------------------------------
+    def prepare(self, routing: Any) -> dict[str, tuple[str, str, str]]:
+        """Before the first message: wait until the named topics have subscribers (or a fixed settle time)."""
+        if self._origin is not None:
+            return {}  # a later pass of a loop: the graph is connected
+        if self.wait_for:
+            self.wait_for_subscribers(self.wait_for)
+        elif self.stop.wait(self.settle):
+            raise Stopped(self.stop.reason)
+        return {}
+
+    def wait_for_subscribers(self, topics: Sequence[str]) -> None:
+        """Until every topic's publisher is matched by a subscriber; LiveError after `wait_timeout`."""
+        unknown = [t for t in topics if t not in self._publishers]
+        if unknown:
+            raise LiveError(f'--wait-for {", ".join(unknown)}: not a topic this bag publishes '
+                            f'(it publishes {", ".join(sorted(self._publishers)) or "nothing"})')
+        deadline = time.monotonic() + self.wait_timeout
+        while True:
+            waiting = [t for t in topics if self._publishers[t].get_subscription_count() == 0]
+            if not waiting:
+                return
+            if time.monotonic() > deadline:
+                raise LiveError(f'no subscriber on {", ".join(waiting)} within {self.wait_timeout:g} s')
+            if self.stop.wait(0.02):
                 raise Stopped(self.stop.reason)
-            self._origin = (bag_time, time.monotonic())
+
+    def begin(self, run: Any) -> None:
+        """Nothing comes from outside a plain play."""
+
+    def gate(self, bag_time: int) -> None:
+        """Sleep until the record's wall time, publishing /clock meanwhile."""
+        stamp = bag_time + self.offset
+        if self._origin is None:
+            self._origin = (stamp, time.monotonic())
         first, started = self._origin
-        due = started + (bag_time - first) / 1e9 / self.rate
+        due = started + (stamp - first) / 1e9 / self.rate
         while True:
             if self.stop.is_set():
                 raise Stopped(self.stop.reason)
             now = time.monotonic()
             if now >= due:
                 break
-            if self._clock is not None and now - self._last_clock >= CLOCK_PERIOD:
-                self._publish_clock(first + round((now - started) * self.rate * 1e9))
+            self._tick(first + round((now - started) * self.rate * 1e9))
             time.sleep(min(due - now, SLICE, CLOCK_PERIOD if self._clock is not None else SLICE))
-        if self._clock is not None:
+        self._publish_clock(stamp)
+
+    def finish(self, run: Any) -> None:
+        """Nothing after the last message of a plain play."""
+
+    def _tick(self, bag_time: int) -> None:
+        """While waiting: /clock at CLOCK_PERIOD (and whatever a subclass does meanwhile)."""
+        if time.monotonic() - self._last_clock >= CLOCK_PERIOD:
             self._publish_clock(bag_time)
 
-    def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
-        """Publish one record when its time has come, and record it."""
-        publisher, recorded = self._topics[channel_id]
-        stamp = log_time + self.offset
-        self._wait(stamp)
-        if publisher is not None:
-            publisher.publish(data if isinstance(data, bytes) else bytes(data))
-            self.published += 1
-        if recorded is not None and self.recording is not None:
-            self.recording.write(recorded, stamp, publish_time + self.offset, data)
+    def _publish_clock(self, bag_time: int) -> None:
+        if bag_time <= self.clock_value:
+            return
+        self.clock_value = bag_time
+        self._last_clock = time.monotonic()
+        if self._clock is not None:
+            self._clock_message.clock.sec, self._clock_message.clock.nanosec = divmod(bag_time, 1_000_000_000)
+            self._clock.publish(self._clock_message)
