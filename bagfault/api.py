@@ -20,16 +20,19 @@ from bagfault.engine.offline import check_recording, run_to_file
 from bagfault.engine.result import RunResult
 from bagfault.engine.scheduler import Activation
 from bagfault.engine.stop import StopFlag
-from bagfault.errors import BagfaultError, ScenarioError, UsageError
+from bagfault.errors import BagfaultError, Problem, ScenarioError, UsageError
 from bagfault.io.outputs import check_output
 from bagfault.scenario import Scenario, load_scenario
+from bagfault.scenario.system import SystemUnderTest, system_from
+from bagfault.scenario.yamlnodes import format_path
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Mapping, Sequence
 
     from bagfault.engine.offline import Progress
     from bagfault.engine.run import Observer
     from bagfault.live.recorder import RecordResult
+    from bagfault.scenario.yamlnodes import PathKey
 
 DEFAULT_SEED = 0
 SEED_MAX = 2**64 - 1
@@ -206,6 +209,77 @@ def record(
                       stop=stop if stop is not None else StopFlag())
 
 
+def test(
+    scenario: Scenario | str | Path,
+    inputs: Sequence[str | Path] = (),
+    output: str | Path | None = None,
+    *,
+    system: Mapping[str, object] | None = None,
+    seed: int | None = None,
+    rate: float = 1.0,
+    repeat: int = 1,
+    keep_logs: str | Path | None = None,
+    stop: StopFlag | None = None,
+) -> RunResult:
+    """Closed loop: start the scenario's system under test on a private ROS domain, play the inputs (default:
+    the scenario's `bags`) into it through the faults on sim time, record it, judge it, stop it; needs rclpy.
+
+    `system` holds `system_under_test` keys that replace the scenario's (`env` is added to). With `repeat`
+    above 1 the loop runs that many times and the result holds each run in `repeats` and pass rates in its
+    assertions. Exit code semantics: `result.failed` is 1; a BagfaultError (could not run) is 2.
+    """
+    from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
+
+    require_rclpy()
+    from bagfault.closedloop.repeat import fold  # noqa: PLC0415
+    from bagfault.closedloop.runner import run_test  # noqa: PLC0415
+
+    loaded = scenario_of(scenario)
+    paths = [Path(p) for p in inputs] or list(loaded.bags)
+    if not paths:
+        raise UsageError(f'{loaded.name}: no bag given, and the scenario names none under `bags:`')
+    under_test = system_of(loaded, system or {})
+    if not (math.isfinite(rate) and rate > 0):
+        raise UsageError(f'--rate {rate:g}: must be above 0')
+    if isinstance(repeat, bool) or not isinstance(repeat, int) or not 1 <= repeat <= 1000:
+        raise UsageError(f'--repeat {repeat}: must be a whole number from 1 to 1000')
+    outputs: list[Path | None] = [None] * repeat
+    if output is not None:
+        out = Path(output)
+        outputs = [out] if repeat == 1 else [out.with_name(f'{out.stem}.run{n}{out.suffix}')
+                                            for n in range(1, repeat + 1)]
+        for path in outputs:
+            assert path is not None
+            _check_output(path, 'recording', paths, loaded)
+    logs = Path(keep_logs) if keep_logs is not None else None
+    flag = stop if stop is not None else StopFlag()
+    results = []
+    for number, path in enumerate(outputs, 1):
+        folder = logs if logs is None or repeat == 1 else logs / f'run{number}'
+        results.append(run_test(loaded, paths, path, system=under_test, seed=seed_of(loaded, seed), rate=rate,
+                                logs=folder, stop=flag))
+    return results[0] if repeat == 1 else fold(results)
+
+
+def system_of(scenario: Scenario, overrides: Mapping[str, object]) -> SystemUnderTest:
+    """The scenario's `system_under_test` with `overrides` in place of its keys; ScenarioError if unusable."""
+    problems: list[Problem] = []
+    name = str(scenario.source or scenario.name)
+
+    def problem(path: PathKey, message: str) -> None:
+        problems.append(Problem(name, 'command line' if overrides else scenario.located.where(path),
+                                format_path(path), message))
+
+    base = scenario.source.parent if scenario.source is not None else None
+    node = scenario.located.data.get('system_under_test') if isinstance(scenario.located.data, dict) else None
+    system = system_from(node, overrides, problem, base)
+    if problems or system is None:
+        raise ScenarioError(problems)
+    if 'cwd' in overrides and isinstance(overrides['cwd'], str):
+        system.cwd = Path(overrides['cwd'])  # relative to where the command runs, not to the scenario
+    return system
+
+
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     scenarios, problems = [], []
@@ -220,4 +294,4 @@ def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scena
 
 
 __all__ = ['BagfaultError', 'RunResult', 'StopFlag', 'check', 'load_scenario', 'play', 'proxy', 'record', 'run',
-           'validate']
+           'test', 'validate']

@@ -109,6 +109,33 @@ def _parser() -> argparse.ArgumentParser:
     record.add_argument('--duration', type=float, default=None, metavar='S', help='stop after S seconds')
     record.add_argument('--use-sim-time', action='store_true', help='stamp messages with /clock time')
 
+    test = sub.add_parser('test', help='closed loop: start the system under test, play the faulty bag into it, '
+                                       'record and judge it',
+                          usage='bagfault test SCENARIO [BAG...] [-o OUT.mcap] [--rate R] [--repeat N] '
+                                '[--keep-logs DIR] [reports] [system options]')
+    test.add_argument('scenario', type=Path)
+    test.add_argument('inputs', type=Path, nargs='*', metavar='BAG', help="bags (default: the scenario's `bags`)")
+    test.add_argument('-o', '--output', type=Path, metavar='OUT.mcap',
+                      help='one recording on bag time: played streams, events, what the system published')
+    test.add_argument('--rate', type=float, default=1.0, help='playback speed factor (default 1.0)')
+    test.add_argument('--repeat', type=int, default=1, metavar='N', help='run N times; pass rates per assertion')
+    test.add_argument('--keep-logs', type=Path, metavar='DIR', help="keep the system's stdout and stderr here")
+    test.add_argument('--seed', type=int, default=None)
+    system = test.add_argument_group('system under test (each replaces the key of `system_under_test:`)')
+    system.add_argument('--command', dest='command_line', metavar='CMD', help='command line of the system')
+    system.add_argument('--shell', action='store_true', default=None, help='run the command in /bin/sh')
+    system.add_argument('--env', action='append', default=[], metavar='NAME=VALUE', help='repeatable')
+    system.add_argument('--cwd', metavar='DIR')
+    system.add_argument('--ready', action='append', default=[], metavar='SPEC',
+                        help='publisher:/t, message:/t, subscribes:played|/a,/b, service:/s or delay:S, '
+                             'each optionally @TIMEOUT; repeatable')
+    system.add_argument('--record-topic', action='append', default=[], metavar='TOPIC',
+                        help='a topic of the system to record (default: all it publishes); repeatable')
+    system.add_argument('--stop-timeout', type=float, metavar='S', help='seconds between SIGINT, SIGTERM, SIGKILL')
+    system.add_argument('--tail', type=float, metavar='S', help='bag seconds recorded after the last message')
+    system.add_argument('--no-sim-time', action='store_true', help='do not pass use_sim_time:=true')
+    _report_options(test)
+
     demo = sub.add_parser('demo', help='run the embedded demo bag and scenario')
     demo.add_argument('-o', '--output-dir', type=Path, default=Path('bagfault_demo'), metavar='DIR')
 
@@ -244,6 +271,47 @@ def _cmd_record(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _system_overrides(args: argparse.Namespace) -> dict[str, object]:
+    """`system_under_test` keys given on the command line, in their YAML form."""
+    from bagfault.scenario.system import ready_spec  # noqa: PLC0415
+
+    out: dict[str, object] = {}
+    if args.command_line is not None:
+        out['command'] = args.command_line
+    if args.shell:
+        out['shell'] = True
+    if args.env:
+        pairs = [item.partition('=') for item in args.env]
+        bad = [item for item, (name, sep, _) in zip(args.env, pairs, strict=True) if not (name and sep)]
+        if bad:
+            raise UsageError(f'--env {bad[0]}: must be NAME=VALUE')
+        out['env'] = {name: value for name, _, value in pairs}
+    if args.cwd is not None:
+        out['cwd'] = args.cwd
+    if args.ready:
+        out['ready'] = [ready_spec(text) for text in args.ready]
+    if args.record_topic:
+        out['record'] = list(args.record_topic)
+    if args.stop_timeout is not None:
+        out['stop_timeout'] = args.stop_timeout
+    if args.tail is not None:
+        out['tail'] = args.tail
+    if args.no_sim_time:
+        out['use_sim_time'] = False
+    return out
+
+
+def _cmd_test(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+
+    reports = _reports(args)
+    reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
+    scenario = api.load_scenario(args.scenario, strict=args.strict)
+    result = api.test(scenario, args.inputs, args.output, system=_system_overrides(args), seed=args.seed,
+                      rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs)
+    return _finish(reports, result)
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from bagfault import api, demo  # noqa: PLC0415
     from bagfault.errors import OutputError  # noqa: PLC0415
@@ -334,6 +402,7 @@ COMMANDS = {
     'proxy': _cmd_proxy,
     'play': _cmd_play,
     'record': _cmd_record,
+    'test': _cmd_test,
     'latency': _cmd_latency,
 }
 
@@ -349,6 +418,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         for line in str(exc).splitlines() or [type(exc).__name__]:
             print(f'bagfault: error: {line}', file=sys.stderr)
+        tail = getattr(exc, 'tail', None)
+        if tail:
+            print('bagfault: the last lines of the system under test:', file=sys.stderr)
+            for line in tail:
+                print(f'  | {line}', file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt:
         if args.debug:

@@ -29,6 +29,7 @@ not part of this tree.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 
@@ -129,7 +130,14 @@ class ReloadError(LiveError):
 
 
 class ClosedLoopError(BagfaultError):
-    """The system under test cannot be started, never became ready, or cannot be stopped."""
+    """The system under test cannot be started, never became ready, or cannot be stopped.
+
+    `tail` holds the last lines the system wrote, shown under the message.
+    """
+
+    def __init__(self, message: str, *, tail: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.tail = list(tail)
 
 
 class CampaignError(BagfaultError):

@@ -11,6 +11,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from helpers import ANCHORS, EXTERNAL, FIXTURES, need
 
+pytest_plugins = ['pytester']
+
 
 @pytest.fixture
 def rover_bag() -> Path:

@@ -186,8 +186,9 @@ def check_recording(
     """Judge a recording with the scenario's assertions and fault manager; inject nothing.
 
     Fault events recorded on /fault_injection/events drive `fault_event`
-    assertions, `during` windows and reports; bag time zero is the
-    recording's first message (plus `start_offset` seconds).
+    assertions, `during` windows and reports; bag time zero is where the
+    live run that made the recording put it (its `bagfault.origin`
+    metadata), else the recording's first message, plus `start_offset`.
     """
     definitions = load_definitions([*msg_paths, *scenario.msg_paths])
     inputs = InputSet([path], salvage=salvage)
@@ -200,9 +201,11 @@ def check_recording(
         channels = [OutputChannel(sink.add_channel(c.topic, c.msgtype, '', ''), c.topic, c.msgtype)
                     for c in inputs.channels]
         event_codec = catalog.codec(FaultEvent.msgtype) if FaultEvent.topic in schemas else None
+        recorded = next((getattr(s, 'recorded_origin', None) for s in inputs.parts), None)
         for index, log_time, publish_time, data in inputs.messages():
             if not run.started:
-                run.begin(log_time, seconds_to_ns(start_offset))
+                zero = (recorded - log_time) if recorded is not None else 0
+                run.begin(log_time, zero + seconds_to_ns(start_offset))
             run.read(1, log_time)
             channel = channels[index]
             if event_codec is not None and channel.topic == FaultEvent.topic:

@@ -33,3 +33,12 @@ def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activation
         'activate': json.dumps([asdict(a) for a in activations], sort_keys=True),
         'start_offset': repr(float(start_offset)),
     }
+
+
+ORIGIN_RECORD = 'bagfault.origin'
+
+
+def origin_metadata(origin: int | None) -> dict[str, str] | None:
+    """The `bagfault.origin` metadata of a live recording: where its bag time zero was, so `check` judges the
+    recording with the zero the live run used (not its first message)."""
+    return {'origin_ns': str(origin)} if origin is not None else None

@@ -53,6 +53,23 @@ class RunStats:
 
 
 @dataclass
+class SystemReport:
+    """What `bagfault test` saw of the system under test."""
+
+    command: list[str]
+    domain_id: int
+    ready_seconds: float = 0.0
+    ending: str = 'running'  # exited (on its own), SIGINT, SIGTERM or SIGKILL (how it was stopped)
+    returncode: int | None = None
+    logs: Path | None = None  # the folder of system.stdout.log and system.stderr.log, when kept
+    tail: list[str] = field(default_factory=list)  # its last lines of output
+    played: dict[str, int] = field(default_factory=dict)  # messages published to it, per topic
+    heard: dict[str, int] = field(default_factory=dict)  # messages it published that were recorded, per topic
+    unwatched: list[str] = field(default_factory=list)  # asserted topics whose type nobody told
+    leftovers: list[int] = field(default_factory=list)  # processes still running after the stop (none)
+
+
+@dataclass
 class RunResult:
     """Everything a run, check, play, proxy or test produced besides its output file."""
 
@@ -68,8 +85,10 @@ class RunResult:
     mode: Mode = 'run'
     fault_manager: dict[str, Any] | None = None
     wall_seconds: float | None = None
+    system: SystemReport | None = None  # `test`: the system under test
+    repeats: list[RunResult] = field(default_factory=list)  # `test --repeat`: each run (this one aggregates)
 
     @property
     def failed(self) -> bool:
-        """True when an assertion failed: exit code 1."""
-        return any(r.state == 'failed' for r in self.assertions)
+        """True when an assertion failed (in any repeated run): exit code 1."""
+        return any(r.state == 'failed' for r in self.assertions) or any(r.failed for r in self.repeats)

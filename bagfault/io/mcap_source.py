@@ -99,6 +99,7 @@ class McapSource:
         self.end_time: int | None = None
         self.losses: list[str] = []
         self.warnings: list[str] = []
+        self.recorded_origin: int | None = None  # bag time zero of a bagfault live recording
         self._ids: dict[int, int] = {}
         self._schemas: dict[int, tuple[str, str, str]] = {}
         self._pending_channels: dict[int, tuple[int, str, str, dict[str, str]]] = {}
@@ -146,6 +147,8 @@ class McapSource:
         for record in reader.iter_metadata():
             if record.name == 'rosbag2':
                 self._read_rosbag2_metadata(record.metadata)
+            elif record.name == 'bagfault.origin' and record.metadata.get('origin_ns', '').isdigit():
+                self.recorded_origin = int(record.metadata['origin_ns'])
         if summary is None or not summary.chunk_indexes:
             self._scan_unindexed()
             return

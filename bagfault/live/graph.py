@@ -57,9 +57,9 @@ def resolve_types(node: Any, scenario: Scenario, executor: Any, stop: StopFlag) 
         executor.spin_once(timeout_sec=0.1)
     return types
 
-def watched_topics(node: Any, scenario: Scenario, executor: Any, stop: StopFlag) -> dict[str, str]:
-    """Topics the oracles need besides the proxy's own: FM diagnostics and conditions, asserted topics."""
-    own = {t for spec in scenario.injectors for t in (spec.input_topic, spec.output_topic) if t}
+def oracle_topics(scenario: Scenario) -> dict[str, str | None]:
+    """Topics the oracles read (FM diagnostics and conditions, asserted topics), with their type when the
+    scenario says it."""
     wanted: dict[str, str | None] = {}
     config = scenario.fault_manager_config
     if config is not None:
@@ -73,18 +73,23 @@ def watched_topics(node: Any, scenario: Scenario, executor: Any, stop: StopFlag)
             if isinstance(name, str) and name:
                 known = assertion.params.get('message_type') if key == 'topic' else None
                 wanted[name] = wanted.get(name) or known
-    wanted = {t: m for t, m in wanted.items() if t not in own and not t.startswith(OWN_PREFIXES)}
-    deadline = time.monotonic() + OBSERVE_WAIT
+    return wanted
+
+
+def watched_topics(node: Any, scenario: Scenario, stop: StopFlag, *, own: set[str],
+                   executor: Any = None, wait: float = OBSERVE_WAIT) -> tuple[dict[str, str], list[str]]:
+    """Oracle topics besides `own` with their types (from the scenario, else from the graph within `wait`
+    seconds); and the topics left unwatched because no publisher told their type."""
+    wanted = {t: m for t, m in oracle_topics(scenario).items() if t not in own and not t.startswith(OWN_PREFIXES)}
+    deadline = time.monotonic() + wait
     while any(m is None for m in wanted.values()) and time.monotonic() < deadline and not stop.is_set():
         graph = dict(node.get_topic_names_and_types())
         for name in [t for t, m in wanted.items() if m is None]:
             if graph.get(name):
                 wanted[name] = graph[name][0]
-        executor.spin_once(timeout_sec=0.1)
-    watched = {}
-    for name, msgtype in wanted.items():
-        if msgtype is None:
-            node.get_logger().warning(f'{name}: no publisher within {OBSERVE_WAIT:g} s, type unknown; not watched')
+        if executor is not None:
+            executor.spin_once(timeout_sec=0.1)
         else:
-            watched[name] = msgtype
-    return watched
+            stop.wait(0.05)
+    watched = {name: msgtype for name, msgtype in wanted.items() if msgtype is not None}
+    return watched, sorted(name for name, msgtype in wanted.items() if msgtype is None)

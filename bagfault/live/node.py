@@ -21,12 +21,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from bagfault import __version__
+from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata
 from bagfault.errors import BagfaultError, MalformedMessageError, ReloadError, ScenarioError
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
 from bagfault.live.delay import DelayLine
 from bagfault.live.diagnostics import diagnostic_array
-from bagfault.live.graph import DIAGNOSTICS_TYPE, resolve_types, watched_topics
+from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
 from bagfault.live.params import FaultParameters
 from bagfault.live.ros import interface_class, qos
 from bagfault.live.session import LiveSession, LiveTopic
@@ -89,7 +90,11 @@ class ProxyNode:
         if self.stop.is_set():
             return
         classes = {injector_id: interface_class(msgtype) for injector_id, msgtype in types.items()}
-        watched = watched_topics(self.node, self.scenario, executor, self.stop)
+        own = {t for spec in self.scenario.injectors for t in (spec.input_topic, spec.output_topic) if t}
+        watched, unknown = watched_topics(self.node, self.scenario, self.stop, own=own, executor=executor)
+        for name in unknown:
+            self.node.get_logger().warning(f'{name}: no publisher within {OBSERVE_WAIT:g} s, type unknown; '
+                                           'not watched')
         watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
@@ -254,6 +259,9 @@ class ProxyNode:
             self.session.finish()
             if self.recording is not None:
                 try:
+                    origin = origin_metadata(self.session.run.stats.origin)
+                    if origin is not None:
+                        self.recording.add_metadata(ORIGIN_RECORD, origin)
                     self.recording.finish()
                 except BaseException:
                     self.session.run.close(ok=False)

@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from bagfault.engine.offline import replay
-from bagfault.engine.provenance import provenance
+from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenance
 from bagfault.engine.result import RunStats
 from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import McapSink
@@ -69,6 +69,9 @@ def run_play(
                     break
                 sink.offset += (run.stats.last_time or 0) - (run.stats.first_time or 0) + LOOP_GAP
             if recording is not None:
+                origin = origin_metadata(total.origin)
+                if origin is not None:
+                    recording.add_metadata(ORIGIN_RECORD, origin)
                 recording.finish()
         except BaseException:
             if recording is not None:

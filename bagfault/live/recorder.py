@@ -23,6 +23,7 @@ from bagfault.live.ros import has_interface, interface_class, qos_yaml
 from bagfault.live.runtime import ros_context
 
 if TYPE_CHECKING:
+    from collections.abc import Callable, Collection
     from pathlib import Path
 
     from bagfault.engine.stop import StopFlag
@@ -43,15 +44,23 @@ class RecordResult:
 
 
 class Recorder:
-    """Subscribes to matching topics as they appear and writes what arrives."""
+    """Subscribes raw to matching topics as they appear and hands on what arrives.
 
-    def __init__(self, node: Any, topics: list[str], every: bool, recording: McapSink) -> None:
+    `on_topic(topic, msgtype, qos_yaml)` is called once per subscribed
+    topic, `on_message(topic, data)` for every message (in the executor's
+    thread). Topics in `exclude` are never subscribed (a player's own).
+    """
+
+    def __init__(self, node: Any, topics: Collection[str], every: bool, *,
+                 on_topic: Callable[[str, str, str], None], on_message: Callable[[str, bytes], None],
+                 exclude: Collection[str] = (), every_excludes: tuple[str, ...] = ()) -> None:
         self.node = node
         self.wanted = set(topics)
         self.every = every
-        self.recording = recording
-        self.catalog = TypeCatalog([], 'jazzy')
-        self.channels: dict[str, int] = {}
+        self.exclude = set(exclude)
+        self.every_excludes = every_excludes  # prefixes `every` does not take (they can still be named)
+        self.on_topic = on_topic
+        self.on_message = on_message
         self.subscriptions: dict[str, Any] = {}
         self.skipped: dict[str, str] = {}
         self.counts: dict[str, int] = {}
@@ -65,29 +74,37 @@ class Recorder:
                           reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
-    def discover(self) -> None:
-        """Subscribe to matching topics that appeared since the last look."""
+    def discover(self) -> list[str]:
+        """Subscribe to matching topics that appeared since the last look; the topics newly subscribed."""
+        added = []
         for topic, types in self.node.get_topic_names_and_types():
-            if topic in self.subscriptions or topic in self.skipped:
+            if topic in self.subscriptions or topic in self.skipped or topic in self.exclude:
                 continue
-            if not (self.every or topic in self.wanted):
+            if not ((self.every and not topic.startswith(self.every_excludes)) or topic in self.wanted):
                 continue
+            if not self.node.get_publishers_info_by_topic(topic):
+                continue  # only subscribers so far: nothing to record, and no QoS to match
             msgtype = types[0]
             if not has_interface(msgtype):
                 self.skipped[topic] = msgtype
                 self.node.get_logger().warning(f'{topic}: {msgtype} has no Python bindings here; not recorded')
                 continue
-            profile = self._profile(topic)
-            self.channels[topic] = self.recording.add_channel(topic, msgtype, *self.catalog.schema(msgtype), 'cdr',
-                                                              {'offered_qos_profiles': qos_yaml(profile)})
-            self.subscriptions[topic] = self.node.create_subscription(
-                interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
-            self.node.get_logger().info(f'recording {topic} ({msgtype})')
+            self.subscribe(topic, msgtype)
+            added.append(topic)
+        return added
+
+    def subscribe(self, topic: str, msgtype: str) -> None:
+        """Subscribe raw to one topic now (QoS from its current publishers)."""
+        profile = self._profile(topic)
+        self.on_topic(topic, msgtype, qos_yaml(profile))
+        self.counts.setdefault(topic, 0)
+        self.subscriptions[topic] = self.node.create_subscription(
+            interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
+        self.node.get_logger().info(f'recording {topic} ({msgtype})')
 
     def _received(self, topic: str, data: bytes) -> None:
-        now = self.node.get_clock().now().nanoseconds
-        self.recording.write(self.channels[topic], now, now, data)
-        self.counts[topic] = self.counts.get(topic, 0) + 1
+        self.counts[topic] += 1
+        self.on_message(topic, data)
 
 
 def run_record(
@@ -115,7 +132,18 @@ def run_record(
         try:
             recording.add_metadata('bagfault', {'tool': 'bagfault', 'version': __version__, 'mode': 'record',
                                                 'topics': ' '.join(names) if names else '--all'})
-            recorder = Recorder(node, names, every, recording)
+            catalog = TypeCatalog([], 'jazzy')
+            channels: dict[str, int] = {}
+
+            def on_topic(topic: str, msgtype: str, profile: str) -> None:
+                channels[topic] = recording.add_channel(topic, msgtype, *catalog.schema(msgtype), 'cdr',
+                                                        {'offered_qos_profiles': profile})
+
+            def on_message(topic: str, data: bytes) -> None:
+                now = node.get_clock().now().nanoseconds
+                recording.write(channels[topic], now, now, data)
+
+            recorder = Recorder(node, names, every, on_topic=on_topic, on_message=on_message)
             node.get_logger().info('bagfault record ready')
             started = last_look = time.monotonic()
             recorder.discover()

@@ -23,15 +23,15 @@ if TYPE_CHECKING:
 
 
 @contextlib.contextmanager
-def ros_context(stop: StopFlag) -> Iterator[Any]:
-    """An initialised rclpy context; SIGINT, SIGTERM and SIGHUP set `stop` while it is open."""
+def ros_context(stop: StopFlag, domain_id: int | None = None) -> Iterator[Any]:
+    """An initialised rclpy context (on `domain_id`, else ROS_DOMAIN_ID); SIGINT, SIGTERM and SIGHUP set `stop`."""
     require_rclpy()
     import rclpy  # noqa: PLC0415
     import rclpy.context  # noqa: PLC0415
     from rclpy.signals import SignalHandlerOptions  # noqa: PLC0415
 
     context = rclpy.context.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
     previous = {}
     if threading.current_thread() is threading.main_thread():
         for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):

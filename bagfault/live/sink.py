@@ -21,7 +21,7 @@ from bagfault.errors import LiveError
 from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Mapping, Sequence
 
     from bagfault.engine.stop import StopFlag
     from bagfault.io.mcap_sink import McapSink
@@ -46,6 +46,7 @@ class LiveSink:
         self.offset = 0  # added to bag times: loops continue the timeline
         self._channels: dict[tuple[str, str], int] = {}
         self._topics: list[tuple[Any, int | None]] = []  # publisher, recording channel id
+        self._names: list[str] = []  # topic of each channel id
         self._publishers: dict[str, Any] = {}
         self._clock = None
         if clock:
@@ -56,6 +57,7 @@ class LiveSink:
         self._last_clock = 0.0
         self.clock_value = -1  # the bag time /clock last said (or would have said), ns
         self.published = 0
+        self.published_per_topic: dict[str, int] = {}
         self.skipped: dict[str, str] = {}
 
     # -- sink ---------------------------------------------------------------------------------
@@ -87,6 +89,7 @@ class LiveSink:
             recorded = self.recording.add_channel(key[0], key[1], schema_encoding, schema_text, message_encoding,
                                                   metadata)
         self._topics.append((publisher, recorded))
+        self._names.append(key[0])
         self._channels[key] = len(self._topics) - 1
         return len(self._topics) - 1
 
@@ -96,11 +99,13 @@ class LiveSink:
         if publisher is not None:
             publisher.publish(data if isinstance(data, bytes) else bytes(data))
             self.published += 1
+            topic = self._names[channel_id]
+            self.published_per_topic[topic] = self.published_per_topic.get(topic, 0) + 1
         if recorded is not None and self.recording is not None:
             self.recording.write(recorded, log_time + self.offset, publish_time + self.offset, data)
 
     # -- pass hooks -------------------------------------------------------------------------------
-    def prepare(self, routing: Any) -> dict[str, tuple[str, str, str]]:
+    def prepare(self, routing: Any) -> Mapping[str, tuple[str, str, str]]:
         """Before the first message: wait until the named topics have subscribers (or a fixed settle time)."""
         if self._origin is not None:
             return {}  # a later pass of a loop: the graph is connected
@@ -144,6 +149,7 @@ class LiveSink:
                 break
             self._tick(first + round((now - started) * self.rate * 1e9))
             time.sleep(min(due - now, SLICE, CLOCK_PERIOD if self._clock is not None else SLICE))
+        self._due(stamp)
         self._publish_clock(stamp)
 
     def finish(self, run: Any) -> None:
@@ -153,6 +159,16 @@ class LiveSink:
         """While waiting: /clock at CLOCK_PERIOD (and whatever a subclass does meanwhile)."""
         if time.monotonic() - self._last_clock >= CLOCK_PERIOD:
             self._publish_clock(bag_time)
+
+    def _due(self, bag_time: int) -> None:
+        """The record at `bag_time` is due, /clock not yet at it (a subclass hands over what came before)."""
+
+    def bag_time_now(self) -> int | None:
+        """The bag time that corresponds to now (None before the first record)."""
+        if self._origin is None:
+            return None
+        first, started = self._origin
+        return first + round((time.monotonic() - started) * self.rate * 1e9)
 
     def _publish_clock(self, bag_time: int) -> None:
         if bag_time <= self.clock_value:

@@ -54,6 +54,10 @@ def build(result: RunResult) -> dict[str, Any]:
     extra: dict[str, Any] = {}
     if result.fault_manager is not None:
         extra['fault_manager'] = result.fault_manager
+    if result.system is not None:
+        extra['system_under_test'] = system_section(result)
+    if result.repeats:
+        extra['repeats'] = repeats_section(result)
     return extra | {
         'schema_version': SCHEMA_VERSION,
         'tool': {'name': 'bagfault', 'version': __version__},
@@ -93,3 +97,33 @@ def build(result: RunResult) -> dict[str, Any]:
         'notes': list(result.notes),
         'warnings': list(result.warnings),
     }
+
+
+def system_section(result: RunResult) -> dict[str, Any]:
+    """`test`: the system under test, its logs and message counts."""
+    system = result.system
+    assert system is not None
+    return {
+        'command': list(system.command), 'ros_domain_id': system.domain_id,
+        'ready_s': round(system.ready_seconds, 3), 'stopped_by': system.ending, 'exit_code': system.returncode,
+        'logs': str(system.logs) if system.logs is not None else None, 'output_tail': list(system.tail),
+        'played_per_topic': dict(sorted(system.played.items())),
+        'heard_per_topic': dict(sorted(system.heard.items())),
+        'unwatched_topics': list(system.unwatched), 'leftover_pids': list(system.leftovers),
+    }
+
+
+def repeats_section(result: RunResult) -> dict[str, Any]:
+    """`test --repeat`: per assertion its pass rate and each run's state and decision time."""
+    runs = result.repeats
+    section: dict[str, Any] = {'runs': len(runs), 'assertions': {}}
+    for assertion in runs[0].assertions:
+        per_run = [next((a for a in r.assertions if a.id == assertion.id), None) for r in runs]
+        states = [a.state if a is not None else 'pending' for a in per_run]
+        section['assertions'][assertion.id] = {
+            'pass_rate': states.count('passed') / len(runs),
+            'states': states,
+            't_s': [seconds(a.time, r.stats.origin) if a is not None else None
+                    for r, a in zip(runs, per_run, strict=True)],
+        }
+    return section

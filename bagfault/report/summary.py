@@ -35,6 +35,8 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
     else:
         print(f'{result.mode:<9} {stats.output_messages} messages from {stats.input_messages} received (not recorded)',
               file=out)
+    if result.system is not None:
+        _print_system(result, out)
     if stats.events:
         print('fault events (bag time from zero):', file=out)
         for event in stats.events:
@@ -54,3 +56,22 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
     failed = sum(r.state == 'failed' for r in result.assertions)
     passed = sum(r.state == 'passed' for r in result.assertions)
     print(f'{"FAILED" if failed else "PASSED"}: {passed} passed, {failed} failed', file=out)
+
+
+def _print_system(result: RunResult, out: TextIO) -> None:
+    """`test`: what ran, on which domain, what it was sent and what it said; its last lines if it died."""
+    system = result.system
+    assert system is not None
+    print(f'system    {" ".join(system.command)}', file=out)
+    print(f'          ROS domain {system.domain_id}, ready after {system.ready_seconds:.2f} s, stopped: '
+          f'{system.ending} (exit code {system.returncode})', file=out)
+    played = ', '.join(f'{t} {n}' for t, n in sorted(system.played.items())) or 'nothing'
+    heard = ', '.join(f'{t} {n}' for t, n in sorted(system.heard.items())) or 'nothing'
+    print(f'played    {played}', file=out)
+    print(f'heard     {heard}', file=out)
+    if system.logs is not None:
+        print(f'logs      {system.logs}', file=out)
+    if any(a.id == 'system_alive' and a.state == 'failed' for a in result.assertions) and system.tail:
+        print('its last lines:', file=out)
+        for line in system.tail:
+            print(f'  | {line}', file=out)

@@ -16,10 +16,11 @@ from typing import Any
 
 from bagfault.errors import Problem, ScenarioError, one_line
 from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
+from bagfault.scenario.system import parse_system
 from bagfault.scenario.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
 
 TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager',
-            'msg_paths'}
+            'msg_paths', 'system_under_test', 'bags'}
 INJECTOR_KEYS = {'id', 'type', 'topic', 'input_topic', 'output_topic', 'qos_depth', 'trigger_service',
                  'proxy_service', 'target_service', 'seed'}
 ENDPOINT_KEYS = {'input_topic', 'output_topic', 'qos_depth'}
@@ -80,6 +81,16 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
         raise ScenarioError([Problem(name, where, '<top>', message)]) from None
     out = _Collector(name, located)
     scenario = _build(located, out)
+    base = source.parent if source is not None else None
+    root = located.data if isinstance(located.data, dict) else {}
+    if 'system_under_test' in root:
+        scenario.system = parse_system(root['system_under_test'], ('system_under_test',), out.add, base)
+    if 'bags' in root:
+        bags = root['bags']
+        if not isinstance(bags, list) or not all(isinstance(b, str) and b for b in bags):
+            out.add(('bags',), 'must be a list of bags (files or rosbag2 folders, relative to this file)')
+        else:
+            scenario.bags = [base / b if base is not None else Path(b) for b in bags]
     scenario.source = source
     if source is not None:
         scenario.msg_paths = [source.parent / p for p in scenario.msg_paths]

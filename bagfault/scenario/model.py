@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from bagfault.scenario.system import SystemUnderTest
 from bagfault.scenario.yamlnodes import LocatedYaml, PathKey
 
 
@@ -114,6 +115,8 @@ class Scenario:
     fault_manager_config: Any = None
     warnings: list[str] = field(default_factory=list)
     msg_paths: list[Path] = field(default_factory=list)  # folders of .msg/.idl definitions (relative to the file)
+    system: SystemUnderTest | None = None  # `system_under_test:`, what `bagfault test` starts
+    bags: list[Path] = field(default_factory=list)  # `bags:`, what a scenario file run by pytest plays
     source: Path | None = None
     text: str = ''
     located: LocatedYaml = field(default_factory=lambda: LocatedYaml(None))

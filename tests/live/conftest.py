@@ -15,10 +15,10 @@ from typing import Any
 import pytest
 
 import bagfault.live
+from bagfault.closedloop.domain import DomainLease
 
 PEERS = Path(__file__).with_name('peers.py')
 ROOT = Path(__file__).resolve().parents[2]
-_domains = itertools.count(10 + os.getpid() % 60)
 
 
 def rclpy_available() -> bool:
@@ -34,7 +34,8 @@ class Graph:
 
     def __init__(self, tmp: Path) -> None:
         self.tmp = tmp
-        self.domain = 10 + next(_domains) % 90
+        self.lease = DomainLease()  # the same leases as `bagfault test`: no two graphs share a domain
+        self.domain = self.lease.domain
         self.env = {**os.environ, 'ROS_DOMAIN_ID': str(self.domain),
                     'FASTRTPS_DEFAULT_PROFILES_FILE': str(bagfault.live.LOOPBACK_PROFILE),
                     'RCUTILS_COLORIZED_OUTPUT': '0', 'PYTHONUNBUFFERED': '1',
@@ -99,6 +100,7 @@ class Graph:
             if process.poll() is None:
                 process.kill()
                 process.wait(timeout=10)
+        self.lease.release()
 
 
 @pytest.fixture

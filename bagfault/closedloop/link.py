@@ -1,0 +1,257 @@
+"""The live pass of `bagfault test`: the bag played as `play` plays it, and the system under test heard.
+
+Before the first message the link waits until the system is ready (each
+condition in turn, failing at once if the system exits), learns the types
+of the topics the oracles read, and subscribes on a second node, spun in
+a thread, to what the system publishes. A message from the system takes
+the bag time of its arrival (wall time since the first record x rate),
+never earlier than what was judged before it and never later than the
+record about to be played; before each record is judged everything that
+arrived is handed to the run loop, so the oracles and the recording see
+one stream in time order on bag time. After the last record /clock runs
+on for `tail` seconds of bag time while the system's answers come in.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from typing import TYPE_CHECKING, Any
+
+from bagfault.assertions.base import AssertionResult
+from bagfault.closedloop.process import describe_exit
+from bagfault.engine.run import OutputChannel
+from bagfault.engine.stop import Stopped
+from bagfault.errors import ClosedLoopError
+from bagfault.events import AssertionEvent
+from bagfault.live.graph import OWN_PREFIXES, watched_topics
+from bagfault.live.recorder import Recorder
+from bagfault.live.sink import LiveSink
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+    from bagfault.closedloop.process import SystemProcess
+    from bagfault.engine.oracles import Schema
+    from bagfault.engine.routing import Routing
+    from bagfault.engine.run import Run
+    from bagfault.engine.stop import StopFlag
+    from bagfault.events import AssertionState
+    from bagfault.io.mcap_sink import McapSink
+    from bagfault.io.types import TypeCatalog
+    from bagfault.scenario.model import Scenario
+    from bagfault.scenario.system import ReadyCondition, SystemUnderTest
+
+POLL = 0.02  # seconds between looks while waiting for readiness
+DISCOVERY_PERIOD = 0.2  # seconds between looks at the graph for new topics of the system during the run
+WATCH_WAIT = 2.0  # seconds to learn the type of an asserted topic the system has not advertised yet
+NOT_RECORDED = ('/clock', '/parameter_events', '/rosout')
+SYSTEM_ALIVE = 'system_alive'
+
+
+class SystemLink(LiveSink):
+    """Plays the bag into the system under test and hands what the system publishes to the run loop."""
+
+    def __init__(self, node: Any, listener: Any, executor: Any, *, system: SystemUnderTest,
+                 process: SystemProcess, scenario: Scenario, catalog: TypeCatalog, rate: float, stop: StopFlag,
+                 recording: McapSink | None) -> None:
+        super().__init__(node, rate=rate, clock=True, stop=stop, recording=recording)
+        self.listener = listener
+        self.executor = executor
+        self.system = system
+        self.process = process
+        self.scenario = scenario
+        self.catalog = catalog
+        self.played: list[str] = []
+        self.unwatched: list[str] = []
+        self.ready_seconds = 0.0
+        self.died_at: int | None = None  # bag time the system was found dead, if it died during the run
+        self.alive_result: AssertionResult | None = None
+        self.heard: dict[str, int] = {}  # messages of the system per topic, as handed to the run
+        self.clock_errors: list[float] = []
+        self._queue: deque[tuple[str, float, bytes]] = deque()
+        self._lock = threading.Lock()
+        self._outputs: dict[str, OutputChannel] = {}
+        self._recorder: Recorder | None = None
+        self._thread: threading.Thread | None = None
+        self._run: Run | None = None
+        self._floor = 0  # nothing is handed over earlier than what was judged before
+        self._last_look = 0.0
+
+    # -- before the first record --------------------------------------------------------------
+    def prepare(self, routing: Routing) -> Mapping[str, Schema]:
+        """Wait until the system is ready, subscribe to its topics; the schemas of those the oracles read."""
+        self.played = sorted(self._publishers)
+        started = time.monotonic()
+        for condition in self.system.conditions():
+            self._await(condition)
+        self.ready_seconds = time.monotonic() - started
+        own = {*self.played, *NOT_RECORDED}
+        watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
+        record = self.system.record
+        every = record == 'all'
+        self._recorder = Recorder(self.listener, [] if record == 'all' else record, every,
+                                  on_topic=self._on_topic, on_message=self._on_message,
+                                  exclude=own, every_excludes=(*NOT_RECORDED, *OWN_PREFIXES))
+        self._recorder.discover()
+        for topic, msgtype in watched.items():
+            if topic not in self._recorder.subscriptions:
+                self._recorder.subscribe(topic, msgtype)  # advertised later (a monitor's first report)
+        self._thread = threading.Thread(target=self._spin, name='bagfault-test-listener', daemon=True)
+        self._thread.start()
+        return {topic: (msgtype, *self.catalog.schema(msgtype)) for topic, msgtype in watched.items()}
+
+    def _await(self, condition: ReadyCondition) -> None:
+        """One ready condition, or ClosedLoopError when the system exits or the timeout passes."""
+        deadline = time.monotonic() + (condition.seconds if condition.kind == 'delay' else condition.timeout)
+        seen: set[str] = set()
+        probe = None
+        while True:
+            if self.stop.is_set():
+                raise Stopped(self.stop.reason)
+            if not self.process.alive():
+                raise ClosedLoopError(f'the system under test exited with {describe_exit(self.process.returncode)} '
+                                      f'before it was ready (waiting for {condition.describe()})',
+                                      tail=self.process.tail())
+            self.process.watch()
+            if condition.kind == 'delay':
+                if time.monotonic() >= deadline:
+                    return
+            elif condition.kind == 'message':
+                if probe is None and self.listener.count_publishers(condition.name):
+                    probe = self._probe(condition.name, seen)
+                if seen:
+                    self.listener.destroy_subscription(probe)
+                    return
+            elif self._met(condition):
+                return
+            if time.monotonic() >= deadline:
+                raise ClosedLoopError(f'the system under test was not ready after {condition.timeout:g} s: still '
+                                      f'waiting for {condition.describe()}', tail=self.process.tail())
+            if condition.kind == 'message':
+                self.executor.spin_once(timeout_sec=POLL)
+            else:
+                time.sleep(POLL)
+
+    def _probe(self, topic: str, seen: set[str]) -> Any:
+        from bagfault.live.ros import interface_class  # noqa: PLC0415
+
+        types = dict(self.listener.get_topic_names_and_types()).get(topic) or []
+        if not types:
+            return None
+        return self.listener.create_subscription(interface_class(types[0]), topic, lambda _d: seen.add(topic),
+                                                 10, raw=True)
+
+    def _met(self, condition: ReadyCondition) -> bool:
+        if condition.kind == 'publisher':
+            return bool(self.listener.count_publishers(condition.name))
+        if condition.kind == 'service':
+            return any(name == condition.name for name, _ in self.listener.get_service_names_and_types())
+        if condition.kind == 'subscribes':
+            topics = self.played if condition.topics == 'played' else list(condition.topics)
+            missing = [t for t in topics if t not in self._publishers]
+            if missing:
+                raise ClosedLoopError(f'ready: {", ".join(missing)} is not a topic this bag plays '
+                                      f'(it plays {", ".join(self.played) or "nothing"})')
+            return all(self._publishers[t].get_subscription_count() > 0 for t in topics)
+        # default: the system subscribes to at least one played topic, and every such subscription is matched
+        subscribed = [t for t in self.played if self.listener.count_subscribers(t) > 0]
+        return bool(subscribed) and all(
+            self._publishers[t].get_subscription_count() >= self.listener.count_subscribers(t) for t in subscribed)
+
+    def _spin(self) -> None:
+        while not self.stop.is_set() and self._thread is not None:
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - shutting down: the context is gone
+                return
+
+    # -- the system's messages ---------------------------------------------------------------
+    def _on_topic(self, topic: str, msgtype: str, profile: str) -> None:
+        channel = self.record_only(topic, msgtype, *self.catalog.schema(msgtype),
+                                   metadata={'offered_qos_profiles': profile})
+        self._outputs[topic] = OutputChannel(channel, topic, msgtype)
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        with self._lock:
+            self._queue.append((topic, time.monotonic(), data))
+
+    def begin(self, run: Run) -> None:
+        """Messages of the system go into this run."""
+        self._run = run
+
+    def _due(self, bag_time: int) -> None:
+        self._hand_over(bag_time)
+        self._floor = bag_time
+
+    def _tick(self, bag_time: int) -> None:
+        super()._tick(bag_time)
+        now = time.monotonic()
+        if now - self._last_look >= DISCOVERY_PERIOD:
+            self._last_look = now
+            if self._recorder is not None:
+                self._recorder.discover()
+            self._check_alive(bag_time)
+        self._hand_over(bag_time)
+
+    def _hand_over(self, upto: int) -> None:
+        """Everything that arrived, into the run loop, stamped with its bag time of arrival (clamped)."""
+        run = self._run
+        if run is None or not self._queue:
+            return
+        with self._lock:
+            items = list(self._queue)
+            self._queue.clear()
+        origin = self._origin
+        for topic, arrived, data in items:
+            stamp = upto if origin is None else origin[0] + round((arrived - origin[1]) * self.rate * 1e9)
+            stamp = min(max(stamp, self._floor), upto)
+            self._floor = stamp
+            self.heard[topic] = self.heard.get(topic, 0) + 1
+            run.message(self._outputs[topic], stamp, stamp, data)
+
+    def _check_alive(self, bag_time: int) -> None:
+        if self.died_at is not None or self.process.alive():
+            if self.died_at is None:
+                self.process.watch()
+            return
+        self.died_at = bag_time
+        code = self.process.returncode
+        self._verdict('failed', bag_time, f'the system under test exited with {describe_exit(code)} during the run')
+
+    def _verdict(self, state: AssertionState, time_ns: int, message: str) -> None:
+        origin = self._run.stats.origin if self._run is not None else None
+        seconds = (time_ns - (origin if origin is not None else time_ns)) / 1e9
+        text = f'{message} (found at {seconds:.3f} s)' if state == 'failed' else message
+        self.alive_result = AssertionResult(SYSTEM_ALIVE, SYSTEM_ALIVE, state, time_ns, text)
+        if self._run is not None:
+            self._run.write_event(AssertionEvent(time_ns, SYSTEM_ALIVE, SYSTEM_ALIVE, state, text))
+
+    # -- after the last record ----------------------------------------------------------------------
+    def finish(self, run: Run) -> None:
+        """/clock on for `tail` seconds of bag time, the system's last answers handed over, the alive verdict."""
+        if self._origin is None:
+            self._hand_over(run.stats.origin or 0)
+            return
+        end = max(self.clock_value, 0) + round(self.system.tail * 1e9)
+        while True:
+            if self.stop.is_set():
+                raise Stopped(self.stop.reason)
+            now = self.bag_time_now()
+            assert now is not None
+            if now >= end:
+                break
+            self._tick(now)
+            time.sleep(min(0.01, (end - now) / 1e9 / self.rate))
+        self._publish_clock(end)
+        self._hand_over(end)
+        self._check_alive(end)
+        if self.died_at is None:
+            self._verdict('passed', end, 'the system under test ran until the end of the bag and its tail')
+
+    def close(self) -> None:
+        """Stop the listener thread."""
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(timeout=2.0)

@@ -1,0 +1,171 @@
+"""The system under test as a process group: started with its own env and logs, stopped with nothing left.
+
+It is started in a new session (its own process group). Stopping sends
+SIGINT, then SIGTERM, then SIGKILL, `stop_timeout` apart, to the group and
+to every descendant that left it (a daemonised child); `leftovers` lists
+whatever still runs, which a test can assert is empty.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Literal
+
+from bagfault.errors import ClosedLoopError
+
+Ending = Literal['running', 'exited', 'SIGINT', 'SIGTERM', 'SIGKILL']
+TAIL_LINES = 20
+
+
+@dataclass(frozen=True)
+class ProcessStat:
+    """One line of /proc/PID/stat: what is needed to find a process's group and parent."""
+
+    pid: int
+    ppid: int
+    pgid: int
+    state: str
+
+
+def processes() -> list[ProcessStat]:
+    """Every process visible in /proc (zombies included: they are reaped by their parent)."""
+    found = []
+    for entry in os.scandir('/proc'):
+        if not entry.name.isdigit():
+            continue
+        try:
+            text = Path(entry.path, 'stat').read_text()
+        except OSError:
+            continue
+        fields = text[text.rfind(')') + 2:].split()  # the command name may hold spaces and parentheses
+        found.append(ProcessStat(int(entry.name), int(fields[1]), int(fields[2]), fields[0]))
+    return found
+
+
+def describe_exit(code: int | None) -> str:
+    """'code 3' or 'signal SIGSEGV' for a Popen return code."""
+    if code is None:
+        return 'no exit code'
+    if code < 0:
+        try:
+            return f'signal {signal.Signals(-code).name}'
+        except ValueError:
+            return f'signal {-code}'
+    return f'code {code}'
+
+
+def family(leader: int) -> set[int]:
+    """Live processes of the group `leader` leads, and every descendant of the leader and of those."""
+    table = [p for p in processes() if p.state != 'Z']
+    members = {p.pid for p in table if p.pgid == leader}
+    if any(p.pid == leader for p in table):
+        members.add(leader)
+    children: dict[int, list[int]] = {}
+    for p in table:
+        children.setdefault(p.ppid, []).append(p.pid)
+    todo = list(members | {leader})
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in members:
+                members.add(child)
+                todo.append(child)
+    return members
+
+
+class SystemProcess:
+    """A running system under test with its stdout and stderr in files."""
+
+    def __init__(self, command: list[str], *, env: dict[str, str], cwd: Path | None, shell: bool,
+                 logs: Path) -> None:
+        logs.mkdir(parents=True, exist_ok=True)
+        self.command = command
+        self.stdout_path = logs / 'system.stdout.log'
+        self.stderr_path = logs / 'system.stderr.log'
+        self.ending: Ending = 'running'
+        self._out: IO[bytes] = self.stdout_path.open('wb')
+        self._err: IO[bytes] = self.stderr_path.open('wb')
+        argv: str | list[str] = command[0] if shell else command
+        try:
+            self.popen = subprocess.Popen(argv, shell=shell, env=env, cwd=cwd, stdin=subprocess.DEVNULL,
+                                          stdout=self._out, stderr=self._err, start_new_session=True)
+        except OSError as exc:
+            self._close_logs()
+            raise ClosedLoopError(f'system under test: cannot start {" ".join(command)}: '
+                                  f'{exc.strerror or exc}') from None
+        self.pid = self.popen.pid
+        self._known: set[int] = {self.pid}
+
+    @property
+    def returncode(self) -> int | None:
+        """The exit status once the main process ended (negative: killed by that signal)."""
+        return self.popen.poll()
+
+    def alive(self) -> bool:
+        """True while the main process runs."""
+        return self.popen.poll() is None
+
+    def watch(self) -> None:
+        """Remember the current descendants, so those that leave the group are still stopped."""
+        self._known |= family(self.pid)
+
+    def stop(self, timeout: float) -> Ending:
+        """SIGINT, SIGTERM, SIGKILL to the group and its descendants, `timeout` apart; how it ended."""
+        if self.alive():
+            self.watch()
+        for sig, name in ((signal.SIGINT, 'SIGINT'), (signal.SIGTERM, 'SIGTERM'), (signal.SIGKILL, 'SIGKILL')):
+            remaining = self.leftovers()
+            main_running = self.alive()
+            if not remaining and not main_running:
+                break
+            if main_running:
+                self.ending = name  # type: ignore[assignment]
+            self._signal(sig, remaining)
+            self._wait(timeout if sig != signal.SIGKILL else 5.0)
+        else:
+            if self.leftovers():
+                raise ClosedLoopError(f'system under test: processes {sorted(self.leftovers())} survive SIGKILL')
+        if self.ending == 'running':
+            self.ending = 'exited'
+        self.popen.wait()
+        self._close_logs()
+        return self.ending
+
+    def leftovers(self) -> set[int]:
+        """Processes of the system still running (its group and the descendants seen)."""
+        alive = {p.pid for p in processes() if p.state != 'Z'}
+        return (family(self.pid) | self._known) & alive - {os.getpid()}
+
+    def tail(self, lines: int = TAIL_LINES) -> list[str]:
+        """The last lines the system wrote, stderr's after stdout's."""
+        out = []
+        for path in (self.stdout_path, self.stderr_path):
+            with contextlib.suppress(OSError):
+                text = path.read_bytes()[-64_000:].decode(errors='replace')
+                out += [line for line in text.splitlines() if line.strip()][-lines:]
+        return out[-lines:]
+
+    def _signal(self, sig: int, pids: set[int]) -> None:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(self.pid, sig)
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.kill(pid, sig)
+
+    def _wait(self, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.popen.poll()  # reap the main process so it leaves the table
+            if not self.leftovers():
+                return
+            time.sleep(0.02)
+
+    def _close_logs(self) -> None:
+        for handle in (self._out, self._err):
+            with contextlib.suppress(OSError):
+                handle.close()

@@ -1,0 +1,132 @@
+"""`bagfault test`: one closed-loop run (or several), from a free domain to a stopped system and a verdict.
+
+    lease a ROS domain -> start the system (own process group, loopback DDS profile, use_sim_time)
+    -> replay the bag through the scenario into a SystemLink (ready, /clock, the system heard)
+    -> stop the system (SIGINT, SIGTERM, SIGKILL) -> verdicts, with `system_alive` first
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from bagfault.closedloop.domain import DomainLease
+from bagfault.closedloop.link import SystemLink
+from bagfault.closedloop.process import SystemProcess
+from bagfault.engine.offline import replay
+from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenance
+from bagfault.engine.result import SystemReport
+from bagfault.errors import ClosedLoopError
+from bagfault.io.definitions import load_definitions
+from bagfault.io.mcap_sink import McapSink
+from bagfault.io.sources import InputSet
+from bagfault.io.types import TypeCatalog
+from bagfault.live import LOOPBACK_PROFILE
+from bagfault.live.runtime import ros_context
+from bagfault.scenario.system import command_line
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from bagfault.engine.result import RunResult
+    from bagfault.engine.stop import StopFlag
+    from bagfault.scenario.model import Scenario
+    from bagfault.scenario.system import SystemUnderTest
+
+PROFILE_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+
+
+def system_env(system: SystemUnderTest, domain: int) -> dict[str, str]:
+    """The system's environment: ours, its `env`, its domain and the loopback discovery profile."""
+    return {**os.environ, 'PYTHONUNBUFFERED': '1', 'RCUTILS_COLORIZED_OUTPUT': '0', **system.env,
+            'ROS_DOMAIN_ID': str(domain), PROFILE_VARIABLE: str(LOOPBACK_PROFILE)}
+
+
+def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *, system: SystemUnderTest,
+             seed: int, rate: float, logs: Path | None, stop: StopFlag) -> RunResult:
+    """One closed-loop run; the recording (if `output`) is complete on return, the system stopped."""
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+    from rclpy.node import Node  # noqa: PLC0415
+
+    os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
+    with DomainLease() as lease, tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch:
+        folder = logs if logs is not None else Path(scratch)
+        command = command_line(system, sys.executable)
+        report = SystemReport(command=command, domain_id=lease.domain, logs=logs)
+        inputs = list(inputs)
+        input_set = InputSet(inputs)
+        try:
+            catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
+            recording = McapSink(output, ros_distro=catalog.distro) if output is not None else None
+            with ros_context(stop, domain_id=lease.domain) as context:
+                node = Node('bagfault_test_player', context=context)
+                listener = Node('bagfault_test_listener', context=context)
+                executor = SingleThreadedExecutor(context=context)
+                executor.add_node(listener)
+                process = None
+                link = None
+                try:
+                    if recording is not None:
+                        recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0),
+                                                            'mode': 'test', 'command': ' '.join(command)})
+                        recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
+                    process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
+                                            shell=system.shell, logs=folder)
+                    link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
+                                      catalog=catalog, rate=rate, stop=stop, recording=recording)
+                    run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output,
+                                          hooks=link)
+                    if stopped:
+                        run.close(ok=False)
+                        raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '
+                                              'nothing judged', tail=process.tail())
+                    if recording is not None:
+                        origin = origin_metadata(run.stats.origin)
+                        if origin is not None:
+                            recording.add_metadata(ORIGIN_RECORD, origin)
+                        try:
+                            recording.finish()
+                        except BaseException:
+                            run.close(ok=False)
+                            raise
+                    run.close(ok=True)
+                except BaseException:
+                    if recording is not None:
+                        recording.abort()
+                    raise
+                finally:
+                    if link is not None:
+                        link.close()
+                    if process is not None:
+                        _stopped(process, system, report)
+                    executor.shutdown()
+                    listener.destroy_node()
+                    node.destroy_node()
+        finally:
+            input_set.close()
+    assert link is not None
+    result = run.result('test', inputs, output, seed)
+    if link.alive_result is not None:
+        result.assertions.insert(0, link.alive_result)
+    report.ready_seconds = link.ready_seconds
+    report.played = dict(link.published_per_topic)
+    report.heard = dict(link.heard)
+    report.unwatched = list(link.unwatched)
+    result.system = report
+    for topic in link.unwatched:
+        result.warnings.append(f'{topic}: asserted, but the system under test never advertised it and the '
+                               'scenario does not give its message_type; not heard')
+    for topic, msgtype in sorted(link.skipped.items()):
+        result.notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
+    return result
+
+
+def _stopped(process: SystemProcess, system: SystemUnderTest, report: SystemReport) -> None:
+    """Stop the system and note how; its output tail goes into the report."""
+    report.ending = process.stop(system.stop_timeout)
+    report.returncode = process.returncode
+    report.tail = process.tail()
+    report.leftovers = sorted(process.leftovers())

@@ -1,0 +1,254 @@
+"""The `system_under_test:` section: what `bagfault test` starts, when it is ready, what it records.
+
+    system_under_test:
+      command: ['{python}', monitor.py]   # a list, or a string split like a shell would (run without one)
+      shell: false                        # true: the string runs in /bin/sh
+      env: {MONITOR_LIMIT: '0.05'}
+      cwd: .                              # relative to the scenario file
+      ready:                              # all of them, each with its own timeout (seconds, default 30)
+        - {topic: /diagnostics, publisher: true}
+        - {topic: /diagnostics, message: true}
+        - {subscribes: played}            # or a list of topics the system must subscribe to
+        - {service: /enable_motors}
+        - {delay: 1.5}
+      record: all                         # or a list of topics the system publishes
+      stop_timeout: 5.0                   # SIGINT, then SIGTERM, then SIGKILL, this long apart
+      use_sim_time: true                  # pass `--ros-args -p use_sim_time:=true` (ros2 launch: use_sim_time:=true)
+      tail: 1.0                           # seconds of bag time recorded after the last message
+
+`{python}` in the command is the interpreter running bagfault. Without
+`ready`, the system is ready once it subscribes to a topic the bag plays
+and every such subscription is matched (at most 30 s).
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Mapping
+
+    from bagfault.scenario.yamlnodes import PathKey
+
+ReadyKind = Literal['publisher', 'message', 'subscribes', 'service', 'delay', 'default']
+KEYS = {'command', 'shell', 'env', 'cwd', 'ready', 'record', 'stop_timeout', 'use_sim_time', 'tail'}
+DEFAULT_TIMEOUT = 30.0
+MAX_SECONDS = 3600.0
+
+
+@dataclass(frozen=True)
+class ReadyCondition:
+    """One thing the system must show before the bag starts playing."""
+
+    kind: ReadyKind
+    name: str = ''  # topic or service
+    topics: tuple[str, ...] | Literal['played'] = 'played'  # for `subscribes`
+    seconds: float = 0.0  # for `delay`
+    timeout: float = DEFAULT_TIMEOUT
+
+    def describe(self) -> str:
+        """What is awaited, for messages."""
+        if self.kind == 'publisher':
+            return f'a publisher on {self.name}'
+        if self.kind == 'message':
+            return f'a first message on {self.name}'
+        if self.kind == 'service':
+            return f'the service {self.name}'
+        if self.kind == 'delay':
+            return f'{self.seconds:g} s'
+        if self.kind == 'subscribes':
+            which = 'every played topic' if self.topics == 'played' else ', '.join(self.topics)
+            return f'subscriptions to {which}'
+        return 'a matched subscription to a topic the bag plays'
+
+
+@dataclass
+class SystemUnderTest:
+    """How to start, wait for, record and stop the system under test."""
+
+    command: list[str] = field(default_factory=list)
+    shell: bool = False
+    env: dict[str, str] = field(default_factory=dict)
+    cwd: Path | None = None
+    ready: list[ReadyCondition] = field(default_factory=list)
+    record: list[str] | Literal['all'] = 'all'
+    stop_timeout: float = 5.0
+    use_sim_time: bool = True
+    tail: float = 1.0
+
+    def conditions(self) -> list[ReadyCondition]:
+        """The ready conditions, or the default one."""
+        return self.ready or [ReadyCondition('default')]
+
+
+
+def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], None],
+                 base: Path | None) -> SystemUnderTest | None:
+    """Check and read the section; every problem reported at its place."""
+    if not isinstance(node, dict):
+        problem(path, 'must be a mapping with at least a command')
+        return None
+    system = SystemUnderTest()
+    for key in node:
+        if key not in KEYS:
+            problem((*path, key), f'unknown key {key!r} (known: {", ".join(sorted(KEYS))})')
+    system.shell = _flag(node, 'shell', False, path, problem)
+    command = node.get('command')
+    if isinstance(command, str) and command.strip():
+        system.command = [command] if system.shell else shlex.split(command)
+    elif isinstance(command, list) and command and all(isinstance(c, (str, int, float)) for c in command):
+        system.command = [str(c) for c in command]
+    else:
+        problem((*path, 'command'), 'must be a command line: a string or a list of arguments')
+    env = node.get('env', {})
+    if not isinstance(env, dict) or not all(isinstance(k, str) and isinstance(v, (str, int, float, bool))
+                                            for k, v in env.items()):
+        problem((*path, 'env'), 'must map variable names to values')
+    else:
+        system.env = {k: _text(v) for k, v in env.items()}
+    if 'cwd' in node:
+        cwd = node['cwd']
+        if not isinstance(cwd, str) or not cwd:
+            problem((*path, 'cwd'), 'must be a folder')
+        else:
+            system.cwd = (base / cwd) if base is not None else Path(cwd)
+    ready = node.get('ready', [])
+    if not isinstance(ready, list):
+        problem((*path, 'ready'), 'must be a list of conditions')
+    else:
+        system.ready = [c for i, item in enumerate(ready) if (c := _condition(item, (*path, 'ready', i), problem))]
+    record = node.get('record', 'all')
+    if record == 'all':
+        system.record = 'all'
+    elif isinstance(record, list) and all(isinstance(t, str) and t for t in record):
+        system.record = list(record)
+    else:
+        problem((*path, 'record'), "must be 'all' or a list of topics")
+    system.stop_timeout = _seconds(node, 'stop_timeout', 5.0, path, problem)
+    system.tail = _seconds(node, 'tail', 1.0, path, problem, zero=True)
+    system.use_sim_time = _flag(node, 'use_sim_time', True, path, problem)
+    return system
+
+
+def _condition(item: object, path: PathKey, problem: Callable[[PathKey, str], None]) -> ReadyCondition | None:
+    if not isinstance(item, dict):
+        problem(path, 'must be a mapping such as {topic: /x, publisher: true}, {subscribes: played}, '
+                      '{service: /s} or {delay: 1.0}')
+        return None
+    timeout = _seconds(item, 'timeout', DEFAULT_TIMEOUT, path, problem)
+    known = {'topic', 'publisher', 'message', 'subscribes', 'service', 'delay', 'timeout'}
+    for key in item:
+        if key not in known:
+            problem((*path, key), f'unknown key {key!r} (known: {", ".join(sorted(known))})')
+    if 'topic' in item:
+        topic = item['topic']
+        if not isinstance(topic, str) or not topic:
+            problem((*path, 'topic'), 'must be a topic name')
+            return None
+        kind: ReadyKind = 'message' if item.get('message') else 'publisher'
+        return ReadyCondition(kind, name=topic, timeout=timeout)
+    if 'subscribes' in item:
+        value = item['subscribes']
+        if value == 'played':
+            return ReadyCondition('subscribes', timeout=timeout)
+        if isinstance(value, list) and value and all(isinstance(t, str) for t in value):
+            return ReadyCondition('subscribes', topics=tuple(value), timeout=timeout)
+        problem((*path, 'subscribes'), "must be 'played' or a list of topics")
+        return None
+    if 'service' in item:
+        if not isinstance(item['service'], str) or not item['service']:
+            problem((*path, 'service'), 'must be a service name')
+            return None
+        return ReadyCondition('service', name=item['service'], timeout=timeout)
+    if 'delay' in item:
+        return ReadyCondition('delay', seconds=_seconds(item, 'delay', 0.0, path, problem, zero=True))
+    problem(path, 'needs one of topic, subscribes, service or delay')
+    return None
+
+
+def _seconds(node: Mapping[str, Any], key: str, default: float, path: PathKey,
+             problem: Callable[[PathKey, str], None], *, zero: bool = False) -> float:
+    value = node.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or value > MAX_SECONDS or value < 0 or (value == 0 and not zero):
+        problem((*path, key), f'{value!r} must be {"0 or more" if zero else "more than 0"} seconds, at most an hour')
+        return default
+    return float(value)
+
+
+def _flag(node: Mapping[str, Any], key: str, default: bool, path: PathKey,
+          problem: Callable[[PathKey, str], None]) -> bool:
+    value = node.get(key, default)
+    if not isinstance(value, bool):
+        problem((*path, key), f'{value!r} is not true or false')
+        return default
+    return value
+
+
+def _text(value: object) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    return str(value)
+
+
+def ready_spec(text: str) -> dict[str, object]:
+    """A `--ready` value as its YAML form: publisher:/t, message:/t, subscribes:played|/a,/b, service:/s,
+    delay:1.5, each optionally followed by @TIMEOUT (seconds)."""
+    body, _, timeout = text.partition('@')
+    kind, _, value = body.partition(':')
+    node: dict[str, object]
+    if kind in ('publisher', 'message'):
+        node = {'topic': value, kind: True}
+    elif kind == 'subscribes':
+        node = {'subscribes': 'played' if value in ('', 'played') else value.split(',')}
+    elif kind == 'service':
+        node = {'service': value}
+    elif kind == 'delay':
+        node = {'delay': _number(value)}
+    else:
+        node = {kind: value}  # reported as unknown by the check
+    if timeout:
+        node['timeout'] = _number(timeout)
+    return node
+
+
+def _number(text: str) -> object:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def system_from(node: object, overrides: Mapping[str, object], problem: Callable[[PathKey, str], None],
+                base: Path | None) -> SystemUnderTest | None:
+    """The scenario's section (a mapping or None) with command-line values in place of its keys; `env`
+    values are added to the scenario's."""
+    merged: dict[str, object] = dict(node) if isinstance(node, dict) else {}
+    for key, value in overrides.items():
+        if key == 'env' and isinstance(value, dict) and isinstance(merged.get('env'), dict):
+            merged['env'] = {**merged['env'], **value}  # type: ignore[dict-item]
+        else:
+            merged[key] = value
+    if not merged:
+        problem(('system_under_test',), 'bagfault test needs a system under test: a `system_under_test:` '
+                                        'section with a command, or --command')
+        return None
+    return parse_system(merged, ('system_under_test',), problem, base)
+
+
+def command_line(system: SystemUnderTest, python: str) -> list[str]:
+    """The argv to start (or the one shell string): `{python}` replaced, `use_sim_time` added where it
+    applies (`use_sim_time:=true` to `ros2 launch`, `--ros-args -p use_sim_time:=true` to a node)."""
+    argv = [part.replace('{python}', shlex.quote(python) if system.shell else python) for part in system.command]
+    if not system.use_sim_time:
+        return argv
+    words = shlex.split(argv[0]) if system.shell else argv
+    launch = len(words) > 1 and Path(words[0]).name == 'ros2' and words[1] == 'launch'
+    extra = ['use_sim_time:=true'] if launch else ['--ros-args', '-p', 'use_sim_time:=true']
+    if system.shell:
+        return [f'{argv[0]} {" ".join(extra)}']
+    return [*argv, *extra]

@@ -1,0 +1,174 @@
+"""`bagfault test` end to end with real processes: the example passes, a broken system fails, bad starts are
+exit 2, runs are isolated, nothing is left running. Expected numbers come from the example bag's definition
+(IMU 100 Hz and odometry 50 Hz for 12 s, yaw rate 0.1 rad/s) and the scenario's fault windows."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from loop import SCENARIO, LoopRunner, running_with
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+NS = 1_000_000_000
+
+
+def decoded(path: Path) -> dict[str, list[tuple[int, object]]]:
+    """Messages per topic, with their log times, read by the mcap library."""
+    topics: dict[str, list[tuple[int, object]]] = {}
+    with path.open('rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, message, value in reader.iter_decoded_messages(log_time_order=True):
+            topics.setdefault(channel.topic, []).append((message.log_time, value))
+    return topics
+
+
+def command(token: str, *flags: str) -> str:
+    return f'{{python}} monitor.py --hardware-id {token} {" ".join(flags)}'.strip()
+
+
+def test_the_example_passes_and_its_recording_holds_the_whole_loop(tester: LoopRunner, example_bag: Path,
+                                                                   tmp_path: Path) -> None:
+    token = tester.token()
+    out = tmp_path / 'loop.mcap'
+    result = tester.run(str(SCENARIO), str(example_bag), '-o', str(out), '--command', command(token),
+                        '--keep-logs', str(tmp_path / 'logs'))
+    assert result.code == 0, result.stdout + result.stderr
+    report = result.report
+    assert report is not None
+    assert {a['id']: a['state'] for a in report['assertions']} == {
+        'system_alive': 'passed', 'drift_detected': 'passed', 'odom_blackout_detected': 'passed',
+        'diagnostics_at_5hz': 'passed'}
+    system = report['system_under_test']
+    # 12 s at 100 Hz; odometry 50 Hz minus the 1.5 s blackout (75 messages, all dropped)
+    assert system['played_per_topic'] == {'/imu': 1200, '/odom': 600 - 75}
+    assert system['stopped_by'] == 'SIGINT' and system['exit_code'] == 0
+    assert system['leftover_pids'] == []
+    assert running_with(token) == []
+    assert 'monitoring /imu and /odom' in (tmp_path / 'logs' / 'system.stderr.log').read_text()
+
+    topics = decoded(out)
+    assert {'/imu', '/odom', '/diagnostics', '/fault_injection/events', '/fault_manager/events'} <= set(topics)
+    origin = topics['/imu'][0][0]
+    # the played streams as the system received them: the bias only inside [3, 7) s
+    for time, imu in topics['/imu']:
+        expected = 0.1 + (0.2 if 3 * NS <= time - origin < 7 * NS else 0.0)
+        assert math.isclose(imu.angular_velocity.z, expected, abs_tol=1e-9)
+    assert len(topics['/odom']) == 525
+    assert not [t for t, _ in topics['/odom'] if 8.5 * NS <= t - origin < 10 * NS]
+    # what the system said, on the same axis: from its start to the tail, and about its own clock
+    diagnostics = topics['/diagnostics']
+    assert {s.hardware_id for _, m in diagnostics for s in m.status} == {token}
+    assert origin <= diagnostics[0][0] and diagnostics[-1][0] <= origin + 13 * NS
+    assert len(diagnostics) >= 5 * 12  # 5 Hz of sim time over 12 s and the tail
+    offsets = [t - (m.header.stamp.sec * NS + m.header.stamp.nanosec) for t, m in diagnostics]
+    assert max(abs(o) for o in offsets) < 0.1 * NS  # the system's sim clock is the bag's clock
+    # detection seen by the fault manager, within the asserted 2 s
+    [activated] = [t for t, e in topics['/fault_injection/events'] if e.fault_id == 'gyro_drift' and e.state == 'active']
+    confirmed = [t for t, e in topics['/fault_manager/events']
+                 if e.fault.fault_code == 'IMU_DRIFT' and e.fault.status == 'CONFIRMED']
+    assert activated == origin + 3 * NS
+    assert 0 < confirmed[0] - activated < 2 * NS
+
+    # `check` on the recording judges with the same time zero and reaches the same verdicts at the same times
+    checked = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'check', str(SCENARIO), str(out), '--json',
+                              str(tmp_path / 'check.json')], check=False, capture_output=True, text=True,
+                             env=tester.env)
+    assert checked.returncode == 0, checked.stderr
+    again = json.loads((tmp_path / 'check.json').read_text())
+    assert again['time']['origin_ns'] == report['time']['origin_ns']
+    live = {a['id']: (a['state'], a['t_s']) for a in report['assertions'] if a['id'] != 'system_alive'}
+    assert {a['id']: (a['state'], a['t_s']) for a in again['assertions']} == live
+
+
+def test_detection_disabled_fails_the_detection_assertion(tester: LoopRunner, example_bag: Path) -> None:
+    token = tester.token()
+    result = tester.run(str(SCENARIO), str(example_bag), '--rate', '2', '--command', command(token, '--no-detection'))
+    assert result.code == 1, result.stdout + result.stderr
+    assert 'FAIL  drift_detected' in result.stdout
+    assert 'IMU_DRIFT did not reach CONFIRMED within 2 s after gyro_drift activated' in result.stdout
+    assert 'PASS  odom_blackout_detected' in result.stdout
+    assert running_with(token) == []
+
+
+def test_a_system_that_exits_at_start_cannot_run(tester: LoopRunner, example_bag: Path, tmp_path: Path) -> None:
+    script = "import sys; print('loading /etc/robot.yaml', flush=True); print('robot.yaml: no such file', file=sys.stderr); sys.exit(4)"
+    result = tester.run(str(SCENARIO), str(example_bag), '-o', str(tmp_path / 'never.mcap'),
+                        '--command', f'{{python}} -c "{script}"')
+    assert result.code == 2, result.stdout + result.stderr
+    lines = result.stderr.splitlines()
+    assert lines[0] == ('bagfault: error: the system under test exited with code 4 before it was ready '
+                        '(waiting for subscriptions to every played topic)')
+    assert '  | robot.yaml: no such file' in lines
+    assert '  | loading /etc/robot.yaml' in lines
+    assert 'Traceback' not in result.stderr
+    assert list(tmp_path.glob('never*')) == []
+
+
+def test_a_system_that_never_becomes_ready(tester: LoopRunner, example_bag: Path) -> None:
+    token = tester.token()
+    script = "import subprocess, sys, time; subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)', sys.argv[1]]); time.sleep(600)"
+    result = tester.run(str(SCENARIO), str(example_bag), '--ready', 'publisher:/never@1.5',
+                        '--command', f'{{python}} -c "{script}" {token}', '--no-sim-time')
+    assert result.code == 2, result.stdout + result.stderr
+    assert result.stderr.splitlines()[0] == ('bagfault: error: the system under test was not ready after 1.5 s: '
+                                             'still waiting for a publisher on /never')
+    assert result.seconds < 20
+    assert running_with(token) == []  # the system and its child
+
+
+def test_a_crash_during_the_run_fails_system_alive(tester: LoopRunner, example_bag: Path) -> None:
+    token = tester.token()
+    result = tester.run(str(SCENARIO), str(example_bag), '--rate', '2', '--command',
+                        command(token, '--crash-after', '2'))
+    assert result.code == 1, result.stdout + result.stderr
+    assert 'FAIL  system_alive' in result.stdout
+    assert 'the system under test exited with code 11 during the run' in result.stdout
+    assert '  | safety_monitor: crashing on purpose after 2.0 s' in result.stdout
+    assert result.report is not None
+    [alive] = [a for a in result.report['assertions'] if a['id'] == 'system_alive']
+    assert 2.0 < alive['t_s'] < 3.5  # found within a look (0.2 s) of its death, 2 s of sim time in
+    assert running_with(token) == []
+
+
+def test_two_runs_at_once_are_isolated(tester: LoopRunner, example_bag: Path, tmp_path: Path) -> None:
+    tokens = [tester.token(), tester.token()]
+    started = [tester.start(str(SCENARIO), str(example_bag), '-o', str(tmp_path / f'{n}.mcap'),
+                            '--command', command(token), name=f'run{n}') for n, token in enumerate(tokens)]
+    results = [tester.finish(*pair) for pair in started]
+    for result in results:
+        assert result.code == 0, result.stdout + result.stderr
+    domains = {r.report['system_under_test']['ros_domain_id'] for r in results if r.report}
+    assert len(domains) == 2
+    for n, token in enumerate(tokens):
+        topics = decoded(tmp_path / f'{n}.mcap')
+        assert {s.hardware_id for _, m in topics['/diagnostics'] for s in m.status} == {token}
+        assert len(topics['/imu']) == 1200
+        assert running_with(token) == []
+
+
+def test_repeat_reports_a_pass_rate_per_assertion(tester: LoopRunner, example_bag: Path, tmp_path: Path) -> None:
+    token = tester.token()
+    result = tester.run(str(SCENARIO), str(example_bag), '--repeat', '3', '--rate', '2', '-o',
+                        str(tmp_path / 'rep.mcap'), '--command', command(token))
+    assert result.code == 0, result.stdout + result.stderr
+    assert result.report is not None
+    rates = {k: v['pass_rate'] for k, v in result.report['repeats']['assertions'].items()}
+    assert rates == {'system_alive': 1.0, 'drift_detected': 1.0, 'odom_blackout_detected': 1.0,
+                     'diagnostics_at_5hz': 1.0}
+    assert result.report['repeats']['runs'] == 3
+    assert result.stdout.count('passed 3 of 3 runs (100%)') == 4
+    assert sorted(p.name for p in tmp_path.glob('rep*.mcap')) == ['rep.run1.mcap', 'rep.run2.mcap', 'rep.run3.mcap']
+    assert running_with(token) == []
+
+
+@pytest.mark.parametrize('bad', [['--repeat', '0'], ['--rate', '0'], ['--env', 'NOEQUALS']])
+def test_bad_options_are_one_line(tester: LoopRunner, example_bag: Path, bad: list[str]) -> None:
+    result = tester.run(str(SCENARIO), str(example_bag), *bad)
+    assert result.code == 2
+    assert len(result.stderr.strip().splitlines()) == 1

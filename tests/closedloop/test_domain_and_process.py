@@ -1,0 +1,157 @@
+"""Domain leases and the system's process group: isolation between runs, and nothing left running."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+from bagfault.closedloop.domain import DomainLease
+from bagfault.closedloop.process import SystemProcess, describe_exit, processes
+from bagfault.errors import ClosedLoopError
+
+
+@pytest.fixture
+def locks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    folder = tmp_path / 'locks'
+    monkeypatch.setenv('BAGFAULT_DOMAIN_LOCKS', str(folder))
+    monkeypatch.setenv('ROS_DOMAIN_ID', '0')
+    return folder
+
+
+def test_leases_are_exclusive_and_given_back(locks: Path) -> None:
+    first, second = DomainLease(40, 41), DomainLease(40, 41)
+    assert {first.domain, second.domain} == {40, 41}
+    with pytest.raises(ClosedLoopError, match='no free ROS domain id between 40 and 41'):
+        DomainLease(40, 41)
+    taken = first.domain
+    first.release()
+    with DomainLease(40, 41) as third:
+        assert third.domain == taken
+    second.release()
+
+
+def test_a_lease_held_by_another_process_is_skipped_and_freed_when_it_dies(locks: Path) -> None:
+    holder = subprocess.Popen(
+        [sys.executable, '-c', 'import sys, time\nfrom bagfault.closedloop.domain import DomainLease\n'
+                               'lease = DomainLease(50, 51)\nprint(lease.domain, flush=True)\ntime.sleep(60)'],
+        stdout=subprocess.PIPE, text=True, env=os.environ)
+    try:
+        held = int(holder.stdout.readline())  # type: ignore[union-attr]
+        with DomainLease(50, 51) as mine:
+            assert mine.domain == ({50, 51} - {held}).pop()
+    finally:
+        holder.kill()
+        holder.wait()
+    with DomainLease(50, 51) as a, DomainLease(50, 51) as b:  # the kernel dropped the dead holder's lock
+        assert {a.domain, b.domain} == {50, 51}
+
+
+def test_the_current_domain_is_never_leased(locks: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv('ROS_DOMAIN_ID', '60')
+    with DomainLease(60, 61) as lease:
+        assert lease.domain == 61
+
+
+def running_with(token: str) -> list[int]:
+    """Processes whose command line holds `token` (found independently of the code under test)."""
+    found = []
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                cmdline = (entry / 'cmdline').read_bytes()
+                state = (entry / 'stat').read_text().rsplit(')', 1)[1].split()[0]
+            except OSError:
+                continue
+            if token.encode() in cmdline and state != 'Z':
+                found.append(int(entry.name))
+    return found
+
+
+SLEEP = f"{sys.executable} -c 'import time; time.sleep(300)'"  # a long sleeper that takes extra arguments
+
+
+def start(tmp_path: Path, script: str, token: str) -> SystemProcess:
+    return SystemProcess([f'{script} # {token}'], env=dict(os.environ), cwd=tmp_path, shell=True, logs=tmp_path)
+
+
+def wait_for(predicate: object, timeout: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():  # type: ignore[operator]
+        assert time.monotonic() < deadline, 'condition not reached'
+        time.sleep(0.05)
+
+
+def test_sigint_ends_a_well_behaved_group(tmp_path: Path) -> None:
+    token = uuid.uuid4().hex
+    process = start(tmp_path, f'echo started; {SLEEP} {token}-a & {SLEEP} {token}-b; wait', token)
+    wait_for(lambda: len(running_with(token)) >= 3)
+    assert process.stop(timeout=5.0) == 'SIGINT'
+    assert running_with(token) == []
+    assert process.leftovers() == set()
+    tail = process.tail()
+    assert tail[0] == 'started'  # stdout first, then stderr: the sleepers' KeyboardInterrupt
+    assert tail[-1] == 'KeyboardInterrupt'
+
+
+def test_escalation_to_sigterm_and_sigkill(tmp_path: Path) -> None:
+    token = uuid.uuid4().hex
+    process = start(tmp_path, f"trap '' INT; {SLEEP} {token} & wait; wait", token)
+    wait_for(lambda: len(running_with(token)) >= 2)
+    began = time.monotonic()
+    assert process.stop(timeout=0.5) == 'SIGTERM'
+    assert running_with(token) == []
+    assert time.monotonic() - began < 5
+
+    stubborn = tmp_path / 'stubborn.py'
+    stubborn.write_text('import signal, sys, time\nfor s in (signal.SIGINT, signal.SIGTERM):\n'
+                        '    signal.signal(s, signal.SIG_IGN)\nprint("ignoring", flush=True)\ntime.sleep(300)\n')
+    token = uuid.uuid4().hex
+    process = start(tmp_path, f'exec {sys.executable} {stubborn} {token}', token)
+    wait_for(lambda: 'ignoring' in process.stdout_path.read_text())
+    assert process.stop(timeout=0.3) == 'SIGKILL'
+    assert process.returncode == -9
+    assert running_with(token) == []
+
+
+def test_a_child_that_left_the_group_is_stopped_too(tmp_path: Path) -> None:
+    token = uuid.uuid4().hex
+    process = start(tmp_path, f'setsid {SLEEP} {token}-escaped & {SLEEP} {token}', token)
+    wait_for(lambda: len(running_with(token)) >= 3)
+    process.watch()  # the run loop looks at the family while the system runs
+    process.stop(timeout=2.0)
+    assert running_with(token) == []
+
+
+def test_a_system_that_exits_by_itself(tmp_path: Path) -> None:
+    process = start(tmp_path, 'echo one; echo two >&2; exit 3', 'x')
+    wait_for(lambda: not process.alive())
+    assert process.returncode == 3
+    assert process.stop(timeout=1.0) == 'exited'
+    assert process.tail() == ['one', 'two']
+
+
+def test_a_command_that_cannot_start(tmp_path: Path) -> None:
+    with pytest.raises(ClosedLoopError, match='cannot start /nonexistent/robot_stack --fast: No such file'):
+        SystemProcess(['/nonexistent/robot_stack', '--fast'], env=dict(os.environ), cwd=None, shell=False,
+                      logs=tmp_path)
+
+
+def test_exit_descriptions() -> None:
+    assert describe_exit(3) == 'code 3'
+    assert describe_exit(-11) == 'signal SIGSEGV'
+    assert describe_exit(None) == 'no exit code'
+
+
+def test_process_table_matches_ps() -> None:
+    ours = next(p for p in processes() if p.pid == os.getpid())
+    ps = subprocess.run(['ps', '-o', 'ppid=,pgid=', '-p', str(os.getpid())], capture_output=True, text=True,
+                        check=False)
+    if ps.returncode != 0:
+        pytest.skip('ps not available')
+    assert [ours.ppid, ours.pgid] == [int(v) for v in ps.stdout.split()]

@@ -1,0 +1,121 @@
+"""The pytest plugin, run by pytest's own pytester in a separate pytest process: scenario files as tests (one per
+assertion, at its line), the `bagfault` fixture, and the JUnit XML CI reads."""
+
+from __future__ import annotations
+
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+from loop import EXAMPLE, rclpy_available
+
+import bagfault.demo.synthetic  # noqa: F401 - numpy loaded before pytester snapshots sys.modules (it cannot load twice)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from helpers import make_bag
+
+GOOD = """
+name: good
+bags: [imu.mcap]
+injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}
+faults:
+  - {id: bias, injector_id: imu, start: 1.0, duration: 1.0, config: {angular_velocity_z_bias: 0.2}}
+assertions:
+  - {id: bias_activates, type: fault_event, fault_id: bias, state: active, within: 1.5}
+  - {id: yaw_rate_bounded, type: field_range, topic: /imu_out, field: angular_velocity.z, min: 0.0, max: 0.5}
+"""
+BAD = GOOD.replace('name: good', 'name: bad').replace('max: 0.5}', 'max: 0.15}').replace('yaw_rate_bounded',
+                                                                                          'yaw_rate_tight')
+FIXTURE_TESTS = """
+import pytest
+
+def test_run_returns_the_result(bagfault):
+    result = bagfault.run('test_good.bagfault.yaml')
+    assert result.output.exists() and not result.failed
+
+def test_a_failed_assertion_fails_the_test(bagfault):
+    bagfault.run('test_bad.bagfault.yaml')
+
+def test_check_false_hands_the_failure_back(bagfault):
+    result = bagfault.run('test_bad.bagfault.yaml', check=False)
+    assert [a.id for a in result.assertions if a.state == 'failed'] == ['yaw_rate_tight']
+"""
+
+
+def line_of(text: str, needle: str) -> int:
+    """1-based line of the first line holding `needle`."""
+    return next(n for n, line in enumerate(text.splitlines(), 1) if needle in line)
+
+
+@pytest.fixture
+def project(pytester: pytest.Pytester) -> pytest.Pytester:
+    make_bag(pytester.path / 'imu.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 4.0)
+    pytester.makefile('.bagfault.yaml', test_good=GOOD, test_bad=BAD)
+    pytester.makepyfile(test_fixture=FIXTURE_TESTS)
+    return pytester
+
+
+def test_scenario_files_and_fixture_tests(project: pytest.Pytester) -> None:
+    result = project.runpytest_subprocess('--junitxml=report.xml', '-p', 'no:cacheprovider')
+    result.assert_outcomes(passed=5, failed=2)
+    result.stdout.fnmatch_lines([
+        'yaw_rate_tight failed: at 1.000 s /imu_out angular_velocity.z = 0.3 is outside [[]0, 0.15]',
+        'FAILED test_bad.bagfault.yaml::yaw_rate_tight - *',
+    ])
+    assert 'Traceback' not in result.stdout.str()
+    cases = {c.get('name'): c for c in ET.parse(project.path / 'report.xml').getroot().iter('testcase')}
+    assert set(cases) == {'bias_activates', 'yaw_rate_bounded', 'yaw_rate_tight', 'test_run_returns_the_result',
+                          'test_a_failed_assertion_fails_the_test', 'test_check_false_hands_the_failure_back'}
+    tight = cases['yaw_rate_tight']
+    assert tight.get('classname') == 'test_bad.bagfault.yaml'
+    [failure] = tight.findall('failure')
+    assert 'angular_velocity.z' in (failure.get('message') or '')
+    properties = {p.get('name'): p.get('value') for p in tight.iter('property')}
+    assert Path(properties['scenario_file']).name == 'test_bad.bagfault.yaml'
+    written = (project.path / 'test_bad.bagfault.yaml').read_text()
+    assert int(properties['scenario_line']) == line_of(written, 'id: yaw_rate_tight')
+    assert cases['test_a_failed_assertion_fails_the_test'].find('failure') is not None
+
+
+def test_junit_xunit1_carries_file_and_line_attributes(project: pytest.Pytester) -> None:
+    result = project.runpytest_subprocess('--junitxml=report.xml', '-o', 'junit_family=xunit1',
+                                          'test_good.bagfault.yaml', '-p', 'no:cacheprovider')
+    result.assert_outcomes(passed=2)
+    cases = {c.get('name'): c for c in ET.parse(project.path / 'report.xml').getroot().iter('testcase')}
+    activates = cases['bias_activates']
+    assert activates.get('file') == 'test_good.bagfault.yaml'
+    written = (project.path / 'test_good.bagfault.yaml').read_text()
+    assert int(activates.get('line') or -1) == line_of(written, 'id: bias_activates') - 1  # pytest counts from 0
+
+
+def test_a_scenario_that_cannot_run_fails_each_item_with_the_reason(pytester: pytest.Pytester) -> None:
+    pytester.makefile('.bagfault.yaml', test_nobag=GOOD.replace('imu.mcap', 'missing.mcap'),
+                      test_broken='injector: {id: imu, type: imu\n')
+    result = pytester.runpytest_subprocess('-p', 'no:cacheprovider')
+    result.assert_outcomes(failed=3)
+    result.stdout.fnmatch_lines(['*test_nobag.bagfault.yaml: could not run: *missing.mcap*'])
+    result.stdout.fnmatch_lines(['*test_broken.bagfault.yaml: could not run: *'])
+
+
+@pytest.mark.skipif(not rclpy_available(), reason="rclpy not installed (pip install '.[live]')")
+def test_closed_loop_scenario_file_and_fixture(pytester: pytest.Pytester) -> None:
+    sys.path.insert(0, str(EXAMPLE))
+    try:
+        import make_bag as example
+    finally:
+        sys.path.remove(str(EXAMPLE))
+    bag = example.write(pytester.path / 'rover.mcap')
+    text = (EXAMPLE / 'test_imu_drift.bagfault.yaml').read_text().replace('cwd: .', f'cwd: {EXAMPLE}')
+    pytester.makefile('.bagfault.yaml', test_loop=text)
+    pytester.makepyfile(test_loop_fixture=f"""
+        def test_detection_disabled(bagfault):
+            result = bagfault.test('test_loop.bagfault.yaml', [{str(bag)!r}], rate=2.0, check=False,
+                                   system={{'command': '{{python}} monitor.py --no-detection'}})
+            assert [a.id for a in result.assertions if a.state == 'failed'] == ['drift_detected']
+            assert result.system.heard['/diagnostics'] > 20
+    """)
+    result = pytester.runpytest_subprocess('-p', 'no:cacheprovider', '-v')
+    result.assert_outcomes(passed=5)
+    result.stdout.fnmatch_lines(['*test_loop.bagfault.yaml::system_alive PASSED*',
+                                 '*test_loop.bagfault.yaml::drift_detected PASSED*'])
