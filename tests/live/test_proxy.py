@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import signal
 import time
@@ -73,8 +74,10 @@ assertions:
   - {id: bias_seen, type: fault_event, fault_id: imu_yaw_rate_bias, state: active}
 """)
     record = tmp_path / 'proxy.mcap'
-    proxy = graph.bagfault('proxy', str(scenario), '--record', str(record), name='proxy')
+    proxy = graph.bagfault('proxy', str(scenario), '--record', str(record), '--json', str(tmp_path / 'live.json'),
+                           name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
+    time.sleep(1.0)  # time zero is the proxy's start; the first message comes later
     graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '100', '--seconds', '3', name='imu')
     time.sleep(2.0)
     assert not record.exists()
@@ -83,9 +86,13 @@ assertions:
     assert [p.name for p in tmp_path.iterdir() if p.name.endswith('.partial')] == []
     counts = {topic: len(messages) for topic, messages in decoded(record).items()}
     assert counts['/sensors/imu_raw'] == counts['/sensors/imu'] > 50
-    check = graph.bagfault('check', str(scenario), str(record), name='check')
+    check = graph.bagfault('check', str(scenario), str(record), '--json', str(tmp_path / 'check.json'), name='check')
     assert check.wait(timeout=60) == 1
     assert 'not observed before the end of the bag' in check.out_path.read_text()
+    live, checked = (json.loads((tmp_path / name).read_text()) for name in ('live.json', 'check.json'))
+    first = min(t for messages in decoded(record).values() for t, _ in messages)
+    assert live['time']['origin_ns'] < first - 500_000_000  # zero was well before the first recorded message
+    assert checked['time']['origin_ns'] == live['time']['origin_ns']  # and `check` puts it at the same place
 
 
 def test_reload_service_applies_new_faults_and_refuses_layout_changes(graph, scenarios: Path, tmp_path: Path) -> None:
