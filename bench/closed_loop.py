@@ -15,6 +15,7 @@ bag time) and the loop time (the echo's arrival on bagfault's bag-time axis
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import statistics
 import subprocess
@@ -59,10 +60,8 @@ def echo() -> None:
             publisher.publish(message)  # type: ignore[attr-defined]
 
         node.create_subscription(kind, topic, back, 100)
-    try:
+    with contextlib.suppress(KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         rclpy.spin(node)
-    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
-        pass
     rclpy.try_shutdown()
 
 
