@@ -22,6 +22,8 @@ from bagfault.engine.scheduler import Activation
 from bagfault.engine.stop import StopFlag
 from bagfault.errors import BagfaultError, Problem, ScenarioError, UsageError
 from bagfault.io.outputs import check_output
+from bagfault.io.recover import Recovered, partial_of, requested_name
+from bagfault.io.recover import recover as copy_readable
 from bagfault.scenario import Scenario, load_scenario
 from bagfault.scenario.system import SystemUnderTest, system_from
 from bagfault.scenario.yamlnodes import format_path
@@ -140,8 +142,12 @@ def proxy(
     seed: int | None = None,
     use_sim_time: bool = False,
     stop: StopFlag | None = None,
+    ros_args: Sequence[str] = (),
 ) -> RunResult:
-    """Live proxy (`/x_raw` -> faults -> `/x`) until SIGINT/SIGTERM or `stop.set()`; needs rclpy."""
+    """Live proxy (`/x_raw` -> faults -> `/x`) until SIGINT/SIGTERM or `stop.set()`; needs rclpy.
+
+    `ros_args` are what follows `--ros-args` on a ROS command line (remaps, `__node`, `__ns`, `-p`,
+    `--params-file`): they apply to the proxy's node."""
     from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
 
     require_rclpy()
@@ -152,7 +158,7 @@ def proxy(
     if out is not None:
         _check_output(out, 'recording', [], loaded)
     return run_proxy(loaded, seed=seed_of(loaded, seed), record=out, use_sim_time=use_sim_time,
-                     stop=stop if stop is not None else StopFlag())
+                     stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args))
 
 
 def play(
@@ -166,8 +172,18 @@ def play(
     seed: int | None = None,
     delay: float = 0.5,
     stop: StopFlag | None = None,
+    wait_for: Sequence[str] = (),
+    remap: Sequence[str] = (),
+    topics: Sequence[str] = (),
+    start_offset: float = 0.0,
+    clock_hz: float = 100.0,
+    ros_args: Sequence[str] = (),
 ) -> RunResult:
-    """Publish bags on their topics through the scenario's faults (a plain player without one); needs rclpy."""
+    """Publish bags on their topics through the scenario's faults (a plain player without one); needs rclpy.
+
+    `wait_for` topics (or ['all']) must have a subscriber before the first message (instead of `delay`);
+    `remap` ('FROM:=TO') renames published topics, `topics` plays only those, `start_offset` skips the bag's
+    first seconds, `clock_hz` is the /clock rate while waiting; `ros_args` apply to the player's node."""
     from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
 
     require_rclpy()
@@ -180,8 +196,20 @@ def play(
     out = Path(record) if record is not None else None
     if out is not None:
         _check_output(out, 'recording', paths, loaded)
+    if not (math.isfinite(clock_hz) and 0 < clock_hz <= 10_000):
+        raise UsageError(f'--clock {clock_hz:g}: must be a rate in Hz above 0, at most 10000')
+    mapped = []
+    for item in remap:
+        source, sep, target = item.partition(':=')
+        if not (sep and source.startswith('/') and target.startswith('/')):
+            raise UsageError(f'--remap {item}: must be /FROM:=/TO')
+        mapped += ['-r', f'{source}:={target}']
     return run_play(loaded, paths, seed=seed_of(loaded, seed), rate=rate, clock=clock, loop=loop, record=out,
-                    delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag())
+                    delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag(),
+                    wait_for=[t if t == 'all' or t.startswith('/') else '/' + t for t in wait_for],
+                    topics=[t if t.startswith('/') else '/' + t for t in topics],
+                    start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
+                    ros_args=[*mapped, *ros_args])
 
 
 def record(
@@ -192,6 +220,7 @@ def record(
     duration: float | None = None,
     use_sim_time: bool = False,
     stop: StopFlag | None = None,
+    ros_args: Sequence[str] = (),
 ) -> RecordResult:
     """Record live topics (or all with `every`) into an MCAP until `duration`, a signal or `stop.set()`."""
     from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
@@ -206,7 +235,7 @@ def record(
     if not topics and not every:
         raise UsageError('record: give topics to record or --all')
     return run_record(list(topics), out, every=every, duration=duration, use_sim_time=use_sim_time,
-                      stop=stop if stop is not None else StopFlag())
+                      stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args))
 
 
 def test(
@@ -280,6 +309,15 @@ def system_of(scenario: Scenario, overrides: Mapping[str, object]) -> SystemUnde
     return system
 
 
+def recover(recording: str | Path, output: str | Path | None = None) -> Recovered:
+    """A live recording cut short by a kill made a valid MCAP: `recording` is the partial file or the name
+    that was requested (its `.NAME.*.partial` is found); `output` defaults to that requested name."""
+    source = partial_of(Path(recording))
+    out = Path(output) if output is not None else requested_name(source)
+    check_output(out, 'output', [('the recording', source)])
+    return copy_readable(source, out)
+
+
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     scenarios, problems = [], []
@@ -293,5 +331,17 @@ def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scena
     return scenarios
 
 
-__all__ = ['BagfaultError', 'RunResult', 'StopFlag', 'check', 'load_scenario', 'play', 'proxy', 'record', 'run',
-           'test', 'validate']
+__all__ = [
+    'BagfaultError',
+    'RunResult',
+    'StopFlag',
+    'check',
+    'load_scenario',
+    'play',
+    'proxy',
+    'record',
+    'recover',
+    'run',
+    'test',
+    'validate',
+]

@@ -80,7 +80,9 @@ def _parser() -> argparse.ArgumentParser:
     latency.add_argument('--stamp-origin', action='store_true',
                          help="measure from the first message's header.stamp instead of its receive time")
 
-    proxy = sub.add_parser('proxy', help="run the scenario's injectors on live ROS 2 topics (rclpy)")
+    proxy = sub.add_parser('proxy', help="run the scenario's injectors on live ROS 2 topics (rclpy)",
+                           usage='bagfault proxy SCENARIO [--record OUT.mcap] [--seed N] [--use-sim-time] [reports] '
+                                 '[--ros-args -r __node:=NAME -r __ns:=/NS -r FROM:=TO -p FAULT.active:=true ...]')
     proxy.add_argument('scenario', type=Path)
     proxy.add_argument('--record', type=Path, metavar='OUT.mcap', help='record raw and faulty topics and events')
     proxy.add_argument('--seed', type=int, default=None)
@@ -93,12 +95,20 @@ def _parser() -> argparse.ArgumentParser:
     play.add_argument('items', type=Path, nargs='+', metavar='[SCENARIO] INPUT',
                       help='an optional scenario file (.yaml) followed by bags')
     play.add_argument('--rate', type=float, default=1.0, help='playback speed factor (default 1.0)')
-    play.add_argument('--clock', action='store_true', help='publish /clock with the bag time')
+    play.add_argument('--clock', type=float, nargs='?', const=100.0, default=None, metavar='HZ',
+                      help='publish /clock with the bag time (at HZ while waiting, default 100)')
     play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
     play.add_argument('--record', type=Path, metavar='OUT.mcap', help='record what was published and the events')
     play.add_argument('--seed', type=int, default=None)
     play.add_argument('--delay', type=float, default=0.5, metavar='SECONDS',
-                      help='wait before the first message so subscribers can connect (default 0.5)')
+                      help='wait before the first message so subscribers can connect (default 0.5), then until '
+                           'every subscriber the graph knows is matched (5 s at most)')
+    play.add_argument('--wait-for', action='append', default=[], metavar='TOPIC',
+                      help="wait (30 s at most) until TOPIC has a subscriber ('all': every topic played); repeatable")
+    play.add_argument('--remap', action='append', default=[], metavar='/FROM:=/TO', help='publish FROM as TO')
+    play.add_argument('--topics', nargs='+', default=[], metavar='TOPIC', help='play only these topics')
+    play.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                      help="skip the bag's first S seconds (still judged: faults and assertions keep bag time)")
     _report_options(play)
 
     record = sub.add_parser('record', help='record live topics into an MCAP',
@@ -135,6 +145,11 @@ def _parser() -> argparse.ArgumentParser:
     system.add_argument('--tail', type=float, metavar='S', help='bag seconds recorded after the last message')
     system.add_argument('--no-sim-time', action='store_true', help='do not pass use_sim_time:=true')
     _report_options(test)
+
+    recover = sub.add_parser('recover', help='make a recording cut short by a kill a valid MCAP again')
+    recover.add_argument('recording', type=Path, metavar='FILE',
+                         help='the partial file (.NAME.*.partial), or the name that was requested')
+    recover.add_argument('-o', '--output', type=Path, default=None, help='default: the name that was requested')
 
     demo = sub.add_parser('demo', help='run the embedded demo bag and scenario')
     demo.add_argument('-o', '--output-dir', type=Path, default=Path('bagfault_demo'), metavar='DIR')
@@ -234,7 +249,8 @@ def _cmd_proxy(args: argparse.Namespace) -> int:
     reports = _reports(args)
     reports.check(_protected(scenario=args.scenario, recording=args.record))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
-    result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time)
+    result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time,
+                       ros_args=args.ros_args)
     return _finish(reports, result)
 
 
@@ -250,8 +266,10 @@ def _cmd_play(args: argparse.Namespace) -> int:
     reports = _reports(args)
     reports.check(_protected(input=items, scenario=scenario_path, recording=args.record))
     scenario = api.load_scenario(scenario_path, strict=args.strict) if scenario_path is not None else None
-    result = api.play(scenario, items, rate=args.rate, clock=args.clock, loop=args.loop, record=args.record,
-                      seed=args.seed, delay=args.delay)
+    result = api.play(scenario, items, rate=args.rate, clock=args.clock is not None, loop=args.loop,
+                      record=args.record, seed=args.seed, delay=args.delay, wait_for=args.wait_for, remap=args.remap,
+                      topics=args.topics, start_offset=args.start_offset,
+                      clock_hz=args.clock if args.clock is not None else 100.0, ros_args=args.ros_args)
     return _finish(reports, result)
 
 
@@ -259,7 +277,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
 
     result = api.record(args.topics, args.output, every=args.all, duration=args.duration,
-                        use_sim_time=args.use_sim_time)
+                        use_sim_time=args.use_sim_time, ros_args=args.ros_args)
     for topic, count in sorted(result.counts.items()):
         print(f'  {count:>9}  {topic}')
     for topic in result.missing:
@@ -310,6 +328,16 @@ def _cmd_test(args: argparse.Namespace) -> int:
     result = api.test(scenario, args.inputs, args.output, system=_system_overrides(args), seed=args.seed,
                       rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs)
     return _finish(reports, result)
+
+
+def _cmd_recover(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+
+    done = api.recover(args.recording, args.output)
+    state = 'complete (nothing was lost)' if done.complete else f'cut short ({done.stopped})'
+    print(f'{done.source}: {state}')
+    print(f'recovered {done.messages} messages on {done.channels} channels into {done.output}')
+    return EXIT_OK
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -403,13 +431,26 @@ COMMANDS = {
     'play': _cmd_play,
     'record': _cmd_record,
     'test': _cmd_test,
+    'recover': _cmd_recover,
     'latency': _cmd_latency,
 }
 
 
+ROS_COMMANDS = ('proxy', 'play', 'record')  # commands that make a node: they take --ros-args
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `bagfault` command: exit 0 passed, 1 an assertion failed, 2 could not run."""
-    args = _parser().parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    ros_args: list[str] = []
+    if '--ros-args' in words:  # as `ros2 run` and launch pass them: everything after it is for ROS
+        at = words.index('--ros-args')
+        words, ros_args = words[:at], [w for w in words[at + 1:] if w not in ('--ros-args', '--')]
+    args = _parser().parse_args(words)
+    args.ros_args = ros_args
+    if ros_args and args.command not in ROS_COMMANDS:
+        print(f'bagfault: error: --ros-args: only {", ".join(ROS_COMMANDS)} make a ROS node', file=sys.stderr)
+        return EXIT_ERROR
     try:
         with _terminating_signals():
             return COMMANDS[args.command](args)

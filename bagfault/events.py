@@ -149,3 +149,20 @@ def to_message(event: FaultEvent | AssertionEvent | ScenarioStatus, store: Any) 
     stamp = types['builtin_interfaces/msg/Time'](sec=event.time // 1_000_000_000, nanosec=event.time % 1_000_000_000)
     values = {k: v for k, v in event.__dict__.items() if k != 'time'}
     return types[event.msgtype](stamp=stamp, **values)
+
+
+EVENTS_JSON_TOPIC = '/bagfault/events'
+EVENTS_JSON_TYPE = 'std_msgs/msg/String'
+
+
+def event_json(event: Event, origin: int | None) -> str:
+    """One event as the JSON text published on /bagfault/events (docs/events.md): `topic` (the anchor topic it
+    belongs to), `stamp_ns`, `t_s` (from time zero) and the event's own fields."""
+    import dataclasses  # noqa: PLC0415
+    import json  # noqa: PLC0415
+
+    fields: dict[str, Any] = dataclasses.asdict(event) if dataclasses.is_dataclass(event) else {}
+    stamp = fields.pop('time', None)
+    body = {'topic': event.topic, 'type': event.msgtype, 'stamp_ns': stamp,
+            't_s': None if stamp is None or origin is None else round((stamp - origin) / 1e9, 9), **fields}
+    return json.dumps(body, sort_keys=True, default=str)

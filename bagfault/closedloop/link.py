@@ -178,7 +178,8 @@ class SystemLink(LiveSink):
             self._queue.append((topic, time.monotonic(), data))
 
     def begin(self, run: Run) -> None:
-        """Messages of the system go into this run."""
+        """Messages of the system go into this run; its events go out live."""
+        super().begin(run)
         self._run = run
 
     def _due(self, bag_time: int) -> None:

@@ -21,7 +21,7 @@ from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenanc
 from bagfault.engine.result import SystemReport
 from bagfault.errors import ClosedLoopError
 from bagfault.io.definitions import load_definitions
-from bagfault.io.mcap_sink import McapSink
+from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live import LOOPBACK_PROFILE
@@ -60,7 +60,8 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
         input_set = InputSet(inputs)
         try:
             catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
-            recording = McapSink(output, ros_distro=catalog.distro) if output is not None else None
+            recording = (McapSink(output, ros_distro=catalog.distro, flush_every=LIVE_FLUSH)
+                         if output is not None else None)
             with ros_context(stop, domain_id=lease.domain) as context:
                 node = Node('bagfault_test_player', context=context)
                 listener = Node('bagfault_test_listener', context=context)

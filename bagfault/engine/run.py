@@ -114,6 +114,7 @@ class Run:
         self.oracles = Oracles(scenario, schemas, catalog, self.write_event, blackbox_base, blackbox_numbers)
         self.observers: list[Observer] = [*self.oracles.observers, *observers]
         self.gate: Callable[[int], None] | None = None  # called before each merged record is judged (live passes)
+        self.event_listeners: list[Callable[[Event, bytes], None]] = []  # every event written, encoded (live)
         self._events: dict[str, tuple[OutputChannel, Codec]] = {}
         self._topics: dict[str, OutputChannel] = {}
         for kind in self.oracles.event_kinds:
@@ -213,7 +214,10 @@ class Run:
     def write_event(self, event: Event) -> None:
         """Encode and write an event record (fault, assertion, scenario status, fault manager) at its time."""
         channel, codec = self.event_channel(event)
-        self.sink.write(channel.id, event.time, event.time, codec.encode(event.to_message(codec.store)))
+        data = codec.encode(event.to_message(codec.store))
+        self.sink.write(channel.id, event.time, event.time, data)
+        for listener in self.event_listeners:
+            listener(event, data)
         stats = self.stats
         stats.output_messages += 1
         stats.per_topic_out[channel.topic] = stats.per_topic_out.get(channel.topic, 0) + 1

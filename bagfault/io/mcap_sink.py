@@ -14,6 +14,7 @@ import contextlib
 import os
 import struct
 import tempfile
+import time
 from pathlib import Path
 
 import yaml
@@ -23,6 +24,7 @@ from bagfault.io.mcap_writer import McapWriter
 from bagfault.io.outputs import current_umask
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')
+LIVE_FLUSH = 1.0  # seconds: a live recording loses at most this much to a kill
 INFINITE = {'sec': 9223372036, 'nsec': 854775807}  # rmw's "infinite" duration, as Jazzy's recorder writes it
 DEFAULT_QOS = yaml.safe_dump([{
     'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
@@ -39,9 +41,11 @@ class McapSink:
     """
 
     def __init__(self, path: Path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 ros_distro: str = 'jazzy') -> None:
+                 ros_distro: str = 'jazzy', flush_every: float | None = None) -> None:
         self.path = path
         self.ros_distro = ros_distro
+        self.flush_every = flush_every  # live recordings: complete a chunk at least this often (seconds)
+        self._flushed = time.monotonic()
         if compression not in COMPRESSIONS:
             raise OutputError(f'{path}: unknown compression {compression!r} (none, lz4, zstd)')
         directory = path.parent if str(path.parent) else Path('.')
@@ -54,6 +58,7 @@ class McapSink:
         except OSError as exc:
             raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
         self._tmp = Path(tmp)
+        self.partial = self._tmp  # where the file grows until `finish` (`bagfault recover` reads it after a kill)
         os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
         self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
@@ -92,6 +97,20 @@ class McapSink:
         except struct.error:
             raise OutputError(f'{self.path}: time {log_time} ns cannot be written (MCAP times are 0 to 2^64 - 1 '
                               'ns)') from None
+        except OSError as exc:
+            raise self._failed(exc) from None
+        if self.flush_every is not None:
+            self.tick()
+
+    def tick(self) -> None:
+        """Live recordings: when `flush_every` has passed, complete the open chunk and hand it to the kernel, so
+        a kill (SIGKILL, the OOM killer) loses at most that much; `bagfault recover` reads the rest."""
+        if self.flush_every is None or time.monotonic() - self._flushed < self.flush_every:
+            return
+        self._flushed = time.monotonic()
+        try:
+            self._writer.flush()
+            self._stream.flush()
         except OSError as exc:
             raise self._failed(exc) from None
 

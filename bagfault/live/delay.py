@@ -5,6 +5,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import threading
+import time
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -49,13 +50,20 @@ class DelayLine:
                     continue
                 _, _, topic, data = heapq.heappop(self._heap)
             self.publish(topic, data)
+            with self._condition:
+                self._condition.notify_all()  # a draining stop waits for the heap to empty
 
-    def stop(self) -> int:
-        """Stop; return how many delayed messages were still waiting (not sent)."""
+    def stop(self, drain: float = 0.0) -> int:
+        """Stop: wait up to `drain` seconds (wall time) for waiting messages to fall due, then publish what is
+        still waiting at once, in order (nothing is lost). Returns how many went out before their time."""
+        deadline = time.monotonic() + drain
         with self._condition:
+            while self._heap and time.monotonic() < deadline:
+                self._condition.wait(0.01)
             self._stopped = True
-            left = len(self._heap)
-            self._heap.clear()
+            left = [heapq.heappop(self._heap) for _ in range(len(self._heap))]
             self._condition.notify()
         self._thread.join(timeout=2.0)
-        return left
+        for _, _, topic, data in left:
+            self.publish(topic, data)
+        return len(left)

@@ -17,19 +17,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from bagfault import __version__
 from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata
-from bagfault.errors import BagfaultError, MalformedMessageError, ReloadError, ScenarioError
-from bagfault.io.mcap_sink import McapSink
+from bagfault.errors import BagfaultError, LiveError, MalformedMessageError, ReloadError, ScenarioError
+from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
 from bagfault.live.delay import DelayLine
 from bagfault.live.diagnostics import diagnostic_array
+from bagfault.live.events import LiveEvents
 from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
 from bagfault.live.params import FaultParameters
-from bagfault.live.ros import interface_class, qos
+from bagfault.live.ros import interface_class, make_node, qos
 from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import TriggerProxy
 from bagfault.scenario import load_scenario
@@ -44,6 +44,7 @@ NODE_NAME = 'bagfault'
 TICK = 0.01  # scheduler resolution in live mode, seconds
 DIAGNOSTICS_PERIOD = 1.0
 MALFORMED_LOG_EVERY = 100
+DRAIN = 2.0  # seconds a clean stop waits for delayed messages and service calls to fall due
 
 
 class ProxyNode:
@@ -58,13 +59,16 @@ class ProxyNode:
         seed: int,
         record: Path | None = None,
         use_sim_time: bool = False,
+        ros_args: list[str] | None = None,
     ) -> None:
         self.scenario = scenario
         self.stop = stop
         self.seed = seed
         self.record_path = record
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
-        self.node = Node(NODE_NAME, context=context, parameter_overrides=overrides)
+        self.node = make_node(NODE_NAME, context, ros_args, parameter_overrides=overrides,
+                              allow_undeclared_parameters=True)  # unknown names get our message, not rclpy's
+        self.node.add_on_set_parameters_callback(self._check_sim_time)
         self.logger = self.node.get_logger()
         self.session: LiveSession | None = None
         self.recording: McapSink | None = None
@@ -75,13 +79,13 @@ class ProxyNode:
         self.parameters: FaultParameters | None = None
         self._warned: set[tuple[str, str]] = set()
         self._last_diagnostics = 0.0
-        self.unsent = 0
+        self.early = 0  # delayed messages published before their time at the stop
         self.failure: BagfaultError | None = None  # raised once the proxy has stopped cleanly
 
     # -- time -------------------------------------------------------------------------------
     def now(self) -> int:
         """ROS time in ns (follows /clock with use_sim_time)."""
-        return self.node.get_clock().now().nanoseconds
+        return int(self.node.get_clock().now().nanoseconds)
 
     # -- set-up ---------------------------------------------------------------------------------
     def setup(self, executor: Any) -> None:
@@ -98,7 +102,7 @@ class ProxyNode:
         watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
-            self.recording = McapSink(self.record_path)
+            self.recording = McapSink(self.record_path, flush_every=LIVE_FLUSH)
             self.recording.add_metadata('bagfault', {
                 'tool': 'bagfault', 'version': __version__, 'mode': 'proxy', 'seed': str(self.seed),
                 'scenario': self.scenario.name})
@@ -106,6 +110,8 @@ class ProxyNode:
         self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, sink=self.recording,
                                    blackbox_base=self.record_path, observed=watched)
         self.session.listeners.append(self._on_events)
+        self.events = LiveEvents(self.node, anchor_topics=True)
+        self.events.attach(self.session.run)
         self.delay = DelayLine(self.now, self._publish)
         for topic in self.session.topics:
             profile = qos(topic.spec.qos_depth, topic.spec.options.get('reliability', 'reliable'),
@@ -193,6 +199,19 @@ class ProxyNode:
             f'{name}: a {other} with incompatible QoS ({policy}) cannot connect to injector {topic.spec.id!r}; '
             "set the injector's reliability/durability to match it. Still running.")
 
+    def _check_sim_time(self, parameters: list[Parameter]) -> Any:
+        """Sim time switched on with nothing on /clock would stop the scheduler and the delay line: refused."""
+        from rcl_interfaces.msg import SetParametersResult  # noqa: PLC0415
+
+        for parameter in parameters:
+            if parameter.name == 'use_sim_time' and parameter.value is True \
+                    and not self.node.get_parameter('use_sim_time').value \
+                    and self.node.count_publishers('/clock') == 0:
+                return SetParametersResult(successful=False, reason=(
+                    'use_sim_time: nothing publishes /clock; sim time would stop the fault schedule and every '
+                    'delayed message. Start the clock source (bagfault play --clock, a simulator) first'))
+        return SetParametersResult(successful=True)
+
     # -- clock ---------------------------------------------------------------------------------
     def _tick(self) -> None:
         session = self.session
@@ -202,9 +221,20 @@ class ProxyNode:
             if self.now() <= 0:
                 return  # sim time: no /clock yet
             session.start()
+            if self.parameters is not None:
+                try:
+                    self.parameters.apply_overrides()
+                except LiveError as exc:
+                    self.logger.error(str(exc))
+                    self.failure = exc
+                    self.stop.set('a refused parameter value')
+                    return
             self.logger.info('bagfault proxy ready')
             self._publish_diagnostics()
         session.advance()
+        if self.recording is not None:
+            with session.lock:
+                self.recording.tick()
         if time.monotonic() - self._last_diagnostics >= DIAGNOSTICS_PERIOD:
             self._publish_diagnostics()
 
@@ -230,13 +260,14 @@ class ProxyNode:
             if source is None:
                 raise ReloadError('reload rejected: the scenario was not loaded from a file')
             scenario = load_scenario(source)
-            held = self.session.reload(scenario)
+            held, kept = self.session.reload(scenario)
         except ScenarioError as exc:
             response.success, response.message = False, f'reload rejected: {exc}'.splitlines()[0]
         except ReloadError as exc:
             response.success, response.message = False, str(exc)
         else:
-            response.success, response.message = True, f'reloaded {source.name}: {len(scenario.faults)} faults'
+            response.success, response.message = True, f'reloaded {source.name}: {len(scenario.faults)} faults' + (
+                f'; kept what was set at run time: {", ".join(kept)}' if kept else '')
             for topic, message in held:
                 self._publish(topic, message.data)
             assert self.parameters is not None
@@ -249,10 +280,18 @@ class ProxyNode:
         return response
 
     # -- end -------------------------------------------------------------------------------------
+    def drain(self, executor: Any) -> None:
+        """A clean stop, while the executor still runs: delayed service calls are answered now."""
+        for service in self.services:
+            service.release()
+        deadline = time.monotonic() + DRAIN
+        while any(s.in_flight for s in self.services) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
+
     def close(self) -> None:
-        """Stop the delay line, publish what injectors hold, finish the session and the recording."""
+        """Publish what the delay line and the injectors hold, finish the session and the recording."""
         if self.delay is not None:
-            self.unsent = self.delay.stop()
+            self.early = self.delay.stop(drain=DRAIN)
         if self.session is not None:
             for topic, message in self.session.flush():
                 self._publish(topic, message.data)

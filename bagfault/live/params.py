@@ -9,8 +9,8 @@ fault's config. Values are checked by the same schema as scenario files.
 
 from __future__ import annotations
 
+import math
 import re
-import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -24,7 +24,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from bagfault.errors import FieldValueError
+from bagfault.errors import FieldValueError, LiveError
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
@@ -39,8 +39,8 @@ TYPES = {'double': ParameterType.PARAMETER_DOUBLE, 'special_float': ParameterTyp
          'int': ParameterType.PARAMETER_INTEGER, 'bool': ParameterType.PARAMETER_BOOL,
          'string': ParameterType.PARAMETER_STRING, 'non_empty_string': ParameterType.PARAMETER_STRING,
          'list': ParameterType.PARAMETER_STRING}
-BIG = sys.float_info.max
 BIG_INT = 2**63 - 1
+ROS_OWN = ('use_sim_time', 'qos_overrides.', 'start_type_description_service')  # rclpy's own parameters
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,8 @@ def _descriptor(name: str, schema: ConfigField) -> ParameterDescriptor:
     if schema.choices:
         constraints.append('one of: ' + ', '.join(schema.choices))
     if schema.type == 'double' and (schema.min is not None or schema.max is not None):
-        low = schema.min if schema.min is not None else -BIG
-        high = schema.max if schema.max is not None else BIG
+        low = schema.min if schema.min is not None else -math.inf  # an open side stays open: defaults may be inf
+        high = schema.max if schema.max is not None else math.inf
         descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
     if schema.type == 'int' and (schema.min is not None or schema.max is not None):
         low = int(schema.min) if schema.min is not None else -BIG_INT
@@ -118,8 +118,10 @@ class FaultParameters:
         self.session = session
         self.publish = publish
         self.parameters: dict[str, FaultParameter] = {}
+        self.overrides: list[Parameter] = []  # values given at start (-p, params files), applied once started
         self._syncing = False
         self.declare()
+        node.add_pre_set_parameters_callback(self.widen)
         node.add_on_set_parameters_callback(self.check)
         node.add_post_set_parameters_callback(self.apply)
 
@@ -136,10 +138,23 @@ class FaultParameters:
             if name not in self.parameters:
                 self._syncing = True
                 try:
-                    self.node.declare_parameter(name, parameter.value, parameter.descriptor)
+                    declared = self.node.declare_parameter(name, parameter.value, parameter.descriptor)
+                except Exception as exc:  # noqa: BLE001 - an override of the wrong type or out of range
+                    raise LiveError(f'parameter {name}: {exc}') from None
                 finally:
                     self._syncing = False
+                if declared.value != parameter.value:
+                    self.overrides.append(declared)
             self.parameters[name] = parameter
+
+    def apply_overrides(self) -> None:
+        """Values given at start (`-p <fault>.active:=true`, params files): checked and applied once the
+        session has started; LiveError with the schema's reason for a value it refuses."""
+        overrides, self.overrides = self.overrides, []
+        refused = self.check(overrides)
+        if not refused.successful:
+            raise LiveError(f'--ros-args: {refused.reason}')
+        self.apply(overrides)
 
     def sync(self) -> None:
         """Parameters show the session's state (after scheduled changes, events, reloads)."""
@@ -164,19 +179,44 @@ class FaultParameters:
             finally:
                 self._syncing = False
 
+    def widen(self, parameters: list[Parameter]) -> list[Parameter]:
+        """An integer for a floating-point key is that number (`ros2 param set /bagfault f.x_bias 1`)."""
+        out = []
+        for parameter in parameters:
+            declared = self.parameters.get(parameter.name)
+            if declared is not None and declared.descriptor.type == ParameterType.PARAMETER_DOUBLE \
+                    and parameter.type_ == Parameter.Type.INTEGER:
+                parameter = Parameter(parameter.name, Parameter.Type.DOUBLE, float(parameter.value))
+            out.append(parameter)
+        return out
+
     def check(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Refuse values the schema refuses, with its reason."""
+        """Refuse values the schema refuses, and names that are not parameters here, with the reason."""
         if self._syncing:
             return SetParametersResult(successful=True)
         for parameter in parameters:
             declared = self.parameters.get(parameter.name)
-            if declared is None or declared.key is None:
+            if declared is None:
+                if parameter.name.startswith(ROS_OWN):
+                    continue
+                return SetParametersResult(successful=False, reason=self.unknown(parameter.name))
+            if declared.key is None:
                 continue
             try:
                 self.session.check_config(declared.fault_id, declared.key, parameter.value)
             except FieldValueError as exc:
                 return SetParametersResult(successful=False, reason=f'{parameter.name}: {exc}')
         return SetParametersResult(successful=True)
+
+    def unknown(self, name: str) -> str:
+        """Why a name is not a parameter here, and what is."""
+        fault_id, _, key = name.partition('.')
+        faults = sorted({p.fault_id for p in self.parameters.values()})
+        if fault_id not in faults:
+            return (f'{name}: no fault {fault_id!r} here (faults: {", ".join(faults) or "none"}); '
+                    'parameters are <fault>.active and <fault>.<config key>')
+        keys = sorted(p.key or 'active' for p in self.parameters.values() if p.fault_id == fault_id)
+        return f'{name}: {key!r} is not a key of fault {fault_id!r} (keys: {", ".join(keys)})'
 
     def apply(self, parameters: list[Parameter]) -> None:
         """Switch faults and change config values now."""

@@ -16,13 +16,15 @@ from bagfault.engine.offline import replay
 from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenance
 from bagfault.engine.result import RunStats
 from bagfault.io.definitions import load_definitions
-from bagfault.io.mcap_sink import McapSink
+from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
+from bagfault.live.ros import make_node
 from bagfault.live.runtime import ros_context
 from bagfault.live.sink import LiveSink
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
     from pathlib import Path
 
     from bagfault.engine.result import RunResult
@@ -44,22 +46,27 @@ def run_play(
     loop: bool = False,
     record: Path | None = None,
     delay: float = 0.5,
+    wait_for: Sequence[str] = (),
+    topics: Sequence[str] = (),
+    start_offset: float = 0.0,
+    clock_hz: float = 100.0,
+    ros_args: list[str] | None = None,
 ) -> RunResult:
     """Play until the end of the bag (or forever with `loop`) or a stop; the recording is complete on return."""
-    from rclpy.node import Node  # noqa: PLC0415
-
     total = RunStats()
     numbers: dict[str, int] = {}  # black box numbering continues across passes
     passes = 0
     last: Run | None = None
     with ros_context(stop) as context:
-        node = Node('bagfault_player', context=context)
-        recording = McapSink(record, ros_distro=_distro(inputs)) if record is not None else None
+        node = make_node('bagfault_player', context, ros_args)
+        recording = (McapSink(record, ros_distro=_distro(inputs), flush_every=LIVE_FLUSH)
+                     if record is not None else None)
         try:
             if recording is not None:
                 recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'})
                 recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
-            sink = LiveSink(node, rate=rate, clock=clock, stop=stop, recording=recording, settle=delay)
+            sink = LiveSink(node, rate=rate, clock=clock, stop=stop, recording=recording, settle=delay,
+                            wait_for=wait_for, clock_hz=clock_hz, topics=topics, skip=start_offset)
             while True:
                 run, stopped = _pass(scenario, inputs, sink, seed=seed, record=record, numbers=numbers)
                 last = run

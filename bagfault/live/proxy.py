@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from bagfault.engine.result import RunResult, RunStats
+from bagfault.live.node import DRAIN, ProxyNode
 from bagfault.live.runtime import ros_context, spin_until
 
 if TYPE_CHECKING:
@@ -21,19 +22,21 @@ def run_proxy(
     stop: StopFlag,
     record: Path | None = None,
     use_sim_time: bool = False,
+    ros_args: list[str] | None = None,
 ) -> RunResult:
     """Proxy until `stop` is set (by a signal or the caller); the recording is complete on return."""
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
 
-    from bagfault.live.node import ProxyNode  # noqa: PLC0415
 
     with ros_context(stop) as context:
-        proxy = ProxyNode(scenario, context, stop, seed=seed, record=record, use_sim_time=use_sim_time)
+        proxy = ProxyNode(scenario, context, stop, seed=seed, record=record, use_sim_time=use_sim_time,
+                          ros_args=ros_args)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(proxy.node)
         try:
             proxy.setup(executor)
             spin_until(executor, stop)
+            proxy.drain(executor)
         except BaseException:
             proxy.abort()
             raise
@@ -50,6 +53,7 @@ def run_proxy(
     for topic in session.topics:
         result.notes.append(f'{topic.input_topic} -> {topic.output_topic}: {topic.received} received, '
                             f'{topic.forwarded} published, {topic.malformed} malformed')
-    if proxy.unsent:
-        result.notes.append(f'{proxy.unsent} delayed messages were still waiting at the stop and were not sent')
+    if proxy.early:
+        result.notes.append(f'{proxy.early} delayed messages were still waiting {DRAIN:g} s after the stop and '
+                            'were published then, before their time')
     return result

@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING, Any
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from bagfault import __version__
-from bagfault.io.mcap_sink import McapSink
+from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
-from bagfault.live.ros import has_interface, interface_class, qos_yaml
+from bagfault.live.ros import has_interface, interface_class, make_node, offered_yaml
 from bagfault.live.runtime import ros_context
 
 if TYPE_CHECKING:
@@ -46,7 +46,7 @@ class RecordResult:
 class Recorder:
     """Subscribes raw to matching topics as they appear and hands on what arrives.
 
-    `on_topic(topic, msgtype, qos_yaml)` is called once per subscribed
+    `on_topic(topic, msgtype, offered_qos_yaml)` is called once per subscribed
     topic, `on_message(topic, data)` for every message (in the executor's
     thread). Topics in `exclude` are never subscribed (a player's own).
     """
@@ -94,9 +94,10 @@ class Recorder:
         return added
 
     def subscribe(self, topic: str, msgtype: str) -> None:
-        """Subscribe raw to one topic now (QoS from its current publishers)."""
+        """Subscribe raw to one topic now (QoS from its current publishers, whose profiles are recorded)."""
         profile = self._profile(topic)
-        self.on_topic(topic, msgtype, qos_yaml(profile))
+        offered = [info.qos_profile for info in self.node.get_publishers_info_by_topic(topic)]
+        self.on_topic(topic, msgtype, offered_yaml(offered))
         self.counts.setdefault(topic, 0)
         self.subscriptions[topic] = self.node.create_subscription(
             interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
@@ -115,17 +116,17 @@ def run_record(
     duration: float | None = None,
     use_sim_time: bool = False,
     stop: StopFlag,
+    ros_args: list[str] | None = None,
 ) -> RecordResult:
     """Record until `duration` seconds (wall clock) have passed or a stop; the file is complete on return."""
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
-    from rclpy.node import Node  # noqa: PLC0415
     from rclpy.parameter import Parameter  # noqa: PLC0415
 
     names = [t if t.startswith('/') else '/' + t for t in topics]
     with ros_context(stop) as context:
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
-        node = Node('bagfault_recorder', context=context, parameter_overrides=overrides)
-        recording = McapSink(output)
+        node = make_node('bagfault_recorder', context, ros_args, parameter_overrides=overrides)
+        recording = McapSink(output, flush_every=LIVE_FLUSH)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         finished = False
@@ -156,6 +157,7 @@ def run_record(
                     recorder.discover()
                     last_look = now
                 executor.spin_once(timeout_sec=0.05)
+                recording.tick()
             finished = True
         finally:
             if finished:

@@ -84,16 +84,34 @@ def recorded_qos(text: str, depth: int = 10) -> QoSProfile | None:
                       durability=durability)
 
 
-def qos_yaml(profile: QoSProfile) -> str:
-    """rosbag2-style `offered_qos_profiles` text (names) for a recorded channel."""
-    entry = {
-        'history': 'keep_last', 'depth': int(profile.depth),
-        'reliability': 'reliable' if profile.reliability == ReliabilityPolicy.RELIABLE else 'best_effort',
-        'durability': 'transient_local' if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL else 'volatile',
-    }
-    return yaml.safe_dump([entry], sort_keys=False)
+def offered_yaml(profiles: list[QoSProfile]) -> str:
+    """rosbag2-style `offered_qos_profiles` text (names): one entry per publisher, as `ros2 bag record` writes
+    them, so a replay offers what the original publishers offered. No publisher: reliable, volatile, depth 10."""
+    entries = []
+    for profile in profiles or [qos(10)]:
+        entries.append({
+            'history': 'keep_all' if profile.history == HistoryPolicy.KEEP_ALL else 'keep_last',
+            'depth': int(profile.depth),
+            'reliability': 'reliable' if profile.reliability == ReliabilityPolicy.RELIABLE else 'best_effort',
+            'durability': 'transient_local' if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL else 'volatile',
+        })
+    return yaml.safe_dump(entries, sort_keys=False)
 
 
 def sleep_duration(seconds: float) -> Duration:
     """An rclpy Duration."""
     return Duration(nanoseconds=round(seconds * 1e9))
+
+
+def make_node(name: str, context: Any, ros_args: list[str] | None = None, **options: Any) -> Any:
+    """A node; `ros_args` (what follows --ros-args on the command line: -r remaps, __node, __ns, -p, params
+    files) apply to it alone. LiveError naming the argument rcl refuses."""
+    from rclpy.node import Node  # noqa: PLC0415
+
+    cli_args = ['--ros-args', *ros_args] if ros_args else None
+    try:
+        return Node(name, context=context, cli_args=cli_args, **options)
+    except Exception as exc:
+        if not ros_args:
+            raise
+        raise LiveError(f'--ros-args {" ".join(ros_args)}: {" ".join(str(exc).split())[:300]}') from None

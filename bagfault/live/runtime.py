@@ -31,7 +31,8 @@ def ros_context(stop: StopFlag, domain_id: int | None = None) -> Iterator[Any]:
     from rclpy.signals import SignalHandlerOptions  # noqa: PLC0415
 
     context = rclpy.context.Context()
-    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(args=[], context=context, domain_id=domain_id,  # not sys.argv: --ros-args are per node
+               signal_handler_options=SignalHandlerOptions.NO)
     previous = {}
     if threading.current_thread() is threading.main_thread():
         for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):

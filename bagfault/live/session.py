@@ -11,6 +11,7 @@ recording and the oracles see one time-ordered stream, as offline.
 from __future__ import annotations
 
 import copy
+import json
 import threading
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
@@ -39,6 +40,9 @@ if TYPE_CHECKING:
     from bagfault.events import FaultSource
     from bagfault.io.types import TypeCatalog
     from bagfault.scenario.model import InjectorSpec, Scenario
+
+
+SERVICE_CALLS_TOPIC = '/bagfault/service_calls'  # JSON of each call through a service injector
 
 
 @dataclass(eq=False)
@@ -106,6 +110,9 @@ class LiveSession:
         self.clock = clock
         self.seed = seed
         self.lock = threading.RLock()
+        self.manual: dict[str, bool] = {}  # fault -> state last set at run time (parameter, service)
+        self.runtime_config: dict[str, dict[str, Any]] = {}  # fault -> config values set at run time
+        self.file_config = {f.id: dict(f.config) for f in scenario.faults}  # as the file says, for reloads
         self.listeners: list[Callable[[list[FaultEvent]], None]] = []
         self.topics: list[LiveTopic] = []
         catalog.add_definition(FaultEvent.msgtype, FaultEvent.definition)
@@ -130,6 +137,8 @@ class LiveSession:
             self._inputs[id(topic)] = self.run.channel(topic.input_topic, topic.msgtype)
             self._outputs[id(topic)] = self.run.channel(topic.output_topic, topic.msgtype)
         self._watched = {name: self.run.channel(name, msgtype) for name, msgtype in self.observed.items()}
+        self._calls: OutputChannel | None = None
+        self._string: Any = None
 
     @property
     def stats(self) -> RunStats:
@@ -226,6 +235,21 @@ class LiveSession:
             self.run.read(1, now)
             self.run.message(self._watched[name], now, now, data)
 
+    def service_call(self, service: str, target: str, outcome: str, success: bool, message: str,
+                     delay_ms: int) -> None:
+        """A call through a service injector, kept in the run (recording) on /bagfault/service_calls as JSON:
+        which service, what happened (forwarded, forced_failure, unavailable, timeout), the answer."""
+        with self.lock:
+            now = self.clock()
+            if self._calls is None:
+                self._calls = self.run.channel(SERVICE_CALLS_TOPIC, 'std_msgs/msg/String')
+                self._string = self.catalog.codec('std_msgs/msg/String')
+            assert self._string is not None
+            text = json.dumps({'service': service, 'target': target, 'outcome': outcome, 'success': success,
+                               'message': message, 'delay_ms': delay_ms}, sort_keys=True)
+            data = self._string.encode(self._string.store.types['std_msgs/msg/String'](data=text))
+            self.run.message(self._calls, now, now, data)
+
     # -- runtime control --------------------------------------------------------------
     def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None:
         """Switch a fault on or off now (a parameter or service call)."""
@@ -235,6 +259,8 @@ class LiveSession:
             if self.scenario.fault(fault_id) is None:
                 raise LiveError(f'no fault {fault_id!r}')
             event = self.scheduler.set_state(fault_id, active, self.clock(), source)
+            if source == 'manual':
+                self.manual[fault_id] = active
             self._publish_events([event] if event is not None else [])
 
     def check_config(self, fault_id: str, key: str, value: object) -> Any:
@@ -264,6 +290,7 @@ class LiveSession:
             fault = self.scenario.fault(fault_id)
             assert fault is not None
             fault.config = {**fault.config, key: coerced}
+            self.runtime_config.setdefault(fault_id, {})[key] = coerced
             text = ('true' if coerced else 'false') if isinstance(coerced, bool) else str(coerced)
             fault.config_text = {**fault.config_text, key: text}
             held = self._rebuild(fault.injector_id)
@@ -281,8 +308,14 @@ class LiveSession:
                 topic.injector = self._build(topic.spec, topic.msgtype)
         return held
 
-    def reload(self, scenario: Scenario) -> list[tuple[LiveTopic, RawMessage]]:
-        """Take new fault definitions; the injector layout must stay as it is (anchor's rules)."""
+    def reload(self, scenario: Scenario) -> tuple[list[tuple[LiveTopic, RawMessage]], list[str]]:
+        """Take new fault definitions; the injector layout must stay as it is (anchor's rules).
+
+        What was changed at run time survives where the file did not change it: a fault switched by a
+        parameter keeps its state (while that state still holds), a config value set at run time stays
+        unless the file now gives that key another value. Returns the messages old injectors held and what
+        was kept.
+        """
         with self.lock:
             if _layout(scenario) != _layout(self.scenario):
                 raise ReloadError('reload rejected: injector ids, types, endpoints, QoS and count must stay the same')
@@ -291,8 +324,25 @@ class LiveSession:
             now = self.clock()
             old_active = set(self.scheduler.active)
             previous = self.scenario
+            file_config = {f.id: dict(f.config) for f in scenario.faults}
+            kept: list[str] = []
+            runtime: dict[str, dict[str, Any]] = {}
+            for fault in scenario.faults:
+                for key, value in self.runtime_config.get(fault.id, {}).items():
+                    if file_config[fault.id].get(key) == self.file_config.get(fault.id, {}).get(key):
+                        fault.config = {**fault.config, key: value}
+                        fault.config_text = {**fault.config_text, key: str(value)}
+                        runtime.setdefault(fault.id, {})[key] = value
+                        kept.append(f'{fault.id}.{key}={value}')
             scheduler = FaultScheduler(scenario, self.scheduler.origin, self.seed)
             scheduler.advance(now)
+            manual = {}
+            for fault_id, state in self.manual.items():
+                still = (fault_id in old_active) == state  # nothing has switched it since
+                if still and scenario.fault(fault_id) is not None:
+                    scheduler.set_state(fault_id, state, self.scheduler.active.get(fault_id, now), 'manual')
+                    manual[fault_id] = state
+                    kept.append(f'{fault_id}.active={"true" if state else "false"}')
             self.scenario = scenario
             try:
                 held = [item for topic in self.topics for item in self._rebuild(topic.spec.id)]
@@ -302,6 +352,7 @@ class LiveSession:
                     topic.injector = self._build(topic.spec, topic.msgtype)
                 raise ReloadError(f'reload rejected: {exc}') from None
             self.scheduler = scheduler
+            self.file_config, self.runtime_config, self.manual = file_config, runtime, manual
             before = {f.id: f for f in previous.faults}
             events = []
             for fault in previous.faults:
@@ -318,7 +369,7 @@ class LiveSession:
                     events.append(FaultEvent(now, fault.id, fault.injector_id, 'active', 'reload',
                                              fault.describe_config()))
             self._publish_events(events)
-            return held
+            return held, kept
 
     def active_faults(self, injector_id: str) -> list[ActiveFault]:
         """Faults of one injector active now (service injectors ask per call)."""

@@ -26,7 +26,8 @@ if TYPE_CHECKING:
     from bagfault.engine.stop import StopFlag
     from bagfault.io.mcap_sink import McapSink
 
-CLOCK_PERIOD = 0.01  # /clock at 100 Hz while waiting for the next message
+CLOCK_PERIOD = 0.01  # /clock at 100 Hz while waiting for the next message (--clock HZ changes it)
+MATCH_WAIT = 5.0  # seconds after the settle time to wait for subscribers the graph knows to be matched
 SLICE = 0.05  # longest sleep between checks of the stop flag
 
 
@@ -35,14 +36,20 @@ class LiveSink:
 
     def __init__(self, node: Any, *, rate: float, clock: bool, stop: StopFlag,
                  recording: McapSink | None = None, settle: float = 0.0, wait_for: Sequence[str] = (),
-                 wait_timeout: float = 30.0) -> None:
+                 wait_timeout: float = 30.0, clock_hz: float = 1 / CLOCK_PERIOD, topics: Sequence[str] = (),
+                 skip: float = 0.0) -> None:
         self.node = node
         self.rate = rate
         self.stop = stop
         self.recording = recording
         self.settle = settle  # seconds between creating the publishers and the first message, for discovery
-        self.wait_for = list(wait_for)  # or: topics whose publishers must first have a subscriber
+        self.wait_for = list(wait_for)  # or: topics whose publishers must first have a subscriber ('all': every one)
         self.wait_timeout = wait_timeout
+        self.clock_period = 1.0 / clock_hz
+        self.topics = set(topics)  # only these are published and recorded (all when empty)
+        self.skip = round(skip * 1e9)  # bag ns from the first message that are not played (--start-offset)
+        self._first: int | None = None
+        self._events: Any = None
         self.offset = 0  # added to bag times: loops continue the timeline
         self._channels: dict[tuple[str, str], int] = {}
         self._topics: list[tuple[Any, int | None]] = []  # publisher, recording channel id
@@ -69,6 +76,8 @@ class LiveSink:
         if found is not None:
             return found
         publisher = None
+        if self.topics and topic not in self.topics:
+            return self._register(key, None, schema_encoding, schema_text, message_encoding, metadata, record=False)
         if has_interface(msgtype):
             profile = recorded_qos((metadata or {}).get('offered_qos_profiles', '')) or qos(10)
             publisher = self.node.create_publisher(interface_class(msgtype), topic, profile)
@@ -83,9 +92,9 @@ class LiveSink:
         return self._register((topic, msgtype), None, schema_encoding, schema_text, 'cdr', metadata)
 
     def _register(self, key: tuple[str, str], publisher: Any, schema_encoding: str, schema_text: str,
-                  message_encoding: str, metadata: dict[str, str] | None) -> int:
+                  message_encoding: str, metadata: dict[str, str] | None, *, record: bool = True) -> int:
         recorded = None
-        if self.recording is not None:
+        if self.recording is not None and record:
             recorded = self.recording.add_channel(key[0], key[1], schema_encoding, schema_text, message_encoding,
                                                   metadata)
         self._topics.append((publisher, recorded))
@@ -95,6 +104,8 @@ class LiveSink:
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Publish one record (its time has come: `gate` waited for it) and record it."""
+        if self._skipping(log_time):
+            return
         publisher, recorded = self._topics[channel_id]
         if publisher is not None:
             publisher.publish(data if isinstance(data, bytes) else bytes(data))
@@ -110,20 +121,32 @@ class LiveSink:
         if self._origin is not None:
             return {}  # a later pass of a loop: the graph is connected
         if self.wait_for:
-            self.wait_for_subscribers(self.wait_for)
-        elif self.stop.wait(self.settle):
+            self.wait_for_subscribers(sorted(self._publishers) if self.wait_for == ['all'] else self.wait_for)
+            return {}
+        if self.stop.wait(self.settle):
             raise Stopped(self.stop.reason)
+        deadline = time.monotonic() + MATCH_WAIT
+        while time.monotonic() < deadline and self._unmatched():  # subscribers the graph knows, not matched yet
+            if self.stop.wait(0.02):
+                raise Stopped(self.stop.reason)
         return {}
 
+    def _unmatched(self) -> list[str]:
+        return [t for t, p in self._publishers.items()
+                if p.get_subscription_count() < self.node.count_subscribers(p.topic_name)]
+
     def wait_for_subscribers(self, topics: Sequence[str]) -> None:
-        """Until every topic's publisher is matched by a subscriber; LiveError after `wait_timeout`."""
-        unknown = [t for t in topics if t not in self._publishers]
+        """Until every topic's publisher is matched by a subscriber; LiveError after `wait_timeout`. A topic is
+        named as in the bag or as published (after remapping)."""
+        publishers = {**self._publishers, **{p.topic_name: p for p in self._publishers.values()}}
+        unknown = [t for t in topics if t not in publishers]
         if unknown:
+            names = sorted({p.topic_name for p in self._publishers.values()})
             raise LiveError(f'--wait-for {", ".join(unknown)}: not a topic this bag publishes '
-                            f'(it publishes {", ".join(sorted(self._publishers)) or "nothing"})')
+                            f'(it publishes {", ".join(names) or "nothing"})')
         deadline = time.monotonic() + self.wait_timeout
         while True:
-            waiting = [t for t in topics if self._publishers[t].get_subscription_count() == 0]
+            waiting = [t for t in topics if publishers[t].get_subscription_count() == 0]
             if not waiting:
                 return
             if time.monotonic() > deadline:
@@ -132,10 +155,25 @@ class LiveSink:
                 raise Stopped(self.stop.reason)
 
     def begin(self, run: Any) -> None:
-        """Nothing comes from outside a plain play."""
+        """The run's events go out on /bagfault/events as they happen (nothing comes from outside a play)."""
+        if self._events is None:
+            from bagfault.live.events import LiveEvents  # noqa: PLC0415
+
+            self._events = LiveEvents(self.node, anchor_topics=False)  # anchor-typed events: published as records
+        self._events.attach(run)
+
+    def _skipping(self, bag_time: int) -> bool:
+        """True for records before --start-offset (judged, neither played nor recorded)."""
+        if not self.skip:
+            return False
+        if self._first is None:
+            self._first = bag_time
+        return bag_time - self._first < self.skip
 
     def gate(self, bag_time: int) -> None:
         """Sleep until the record's wall time, publishing /clock meanwhile."""
+        if self._skipping(bag_time):
+            return
         stamp = bag_time + self.offset
         if self._origin is None:
             self._origin = (stamp, time.monotonic())
@@ -148,7 +186,7 @@ class LiveSink:
             if now >= due:
                 break
             self._tick(first + round((now - started) * self.rate * 1e9))
-            time.sleep(min(due - now, SLICE, CLOCK_PERIOD if self._clock is not None else SLICE))
+            time.sleep(min(due - now, SLICE, self.clock_period if self._clock is not None else SLICE))
         self._due(stamp)
         self._publish_clock(stamp)
 
@@ -156,9 +194,12 @@ class LiveSink:
         """Nothing after the last message of a plain play."""
 
     def _tick(self, bag_time: int) -> None:
-        """While waiting: /clock at CLOCK_PERIOD (and whatever a subclass does meanwhile)."""
-        if time.monotonic() - self._last_clock >= CLOCK_PERIOD:
+        """While waiting: /clock every clock period, the recording's chunk when it is due (and whatever a
+        subclass does meanwhile)."""
+        if time.monotonic() - self._last_clock >= self.clock_period:
             self._publish_clock(bag_time)
+        if self.recording is not None:
+            self.recording.tick()
 
     def _due(self, bag_time: int) -> None:
         """The record at `bag_time` is due, /clock not yet at it (a subclass hands over what came before)."""

@@ -38,14 +38,17 @@ class TriggerProxy:
         self.spec = spec
         self.session = session
         self.calls = 0
+        self.in_flight = 0  # calls not answered yet
+        self.stopping = False
+        self._waits: list[Future] = []
         trigger = interface_class('std_srvs/srv/Trigger')
         group = ReentrantCallbackGroup()
         assert spec.proxy_service and spec.target_service
         self.client = node.create_client(trigger, spec.target_service, callback_group=group)
         self.service = node.create_service(trigger, spec.proxy_service, self.handle, callback_group=group)
 
-    def _after(self, seconds: float) -> Future:
-        """A future done after `seconds` of the node's clock."""
+    def _after(self, seconds: float, *, delay: bool = False) -> Future:
+        """A future done after `seconds` of the node's clock (a fault's `delay` ends early when the proxy stops)."""
         future = Future()
 
         def fire() -> None:
@@ -59,23 +62,49 @@ class TriggerProxy:
 
         timer = self.node.create_timer(seconds, fire)
         future.add_done_callback(release)
+        if delay:
+            self._waits = [w for w in self._waits if not w.done()] + [future]
+            if self.stopping:
+                fire()
         return future
 
+    def release(self) -> None:
+        """The proxy stops: calls waiting out a delay go on now, so every client gets its answer."""
+        self.stopping = True
+        for wait in self._waits:
+            if not wait.done():
+                wait.set_result(True)
+
     async def handle(self, request: Any, response: Any) -> Any:
-        """One call: delay, forced failure, or forward."""
+        """One call: delay, forced failure, or forward; kept in the recording."""
         self.calls += 1
+        self.in_flight += 1
+        delay = [0]
+        outcome = ['forwarded']
+        try:
+            answer = await self._handle(request, response, delay, outcome)
+            self.session.service_call(str(self.spec.proxy_service), str(self.spec.target_service), outcome[0],
+                                      bool(answer.success), str(answer.message), delay[0])
+            return answer
+        finally:
+            self.in_flight -= 1
+
+    async def _handle(self, request: Any, response: Any, delay: list[int], outcome: list[str]) -> Any:
         active = self.session.active_faults(self.spec.id)
         delay_ms, _ = strongest(active, 'delay_ms')
+        delay[0] = int(delay_ms)
         if delay_ms > 0:
-            await self._after(delay_ms / 1000.0)
+            await self._after(delay_ms / 1000.0, delay=True)
         failing = next((f for f in active if f.config.get('force_failure')), None)
         if failing is not None:
+            outcome[0] = 'forced_failure'
             response.success = False
             response.message = str(failing.config.get('failure_message', DEFAULT_FAILURE))
             return response
         if not self.client.service_is_ready():
             await self._after(TARGET_WAIT)
         if not self.client.service_is_ready():
+            outcome[0] = 'unavailable'
             response.success = False
             self.node.get_logger().warning(f'Trigger service {self.spec.target_service!r} is not available')
             response.message = UNAVAILABLE
@@ -86,6 +115,7 @@ class TriggerProxy:
         timeout = self._after(TARGET_TIMEOUT)
         timeout.add_done_callback(lambda _f: done.done() or done.set_result('timeout'))
         if await done == 'timeout':
+            outcome[0] = 'timeout'
             response.success = False
             self.node.get_logger().warning(f'Trigger service {self.spec.target_service!r} did not respond in time')
             response.message = TIMEOUT

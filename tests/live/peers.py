@@ -86,7 +86,8 @@ def clock_check(args) -> None:
     """Receive /clock and a topic; report order and how stamps relate to the clock."""
     node = rclpy.create_node('clock_check')
     state = {'clock': None, 'clock_first': None, 'clock_monotonic': True, 'messages': 0, 'in_order': True,
-             'last_stamp': None, 'stamp_after_clock': 0, 'first_wall': None, 'span': 0.0}
+             'last_stamp': None, 'stamp_after_clock': 0, 'first_wall': None, 'span': 0.0, 'first_stamp': None,
+             'final_stamp': None}
 
     def on_clock(message) -> None:
         value = message.clock.sec * 1_000_000_000 + message.clock.nanosec
@@ -101,6 +102,9 @@ def clock_check(args) -> None:
         if state['last_stamp'] is not None and stamp <= state['last_stamp']:
             state['in_order'] = False
         state['last_stamp'] = stamp
+        state['final_stamp'] = stamp
+        if state['first_stamp'] is None:
+            state['first_stamp'] = stamp
         state['messages'] += 1
         if state['first_wall'] is None:
             state['first_wall'] = time.monotonic()

@@ -22,7 +22,7 @@ def test_play_with_clock_into_a_subscriber_and_record_reads_back_the_same_counts
     assert play.wait(timeout=60) == 0
     checker.wait(timeout=30)
     checked = graph.lines(checker)[-1]
-    assert checked['messages'] == 400  # every message of the topic, in stamp order
+    assert checked['messages'] == 400, checked  # every message of the topic, in stamp order
     assert checked['in_order'] and checked['clock_monotonic']
     assert checked['clock_first'] == 1_700_000_000 * NS  # /clock carries bag time
     assert checked['stamp_after_clock'] == 0  # no message arrived before /clock reached its time

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import pytest
+import yaml
 
 rclpy = pytest.importorskip('rclpy')
 
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy  # noqa: E402
 
-from bagfault.live.ros import qos, qos_yaml, recorded_qos  # noqa: E402
+from bagfault.live.ros import offered_yaml, qos, recorded_qos  # noqa: E402
 
 HUMBLE_TF_STATIC = ('- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n  deadline:\n    sec: 9223372036\n'
                     '    nsec: 854775807\n  liveliness: 1\n  avoid_ros_namespace_conventions: false')
@@ -30,6 +31,8 @@ def test_numbers_and_names_of_rosbag2_profiles() -> None:
 def test_unknown_profiles_give_none_and_written_profiles_read_back() -> None:
     assert recorded_qos('') is None and recorded_qos(': not yaml [') is None and recorded_qos('{}') is None
     profile = qos(7, 'best_effort', 'transient_local')
-    again = recorded_qos(qos_yaml(profile))
+    again = recorded_qos(offered_yaml([profile, qos(3)]))  # the first publisher's profile is the one replayed
     assert (again.reliability, again.durability, again.depth) == (
         ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.TRANSIENT_LOCAL, 7)
+    assert yaml.safe_load(offered_yaml([profile, qos(3)]))[1] == {
+        'history': 'keep_last', 'depth': 3, 'reliability': 'reliable', 'durability': 'volatile'}

@@ -164,3 +164,27 @@ def test_recording_holds_raw_and_faulty_topics_and_the_events(tmp_path: Path) ->
     (time, event), = raw['/fault_injection/events']
     assert (event.fault_id, event.state, event.source) == ('bias', 'active', 'manual')
     assert time == 100 * NS + 30_000_000
+
+
+def test_reload_keeps_what_was_set_at_run_time_unless_the_file_changed_it() -> None:
+    clock = Clock()
+    session = session_for(SCENARIO, clock)
+    session.set_active('bias', True)  # by a parameter
+    session.set_config('bias', 'angular_velocity_z_bias', 2.0)
+    session.set_config('late', 'delay_ms', 100)
+    # the file now changes late.delay_ms (its new value wins) and nothing about bias
+    held, kept = session.reload(parse_scenario(SCENARIO.replace('delay_ms: 250', 'delay_ms: 400')))
+    assert held == []
+    assert kept == ['bias.angular_velocity_z_bias=2.0', 'bias.active=true']
+    assert session.scenario.fault('late').config == {'delay_ms': 400}
+    (out,) = session.receive(session.topics[0], imu(0.25))
+    assert value(out.data, 'angular_velocity.z') == 2.25  # still active, with the run-time value
+    assert not [e for e in session.stats.events if e.fault_id == 'bias' and e.source == 'reload']
+    # a state the schedule has switched since is not brought back
+    session.set_active('bias', False)
+    session.set_active('scheduled', True)  # by hand at 0 s; the schedule ends it at 3 s
+    clock.now += 4 * NS
+    session.advance()
+    _, kept = session.reload(parse_scenario(SCENARIO))
+    assert kept == ['bias.angular_velocity_z_bias=2.0', 'bias.active=false']
+    assert not session.scheduler.active
