@@ -143,6 +143,7 @@ def proxy(
     use_sim_time: bool = False,
     stop: StopFlag | None = None,
     ros_args: Sequence[str] = (),
+    foxglove: str | None = None,
 ) -> RunResult:
     """Live proxy (`/x_raw` -> faults -> `/x`) until SIGINT/SIGTERM or `stop.set()`; needs rclpy.
 
@@ -158,7 +159,7 @@ def proxy(
     if out is not None:
         _check_output(out, 'recording', [], loaded)
     return run_proxy(loaded, seed=seed_of(loaded, seed), record=out, use_sim_time=use_sim_time,
-                     stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args))
+                     stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args), foxglove=foxglove)
 
 
 def play(
@@ -178,15 +179,20 @@ def play(
     start_offset: float = 0.0,
     clock_hz: float = 100.0,
     ros_args: Sequence[str] = (),
+    foxglove: str | None = None,
 ) -> RunResult:
-    """Publish bags on their topics through the scenario's faults (a plain player without one); needs rclpy.
+    """Publish bags on their topics through the scenario's faults (a plain player without one); needs rclpy,
+    but for `foxglove` ('HOST:PORT'), which shows the play in Foxglove with its faults as parameters and
+    playback controls, with ROS if rclpy is installed and without it otherwise.
 
     `wait_for` topics (or ['all']) must have a subscriber before the first message (instead of `delay`);
     `remap` ('FROM:=TO') renames published topics, `topics` plays only those, `start_offset` skips the bag's
     first seconds, `clock_hz` is the /clock rate while waiting; `ros_args` apply to the player's node."""
-    from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
+    from bagfault.live import rclpy_available, require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
 
-    require_rclpy()
+    ros = rclpy_available()
+    if foxglove is None:
+        require_rclpy()
     from bagfault.live.player import run_play  # noqa: PLC0415
 
     loaded = scenario_of(scenario) if scenario is not None else Scenario([], [], [])
@@ -209,7 +215,7 @@ def play(
                     wait_for=[t if t == 'all' or t.startswith('/') else '/' + t for t in wait_for],
                     topics=[t if t.startswith('/') else '/' + t for t in topics],
                     start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
-                    ros_args=[*mapped, *ros_args])
+                    ros_args=[*mapped, *ros_args], foxglove=foxglove, ros=ros)
 
 
 def record(
@@ -249,6 +255,7 @@ def test(
     repeat: int = 1,
     keep_logs: str | Path | None = None,
     stop: StopFlag | None = None,
+    foxglove: str | None = None,
 ) -> RunResult:
     """Closed loop: start the scenario's system under test on a private ROS domain, play the inputs (default:
     the scenario's `bags`) into it through the faults on sim time, record it, judge it, stop it; needs rclpy.
@@ -286,7 +293,7 @@ def test(
     for number, path in enumerate(outputs, 1):
         folder = logs if logs is None or repeat == 1 else logs / f'run{number}'
         results.append(run_test(loaded, paths, path, system=under_test, seed=seed_of(loaded, seed), rate=rate,
-                                logs=folder, stop=flag))
+                                logs=folder, stop=flag, foxglove=foxglove))
     return results[0] if repeat == 1 else fold(results)
 
 

@@ -87,6 +87,8 @@ def _parser() -> argparse.ArgumentParser:
     proxy.add_argument('--record', type=Path, metavar='OUT.mcap', help='record raw and faulty topics and events')
     proxy.add_argument('--seed', type=int, default=None)
     proxy.add_argument('--use-sim-time', action='store_true', help='follow /clock (scheduler starts with it)')
+    proxy.add_argument('--foxglove', nargs='?', const='', default=None, metavar='HOST:PORT',
+                       help='a Foxglove WebSocket view: raw and faulty topics, events, faults as parameters, reload')
     _report_options(proxy)
 
     play = sub.add_parser('play', help="publish a bag on its topics, through a scenario's faults",
@@ -107,6 +109,9 @@ def _parser() -> argparse.ArgumentParser:
                       help="wait (30 s at most) until TOPIC has a subscriber ('all': every topic played); repeatable")
     play.add_argument('--remap', action='append', default=[], metavar='/FROM:=/TO', help='publish FROM as TO')
     play.add_argument('--topics', nargs='+', default=[], metavar='TOPIC', help='play only these topics')
+    play.add_argument('--foxglove', nargs='?', const='', default=None, metavar='HOST:PORT',
+                      help='show the play in Foxglove (WebSocket, default 127.0.0.1:8765): topics, events, the faults '
+                           'as parameters, playback controls; needs no ROS')
     play.add_argument('--start-offset', type=float, default=0.0, metavar='S',
                       help="skip the bag's first S seconds (still judged: faults and assertions keep bag time)")
     _report_options(play)
@@ -131,6 +136,8 @@ def _parser() -> argparse.ArgumentParser:
     test.add_argument('--repeat', type=int, default=1, metavar='N', help='run N times; pass rates per assertion')
     test.add_argument('--keep-logs', type=Path, metavar='DIR', help="keep the system's stdout and stderr here")
     test.add_argument('--seed', type=int, default=None)
+    test.add_argument('--foxglove', nargs='?', const='', default=None, metavar='HOST:PORT',
+                      help='a Foxglove WebSocket view of the loop (read-only)')
     system = test.add_argument_group('system under test (each replaces the key of `system_under_test:`)')
     system.add_argument('--command', dest='command_line', metavar='CMD', help='command line of the system')
     system.add_argument('--shell', action='store_true', default=None, help='run the command in /bin/sh')
@@ -250,7 +257,7 @@ def _cmd_proxy(args: argparse.Namespace) -> int:
     reports.check(_protected(scenario=args.scenario, recording=args.record))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
     result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time,
-                       ros_args=args.ros_args)
+                       ros_args=args.ros_args, foxglove=args.foxglove)
     return _finish(reports, result)
 
 
@@ -269,7 +276,8 @@ def _cmd_play(args: argparse.Namespace) -> int:
     result = api.play(scenario, items, rate=args.rate, clock=args.clock is not None, loop=args.loop,
                       record=args.record, seed=args.seed, delay=args.delay, wait_for=args.wait_for, remap=args.remap,
                       topics=args.topics, start_offset=args.start_offset,
-                      clock_hz=args.clock if args.clock is not None else 100.0, ros_args=args.ros_args)
+                      clock_hz=args.clock if args.clock is not None else 100.0, ros_args=args.ros_args,
+                      foxglove=args.foxglove)
     return _finish(reports, result)
 
 
@@ -326,7 +334,7 @@ def _cmd_test(args: argparse.Namespace) -> int:
     reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
     result = api.test(scenario, args.inputs, args.output, system=_system_overrides(args), seed=args.seed,
-                      rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs)
+                      rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs, foxglove=args.foxglove)
     return _finish(reports, result)
 
 

@@ -36,23 +36,26 @@ faults:
 
 
 def publisher(rate: float, seconds: float) -> None:
-    """Publish Imu at `rate` with the send time in the stamp; print how many were sent."""
+    """Publish Imu at `rate` with the send time in the stamp; print how many were sent. Serialized once and
+    stamped in place, sent by an events executor, so the publisher is never what limits the rate."""
+    import struct
+
     import rclpy
     from rclpy.qos import QoSProfile
+    from rclpy.serialization import serialize_message
     from sensor_msgs.msg import Imu
 
     rclpy.init()
     node = rclpy.create_node('bench_publisher')
     pub = node.create_publisher(Imu, '/bench/imu_raw', QoSProfile(depth=100))
     time.sleep(2.0)  # discovery
-    message = Imu()
+    data = bytearray(serialize_message(Imu()))
     period = 1.0 / rate
     start = time.monotonic()
     sent = 0
     while time.monotonic() - start < seconds:
-        now = time.time_ns()
-        message.header.stamp.sec, message.header.stamp.nanosec = divmod(now, 1_000_000_000)
-        pub.publish(message)
+        struct.pack_into('<iI', data, 4, *divmod(time.time_ns(), 1_000_000_000))  # header.stamp after the CDR head
+        pub.publish(bytes(data))
         sent += 1
         delay = start + sent * period - time.monotonic()
         if delay > 0:
@@ -63,28 +66,37 @@ def publisher(rate: float, seconds: float) -> None:
 
 
 def subscriber(seconds: float) -> None:
-    """Receive both topics; print latencies (ms) per topic."""
+    """Receive both topics raw (stamp read from the bytes) on an events executor; print latencies (ms)."""
+    import struct
+
     import rclpy
+    from rclpy.experimental import EventsExecutor
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import Imu
 
     rclpy.init()
     node = rclpy.create_node('bench_subscriber')
     latencies: dict[str, list[float]] = {'/bench/imu_raw': [], '/bench/imu': []}
+    stamp = struct.Struct('<iI')
 
     def receiver(topic: str):
-        def received(message: Imu) -> None:
-            stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-            latencies[topic].append((time.time_ns() - stamp) / 1e6)
+        values = latencies[topic]
+
+        def received(data: bytes) -> None:
+            sec, nanosec = stamp.unpack_from(data, 4)
+            values.append((time.time_ns() - sec * 1_000_000_000 - nanosec) / 1e6)
         return received
 
     for topic in latencies:
-        node.create_subscription(Imu, topic, receiver(topic), QoSProfile(depth=1000))
+        node.create_subscription(Imu, topic, receiver(topic), QoSProfile(depth=1000), raw=True)
+    executor = EventsExecutor()
+    executor.add_node(node)
     print('ready', file=sys.stderr, flush=True)
     end = time.monotonic() + seconds
     while time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.05)
+        executor.spin_once(timeout_sec=0.05)
     print(json.dumps(latencies), flush=True)
+    executor.shutdown()
     rclpy.shutdown()
 
 
@@ -161,6 +173,7 @@ def main() -> int:
     parser.add_argument('--seconds', type=float, default=10.0)
     parser.add_argument('--depth', type=int, default=10)
     parser.add_argument('--forwarders', nargs='+', default=['relay', 'proxy'])
+    parser.add_argument('--load', type=int, default=0, help='processes spinning on the CPU meanwhile (a busy machine)')
     parser.add_argument('--json', type=Path, default=None)
     parser.add_argument('--role', choices=['publisher', 'subscriber', 'relay'], help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -180,16 +193,20 @@ def main() -> int:
     env = {**os.environ, 'ROS_DOMAIN_ID': os.environ.get('BENCH_DOMAIN_ID', '77'),
            'FASTRTPS_DEFAULT_PROFILES_FILE': str(bagfault.live.LOOPBACK_PROFILE)}
     results = []
+    hogs = [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(args.load)]
     with tempfile.TemporaryDirectory() as tmp:
         for rate in args.rates:
             for forwarder in args.forwarders:
                 row = measure(forwarder, rate, args.seconds, args.depth, env, Path(tmp))
+                row['load'] = args.load
                 results.append(row)
                 fwd = row['latency_ms']['forwarded']
-                print(f'{forwarder:<6} {rate:>6.0f} Hz depth {args.depth}: sent {row["sent"]}, lost '
+                print(f'{forwarder:<6} {rate:>6.0f} Hz depth {args.depth} load {args.load}: sent {row["sent"]}, lost '
                       f'{row["lost_forwarded"]} ({100 * row["lost_forwarded"] / row["sent"]:.2f} %), '
                       f'latency p50 {fwd["p50"]:.3f} p99 {fwd["p99"]:.3f} ms, CPU {100 * row["cpu_share"]:.0f} %',
                       flush=True)
+    for hog in hogs:
+        hog.kill()
     report = {'date': date.today().isoformat(), 'command': 'python bench/live_proxy.py ' + ' '.join(sys.argv[1:]),
               'seconds': args.seconds, 'results': results}
     from bench.run import RESULTS, save

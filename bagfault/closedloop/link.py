@@ -245,7 +245,7 @@ class SystemLink(LiveSink):
                 break
             self._tick(now)
             time.sleep(min(0.01, (end - now) / 1e9 / self.rate))
-        self._publish_clock(end)
+        self._reached(end)
         self._hand_over(end)
         self._check_alive(end)
         if self.died_at is None:

@@ -151,9 +151,12 @@ class SystemProcess:
         return out[-lines:]
 
     def _signal(self, sig: int, pids: set[int]) -> None:
+        """Once to the group, and once to each process that left it (never twice to one process: a second
+        SIGINT can reach a node after its handler was removed and kill it instead of stopping it)."""
         with contextlib.suppress(ProcessLookupError, PermissionError):
             os.killpg(self.pid, sig)
-        for pid in pids:
+        grouped = {p.pid for p in processes() if p.pgid == self.pid}
+        for pid in pids - grouped:
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.kill(pid, sig)
 

@@ -25,7 +25,7 @@ from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live import LOOPBACK_PROFILE
-from bagfault.live.runtime import ros_context
+from bagfault.live.runtime import make_executor, ros_context
 from bagfault.scenario.system import command_line
 
 if TYPE_CHECKING:
@@ -46,9 +46,8 @@ def system_env(system: SystemUnderTest, domain: int) -> dict[str, str]:
 
 
 def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *, system: SystemUnderTest,
-             seed: int, rate: float, logs: Path | None, stop: StopFlag) -> RunResult:
+             seed: int, rate: float, logs: Path | None, stop: StopFlag, foxglove: str | None = None) -> RunResult:
     """One closed-loop run; the recording (if `output`) is complete on return, the system stopped."""
-    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.node import Node  # noqa: PLC0415
 
     os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
@@ -65,11 +64,17 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
             with ros_context(stop, domain_id=lease.domain) as context:
                 node = Node('bagfault_test_player', context=context)
                 listener = Node('bagfault_test_listener', context=context)
-                executor = SingleThreadedExecutor(context=context)
+                executor = make_executor(context)
                 executor.add_node(listener)
                 process = None
                 link = None
+                view = None
                 try:
+                    if foxglove is not None:
+                        from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
+
+                        view = FoxgloveView(foxglove, scenario)  # read-only: a test's faults are its scenario's
+                        print(f'bagfault: Foxglove view on {view.url}', flush=True)
                     if recording is not None:
                         recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0),
                                                             'mode': 'test', 'command': ' '.join(command)})
@@ -78,6 +83,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                                             shell=system.shell, logs=folder)
                     link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
                                       catalog=catalog, rate=rate, stop=stop, recording=recording)
+                    link.view = view
                     run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output,
                                           hooks=link)
                     if stopped:
@@ -99,6 +105,8 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                         recording.abort()
                     raise
                 finally:
+                    if view is not None:
+                        view.close()
                     if link is not None:
                         link.close()
                     if process is not None:

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
     from pathlib import Path
 
+    from bagfault.engine.control import FaultControl
     from bagfault.engine.oracles import Schema
     from bagfault.engine.result import RunResult
     from bagfault.engine.routing import Routing
@@ -86,6 +87,7 @@ def replay(
     blackbox_base: Path | None = None,
     blackbox_numbers: dict[str, int] | None = None,
     hooks: PassHooks | None = None,
+    control: FaultControl | None = None,
 ) -> tuple[Run, bool]:
     """One pass of the inputs through the scenario into `sink`; (the run, True if a Stopped ended it early).
 
@@ -104,7 +106,7 @@ def replay(
     run.warnings += routing.warnings
     run.stats.replaced_topics = list(routing.replaced)
     pipeline = Pipeline(inputs, run, routing.routes, routing.copies, seed=seed, activations=activations,
-                        start_offset=start_offset, batch=batch, progress=progress)
+                        start_offset=start_offset, batch=batch, progress=progress, control=control)
     if hooks is not None:
         hooks.begin(run)
         run.gate = hooks.gate

@@ -21,6 +21,7 @@ from bisect import bisect_left
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from bagfault.engine.build import build_injector
 from bagfault.engine.merge import COPY_RANK, EVENT_RANK, TimeOrderedMerge
 from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
 from bagfault.errors import MalformedMessageError
@@ -30,6 +31,7 @@ from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
+    from bagfault.engine.control import FaultChange, FaultControl
     from bagfault.engine.merge import Record
     from bagfault.engine.run import OutputChannel, Run
     from bagfault.io.channel import Data, InputMessage
@@ -51,6 +53,11 @@ class InjectorRuntime:
     rank: int
     active: list[ActiveFault] = field(default_factory=list)
 
+    @property
+    def msgtype(self) -> str:
+        """The type of the messages it takes."""
+        return self.channel.msgtype
+
 
 class Pipeline:
     """Runs a scenario's faults over an input set and hands every output record to a Run."""
@@ -67,8 +74,10 @@ class Pipeline:
         start_offset: float = 0.0,
         batch: bool = True,
         progress: Callable[[int, int], None] | None = None,
+        control: FaultControl | None = None,
     ) -> None:
         self.inputs = inputs
+        self.control = control  # changes from outside (play with controls): applied message by message
         self.run = run
         self.scenario = run.scenario
         self.catalog = run.catalog
@@ -135,7 +144,10 @@ class Pipeline:
         times = [item[1] for item in batch]
         self.run.read(len(batch), times[-1])
         start = 0
+        control = self.control
         while start < len(batch):
+            if control is not None:
+                self._apply(control.take(), times[start], first_order + start)
             change = scheduler.next_time()
             if change is not None and change <= times[start]:
                 events = scheduler.advance(times[start])
@@ -145,10 +157,43 @@ class Pipeline:
                 self.run.emit(self._merge.release(records, times[start], is_sorted=True))
                 continue
             stop = len(batch) if change is None else bisect_left(times, change, start)
+            if control is not None:
+                stop = start + 1  # a change asked meanwhile applies from the next message
             self._segment(batch, start, stop, first_order)
             start = stop
         if self.progress is not None:
             self.progress(self.run.stats.input_messages, times[-1])
+
+    def _apply(self, changes: list[FaultChange], time: int, order: int) -> None:
+        """Changes asked from outside, at bag time `time`: switches and config values, as `manual` events."""
+        if not changes:
+            return
+        scheduler = self.scheduler
+        assert scheduler is not None
+        events: list[FaultEvent] = []
+        held: list[Record] = []
+        for change in changes:
+            fault = self.scenario.fault(change.fault_id)
+            if fault is None:
+                continue
+            if change.key is None:
+                event = scheduler.set_state(fault.id, bool(change.value), time, 'manual')
+                if event is not None:
+                    events.append(event)
+                continue
+            fault.config = {**fault.config, change.key: change.value}
+            fault.config_text = {**fault.config_text, change.key: str(change.value)}
+            for runtime in self._runtimes:
+                if fault in runtime.faults:  # a new injector takes the new config; the old one hands over
+                    held += [(m.log_time, m.order, runtime.rank, next(self._counter), runtime.channel,
+                              m.publish_time, m.data) for m in runtime.injector.flush(time)]
+                    runtime.injector = build_injector(runtime.spec, runtime.msgtype, runtime.faults, self.catalog,
+                                                      self.scenario.name)
+            events.append(FaultEvent(time, fault.id, fault.injector_id, 'config_updated', 'manual',
+                                     fault.describe_config()))
+        self._refresh_active()
+        records: list[Record] = [(e.time, order, EVENT_RANK, next(self._counter), e) for e in events]
+        self.run.emit(self._merge.release(records + held, time, is_sorted=False))
 
     def _segment(self, batch: list[InputMessage], start: int, stop: int, first_order: int) -> None:
         copies, routes, counter = self.copies, self.routes, self._counter

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from bagfault.engine.build import build_injector
 from bagfault.engine.merge import COPY_RANK
 from bagfault.engine.pipeline import InjectorRuntime
 from bagfault.engine.run import OutputChannel
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
     from bagfault.io.channel import Channel
     from bagfault.io.sources import InputSet
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import FaultSpec, InjectorSpec, Scenario
+    from bagfault.scenario.model import InjectorSpec, Scenario
 
 ROS_SCHEMA_ENCODINGS = {'', 'ros2msg', 'ros2idl'}
 
@@ -181,19 +182,3 @@ def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: 
             rank += 1
             output = OutputChannel(channel_id, w.output_topic, channel.msgtype)
             routing.routes.setdefault(number, []).append(InjectorRuntime(w.spec, injector, faults, output, rank))
-
-
-def build_injector(spec: InjectorSpec, msgtype: str, faults: list[FaultSpec], catalog: TypeCatalog,
-                   scenario_name: str) -> Injector:
-    """An injector for messages of `msgtype`, with a codec when its faults need one; EngineError if it cannot work."""
-    cls = get_injector_type(spec.type)
-    assert cls is not None and issubclass(cls, Injector)
-    codec = catalog.codec(msgtype) if msgtype else None
-    if codec is None and cls.decodes(faults):
-        raise EngineError(f'{scenario_name}: injector {spec.id!r}: cannot decode {msgtype} on {spec.input_topic}: '
-                          + catalog.why_not(msgtype))
-    if codec is not None:
-        problems = cls.check_type(msgtype, codec.store, faults)
-        if problems:
-            raise EngineError(f'{scenario_name}: injector {spec.id!r} on {spec.input_topic}: ' + '; '.join(problems))
-    return cls(spec, codec, faults)

@@ -14,6 +14,15 @@ from bagfault.errors import LiveError
 LOOPBACK_PROFILE = Path(__file__).with_name('fastdds_loopback.xml')
 
 
+def rclpy_available() -> bool:
+    """True when rclpy imports here."""
+    try:
+        import rclpy  # noqa: F401, PLC0415
+    except ImportError:
+        return False
+    return True
+
+
 def require_rclpy() -> None:
     """Fail with one clear line when rclpy is not importable."""
     try:

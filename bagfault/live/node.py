@@ -20,6 +20,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.parameter import Parameter
 
 from bagfault import __version__
+from bagfault.engine.control import check_change
 from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata
 from bagfault.errors import BagfaultError, LiveError, MalformedMessageError, ReloadError, ScenarioError
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
@@ -31,7 +32,7 @@ from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, w
 from bagfault.live.params import FaultParameters
 from bagfault.live.ros import interface_class, make_node, qos
 from bagfault.live.session import LiveSession, LiveTopic
-from bagfault.live.trigger import TriggerProxy
+from bagfault.live.trigger import ServiceHost, TriggerProxy
 from bagfault.scenario import load_scenario
 
 if TYPE_CHECKING:
@@ -60,8 +61,11 @@ class ProxyNode:
         record: Path | None = None,
         use_sim_time: bool = False,
         ros_args: list[str] | None = None,
+        foxglove: str | None = None,
     ) -> None:
         self.scenario = scenario
+        self.foxglove = foxglove
+        self.view: Any = None
         self.stop = stop
         self.seed = seed
         self.record_path = record
@@ -76,6 +80,9 @@ class ProxyNode:
         self.publishers: dict[int, Any] = {}
         self.subscriptions: list[Any] = []
         self.services: list[TriggerProxy] = []
+        self.service_host: ServiceHost | None = None
+        self.context = context
+        self.ros_args = ros_args
         self.parameters: FaultParameters | None = None
         self._warned: set[tuple[str, str]] = set()
         self._last_diagnostics = 0.0
@@ -107,8 +114,19 @@ class ProxyNode:
                 'tool': 'bagfault', 'version': __version__, 'mode': 'proxy', 'seed': str(self.seed),
                 'scenario': self.scenario.name})
             self.recording.add_attachment(self.scenario.name, 'application/yaml', self.scenario.text.encode())
-        self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, sink=self.recording,
+        sink: Any = self.recording
+        if self.foxglove is not None:
+            from bagfault.engine.run import NullSink  # noqa: PLC0415
+            from bagfault.view.foxglove import FoxgloveView, ViewSink  # noqa: PLC0415
+
+            self.view = FoxgloveView(self.foxglove, self.scenario, reload=self.reload_scenario, editable=True)
+            sink = ViewSink(self.view, self.recording if self.recording is not None else NullSink())
+            self.logger.info(f'Foxglove view on {self.view.url}')
+        self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, sink=sink,
                                    blackbox_base=self.record_path, observed=watched)
+        if self.view is not None:
+            self.view.controls = self
+            self.view.attach(self.session.run)
         self.session.listeners.append(self._on_events)
         self.events = LiveEvents(self.node, anchor_topics=True)
         self.events.attach(self.session.run)
@@ -132,7 +150,9 @@ class ProxyNode:
             self.logger.info(f'watching {name} ({watched[name]}) for the oracles')
         for spec in self.scenario.injectors:
             if spec.is_service:
-                self.services.append(TriggerProxy(self.node, spec, self.session))
+                if self.service_host is None:
+                    self.service_host = ServiceHost(self.node.get_name(), self.context, self.ros_args)
+                self.services.append(TriggerProxy(self.service_host.node, spec, self.session))
                 self.logger.info(f'proxy service {spec.proxy_service} -> {spec.target_service}')
         self.parameters = FaultParameters(self.node, self.session, self._publish)
         trigger = interface_class('std_srvs/srv/Trigger')
@@ -254,6 +274,11 @@ class ProxyNode:
 
     # -- reload --------------------------------------------------------------------------------
     def _reload(self, request: Any, response: Any) -> Any:
+        response.success, response.message = self.reload_scenario()
+        return response
+
+    def reload_scenario(self) -> tuple[bool, str]:
+        """Re-read the scenario file (the reload service, the Foxglove view): (success, message)."""
         assert self.session is not None
         source = self.scenario.source
         try:
@@ -262,31 +287,48 @@ class ProxyNode:
             scenario = load_scenario(source)
             held, kept = self.session.reload(scenario)
         except ScenarioError as exc:
-            response.success, response.message = False, f'reload rejected: {exc}'.splitlines()[0]
+            success, message = False, f'reload rejected: {exc}'.splitlines()[0]
         except ReloadError as exc:
-            response.success, response.message = False, str(exc)
+            success, message = False, str(exc)
         else:
-            response.success, response.message = True, f'reloaded {source.name}: {len(scenario.faults)} faults' + (
+            success, message = True, f'reloaded {source.name}: {len(scenario.faults)} faults' + (
                 f'; kept what was set at run time: {", ".join(kept)}' if kept else '')
-            for topic, message in held:
-                self._publish(topic, message.data)
+            for topic, held_message in held:
+                self._publish(topic, held_message.data)
             assert self.parameters is not None
             self.parameters.declare()  # faults may have come or gone
             self.parameters.sync()
-        if response.success:
-            self.logger.info(response.message)
+            if self.view is not None:
+                self.view.scenario = scenario
+        if success:
+            self.logger.info(message)
         else:
-            self.logger.warning(response.message)
-        return response
+            self.logger.warning(message)
+        return success, message
+
+    def ask(self, fault_id: str, key: str | None, value: object) -> Any:
+        """A change from the Foxglove view: checked by the schema, applied now (parameters follow)."""
+        assert self.session is not None
+        if key is None:
+            checked = check_change(self.session.scenario, fault_id, None, value)
+            self.session.set_active(fault_id, bool(checked), 'manual')
+            return checked
+        checked = self.session.check_config(fault_id, key, value)
+        for topic, message in self.session.set_config(fault_id, key, checked):
+            self._publish(topic, message.data)
+        return checked
 
     # -- end -------------------------------------------------------------------------------------
-    def drain(self, executor: Any) -> None:
-        """A clean stop, while the executor still runs: delayed service calls are answered now."""
+    def drain(self) -> None:
+        """A clean stop, while the service thread still runs: delayed service calls are answered now."""
         for service in self.services:
             service.release()
         deadline = time.monotonic() + DRAIN
         while any(s.in_flight for s in self.services) and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.02)
+            time.sleep(0.02)
+        if self.service_host is not None:
+            self.service_host.close()
+            self.service_host = None
 
     def close(self) -> None:
         """Publish what the delay line and the injectors hold, finish the session and the recording."""
@@ -310,8 +352,17 @@ class ProxyNode:
             self.recording.abort()
         self.node.destroy_node()
 
+    def close_view(self) -> None:
+        """Stop the Foxglove server."""
+        if self.view is not None:
+            self.view.close()
+            self.view = None
+
     def abort(self) -> None:
         """A failure: stop the delay line, drop the partial recording and black boxes."""
+        self.close_view()
+        if self.service_host is not None:
+            self.service_host.close()
         if self.delay is not None:
             self.delay.stop()
         if self.recording is not None:

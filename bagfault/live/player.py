@@ -1,17 +1,23 @@
-"""`bagfault play`: a bag onto the live graph, through the scenario's faults, paced by bag time.
+"""`bagfault play`: a bag onto the live graph (and into Foxglove), through the scenario's faults, paced by bag time.
 
 Each pass is the offline `replay` unchanged (same routing, injectors,
-scheduler on bag time, oracles); only its sink differs (`LiveSink`), so what
+scheduler on bag time, oracles); only its sink differs (`LiveSink` with
+ROS, a bare `Pacer` for `--foxglove` where rclpy is not installed), so what
 is published, and recorded with --record, is what `bagfault run` would
 write. With --loop the bag starts again after its end, the timeline (and
 /clock) continuing where the previous pass ended; each pass's verdicts and
-black boxes are its own.
+black boxes are its own. With --foxglove the faults are parameters of the
+view (applied by the pipeline from the next message) and a seek starts a
+new pass that skips to the requested time; at the end of the bag the view
+stays until Ctrl-C, so a seek can play it again.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import contextlib
+from typing import TYPE_CHECKING, Any
 
+from bagfault.engine.control import FaultControl
 from bagfault.engine.offline import replay
 from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenance
 from bagfault.engine.result import RunStats
@@ -19,18 +25,17 @@ from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
-from bagfault.live.ros import make_node
-from bagfault.live.runtime import ros_context
-from bagfault.live.sink import LiveSink
+from bagfault.live.pacer import SEEK, Pacer
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterator, Sequence
     from pathlib import Path
 
     from bagfault.engine.result import RunResult
     from bagfault.engine.run import Run
     from bagfault.engine.stop import StopFlag
     from bagfault.scenario.model import Scenario
+    from bagfault.view.foxglove import FoxgloveView
 
 LOOP_GAP = 1_000_000  # ns between the end of a pass and the start of the next
 
@@ -51,30 +56,56 @@ def run_play(
     start_offset: float = 0.0,
     clock_hz: float = 100.0,
     ros_args: list[str] | None = None,
+    foxglove: str | None = None,
+    ros: bool = True,
 ) -> RunResult:
-    """Play until the end of the bag (or forever with `loop`) or a stop; the recording is complete on return."""
+    """Play until the end of the bag (or forever with `loop`, or until a stop with `foxglove`); the recording
+    is complete on return. `ros=False` plays into the Foxglove view only (no rclpy needed)."""
     total = RunStats()
     numbers: dict[str, int] = {}  # black box numbering continues across passes
     passes = 0
     last: Run | None = None
-    with ros_context(stop) as context:
-        node = make_node('bagfault_player', context, ros_args)
+    first, end = _time_range(inputs)
+    control = FaultControl(scenario) if foxglove is not None else None
+    with _node(ros, stop, ros_args) as node:
         recording = (McapSink(record, ros_distro=_distro(inputs), flush_every=LIVE_FLUSH)
                      if record is not None else None)
+        view: FoxgloveView | None = None
         try:
             if recording is not None:
                 recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'})
                 recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
-            sink = LiveSink(node, rate=rate, clock=clock, stop=stop, recording=recording, settle=delay,
-                            wait_for=wait_for, clock_hz=clock_hz, topics=topics, skip=start_offset)
+            sink = _sink(node, rate=rate, clock=clock, stop=stop, recording=recording, delay=delay,
+                         wait_for=wait_for, clock_hz=clock_hz, topics=topics, start_offset=start_offset)
+            if foxglove is not None:
+                from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
+
+                view = FoxgloveView(foxglove, scenario, controls=control, playback=sink, time_range=(first, end))
+                sink.view = view
+                print(f'bagfault: Foxglove view on {view.url} (open it in the Foxglove app: Open connection, '
+                      'Foxglove WebSocket)', flush=True)
             while True:
-                run, stopped = _pass(scenario, inputs, sink, seed=seed, record=record, numbers=numbers)
+                run, stopped = _pass(scenario, inputs, sink, seed=seed, record=record, numbers=numbers,
+                                     control=control)
                 last = run
                 passes += 1
                 total.add(run.stats)
-                if stopped or not loop or run.stats.input_messages == 0:
+                if sink.seeking():
+                    sink.restart(first)
+                    continue
+                if stopped or run.stats.input_messages == 0:
                     break
-                sink.offset += (run.stats.last_time or 0) - (run.stats.first_time or 0) + LOOP_GAP
+                if loop:
+                    sink.offset += (run.stats.last_time or 0) - (run.stats.first_time or 0) + LOOP_GAP
+                    continue
+                if view is None:
+                    break
+                view.ended(end)  # stay until Ctrl-C; a seek plays again
+                while not stop.is_set() and not sink.seeking():
+                    stop.wait(0.05)
+                if not sink.seeking():
+                    break
+                sink.restart(first)
             if recording is not None:
                 origin = origin_metadata(total.origin)
                 if origin is not None:
@@ -85,30 +116,89 @@ def run_play(
                 recording.abort()
             raise
         finally:
-            node.destroy_node()
+            if view is not None:
+                view.close()
     assert last is not None
     result = last.result('play', inputs, record, seed, total)
     result.notes.append(f'published {sink.published} messages in {passes} pass{"es" if passes != 1 else ""}'
-                        + (f' (stopped by {stop.reason})' if stop.is_set() else ''))
-    if loop and passes > 1:
+                        + (f' (stopped by {stop.reason})' if stop.is_set() and stop.reason != SEEK else ''))
+    if passes > 1:
         result.notes.append(f'verdicts are those of the last pass ({passes} passes)')
-    for topic, msgtype in sorted(sink.skipped.items()):
+    for topic, msgtype in sorted(getattr(sink, 'skipped', {}).items()):
         result.notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
+    if not ros:
+        result.notes.append('played into the Foxglove view only (rclpy is not installed here)')
     return result
 
 
-def _pass(scenario: Scenario, inputs: list[Path], sink: LiveSink, *, seed: int, record: Path | None,
-          numbers: dict[str, int]) -> tuple[Run, bool]:
+@contextlib.contextmanager
+def _node(ros: bool, stop: StopFlag, ros_args: list[str] | None) -> Iterator[Any]:
+    """The player's node on a fresh rclpy context (None without ROS: signals still stop the play)."""
+    if not ros:
+        with _signals(stop):
+            yield None
+        return
+    from bagfault.live.ros import make_node  # noqa: PLC0415
+    from bagfault.live.runtime import ros_context  # noqa: PLC0415
+
+    with ros_context(stop) as context:
+        node = make_node('bagfault_player', context, ros_args)
+        try:
+            yield node
+        finally:
+            node.destroy_node()
+
+
+@contextlib.contextmanager
+def _signals(stop: StopFlag) -> Iterator[None]:
+    """SIGINT, SIGTERM and SIGHUP set `stop` (as `ros_context` does), in the main thread."""
+    import signal  # noqa: PLC0415
+    import threading  # noqa: PLC0415
+
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            previous[number] = signal.signal(number, lambda n, _f: stop.set(signal.Signals(n).name))
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def _sink(node: Any, *, rate: float, clock: bool, stop: StopFlag, recording: McapSink | None, delay: float,
+          wait_for: Sequence[str], clock_hz: float, topics: Sequence[str], start_offset: float) -> Pacer:
+    """A LiveSink on the node, or a bare Pacer without ROS."""
+    if node is None:
+        return Pacer(rate=rate, stop=stop, recording=recording, topics=topics, skip=start_offset,
+                     clock_hz=clock_hz)
+    from bagfault.live.sink import LiveSink  # noqa: PLC0415
+
+    return LiveSink(node, rate=rate, clock=clock, stop=stop, recording=recording, settle=delay, wait_for=wait_for,
+                    clock_hz=clock_hz, topics=topics, skip=start_offset)
+
+
+def _pass(scenario: Scenario, inputs: list[Path], sink: Pacer, *, seed: int, record: Path | None,
+          numbers: dict[str, int], control: FaultControl | None) -> tuple[Run, bool]:
     """One pass over the bag; its black boxes are named before the next pass begins."""
     input_set = InputSet(inputs)
     try:
         catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
         run, stopped = replay(input_set, scenario, catalog, sink, seed=seed, blackbox_base=record,
-                              blackbox_numbers=numbers, hooks=sink)
+                              blackbox_numbers=numbers, hooks=sink, control=control)
     finally:
         input_set.close()
     run.close(ok=True)
     return run, stopped
+
+
+def _time_range(inputs: list[Path]) -> tuple[int, int]:
+    """The bag's first and last log times."""
+    input_set = InputSet(inputs)
+    try:
+        return input_set.start_time or 0, input_set.end_time or 0
+    finally:
+        input_set.close()
 
 
 def _distro(inputs: list[Path]) -> str:

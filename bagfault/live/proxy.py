@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 from bagfault.engine.result import RunResult, RunStats
 from bagfault.live.node import DRAIN, ProxyNode
-from bagfault.live.runtime import ros_context, spin_until
+from bagfault.live.runtime import make_executor, ros_context, spin_until
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -23,26 +23,27 @@ def run_proxy(
     record: Path | None = None,
     use_sim_time: bool = False,
     ros_args: list[str] | None = None,
+    foxglove: str | None = None,
 ) -> RunResult:
     """Proxy until `stop` is set (by a signal or the caller); the recording is complete on return."""
-    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
 
 
     with ros_context(stop) as context:
         proxy = ProxyNode(scenario, context, stop, seed=seed, record=record, use_sim_time=use_sim_time,
-                          ros_args=ros_args)
-        executor = SingleThreadedExecutor(context=context)
+                          ros_args=ros_args, foxglove=foxglove)
+        executor = make_executor(context)
         executor.add_node(proxy.node)
         try:
             proxy.setup(executor)
             spin_until(executor, stop)
-            proxy.drain(executor)
+            proxy.drain()
         except BaseException:
             proxy.abort()
             raise
         finally:
             executor.shutdown()
         proxy.close()
+        proxy.close_view()
     if proxy.failure is not None:
         raise proxy.failure
     session = proxy.session

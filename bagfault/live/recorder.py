@@ -20,7 +20,7 @@ from bagfault import __version__
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
 from bagfault.live.ros import has_interface, interface_class, make_node, offered_yaml
-from bagfault.live.runtime import ros_context
+from bagfault.live.runtime import make_executor, ros_context
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Collection
@@ -119,7 +119,6 @@ def run_record(
     ros_args: list[str] | None = None,
 ) -> RecordResult:
     """Record until `duration` seconds (wall clock) have passed or a stop; the file is complete on return."""
-    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.parameter import Parameter  # noqa: PLC0415
 
     names = [t if t.startswith('/') else '/' + t for t in topics]
@@ -127,7 +126,7 @@ def run_record(
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
         node = make_node('bagfault_recorder', context, ros_args, parameter_overrides=overrides)
         recording = McapSink(output, flush_every=LIVE_FLUSH)
-        executor = SingleThreadedExecutor(context=context)
+        executor = make_executor(context)
         executor.add_node(node)
         finished = False
         try:

@@ -54,3 +54,21 @@ def spin_until(executor: Any, stop: StopFlag, period: float = 0.05) -> None:
         except Exception:  # noqa: BLE001 - one bad callback must not take the proxy down
             print('bagfault: error in a callback (the proxy keeps running):', file=sys.stderr)
             traceback.print_exc()
+
+
+def make_executor(context: Any) -> Any:
+    """The executor of a node that forwards messages: rclpy's events executor (C++ event queue, a fraction of
+    the Python executor's cost per message) where this rclpy has it, else the single-threaded one.
+    BAGFAULT_EXECUTOR=single forces the latter."""
+    import os  # noqa: PLC0415
+
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+
+    if os.environ.get('BAGFAULT_EXECUTOR', 'events') != 'single':
+        try:
+            from rclpy.experimental.events_executor import EventsExecutor  # noqa: PLC0415
+        except ImportError:
+            pass
+        else:
+            return EventsExecutor(context=context)
+    return SingleThreadedExecutor(context=context)

@@ -16,20 +16,18 @@ import threading
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
-from bagfault.engine.routing import build_injector
+from bagfault.engine.build import build_injector
+from bagfault.engine.control import check_change
 from bagfault.engine.run import NullSink, Run
 from bagfault.engine.scheduler import FaultScheduler
 from bagfault.errors import (
     EngineError,
-    FieldValueError,
-    InjectorConfigError,
     LiveError,
     MalformedMessageError,
     ReloadError,
 )
 from bagfault.events import FaultEvent
 from bagfault.injectors.base import ActiveFault, Injector, RawMessage
-from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -265,23 +263,7 @@ class LiveSession:
 
     def check_config(self, fault_id: str, key: str, value: object) -> Any:
         """The value as the schema accepts it; FieldValueError with the schema's reason otherwise."""
-        fault = self.scenario.fault(fault_id)
-        if fault is None:
-            raise FieldValueError(f'no fault {fault_id!r}')
-        spec = self.scenario.injector(fault.injector_id)
-        assert spec is not None
-        cls = get_injector_type(spec.type)
-        assert cls is not None
-        schema_field = cls.field(key)
-        if schema_field is None:
-            raise FieldValueError(f'{key!r} is not a config key of injector type {spec.type!r}')
-        coerced = schema_field.coerce(value)
-        config = {**fault.config, key: coerced}
-        try:
-            cls.check_fault(config, spec.options)
-        except InjectorConfigError as exc:
-            raise FieldValueError(str(exc)) from None
-        return coerced
+        return check_change(self.scenario, fault_id, key, value)
 
     def set_config(self, fault_id: str, key: str, value: object) -> list[tuple[LiveTopic, RawMessage]]:
         """Change one config value now; a `config_updated` event; returns messages the old injector held."""

@@ -125,3 +125,46 @@ class TriggerProxy:
         response.success = reply.success
         response.message = reply.message
         return response
+
+
+class ServiceHost:
+    """A second node, spun by the Python executor in its own thread, for the service proxies: their calls
+    wait (delays, the target's answer) as coroutines, which the events executor of the message path cannot
+    run. Its name is the proxy's with `_services`; the proxy's --ros-args apply to it but for `__node`."""
+
+    def __init__(self, name: str, context: Any, ros_args: list[str] | None) -> None:
+        import threading  # noqa: PLC0415
+
+        from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+
+        from bagfault.live.ros import make_node  # noqa: PLC0415
+
+        kept = [a for i, a in enumerate(ros_args or []) if not _names_node(ros_args or [], i)]
+        self.node = make_node(f'{name}_services', context, kept)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._spin, name='bagfault-services', daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while not self._done.is_set():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - shutting down
+                return
+
+    def close(self) -> None:
+        """Stop the thread and the node."""
+        self._done.set()
+        self._thread.join(timeout=2.0)
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+def _names_node(args: list[str], index: int) -> bool:
+    """True for a `-r __node:=X` pair (either word) in ROS arguments."""
+    word = args[index]
+    if word.startswith(('__node:=', '__name:=')):
+        return index > 0 and args[index - 1] in ('-r', '--remap')
+    return word in ('-r', '--remap') and index + 1 < len(args) and args[index + 1].startswith(('__node:=', '__name:='))

@@ -7,15 +7,16 @@ import math
 
 import pytest
 
-rclpy = pytest.importorskip('rclpy')
+pytest.importorskip('rclpy')
 
-import rclpy.context  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
+import rclpy
+import rclpy.context
+from rclpy.node import Node
+from rclpy.parameter import Parameter
 
-from bagfault.injectors.registry import injector_types  # noqa: E402
-from bagfault.live.params import fault_parameters  # noqa: E402
-from bagfault.scenario import parse_scenario  # noqa: E402
+from bagfault.injectors.registry import injector_types
+from bagfault.live.params import fault_parameters
+from bagfault.scenario import parse_scenario
 
 
 def scenario_with_every_type() -> str:

@@ -1,0 +1,8 @@
+"""View tests: the Foxglove client against play (no ROS) and proxy (a private ROS graph)."""
+
+from __future__ import annotations
+
+import pytest
+from livegraph import graph_fixture
+
+graph = pytest.fixture(graph_fixture, name='graph')
