@@ -25,6 +25,7 @@ from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata
 from bagfault.errors import BagfaultError, LiveError, MalformedMessageError, ReloadError, ScenarioError
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
+from bagfault.live import anchor
 from bagfault.live.delay import DelayLine
 from bagfault.live.diagnostics import diagnostic_array
 from bagfault.live.events import LiveEvents
@@ -66,6 +67,7 @@ class ProxyNode:
         self.scenario = scenario
         self.foxglove = foxglove
         self.view: Any = None
+        self.anchor: Any = None
         self.stop = stop
         self.seed = seed
         self.record_path = record
@@ -157,6 +159,9 @@ class ProxyNode:
         self.parameters = FaultParameters(self.node, self.session, self._publish)
         trigger = interface_class('std_srvs/srv/Trigger')
         self.node.create_service(trigger, '~/reload_scenario', self._reload)
+        if anchor.available():
+            self.anchor = anchor.AnchorServices(self.node, self)
+            self.logger.info('serving the anchor interface (fault_injection/*)')
         diagnostics = interface_class('diagnostic_msgs/msg/DiagnosticArray')
         self.diagnostics = self.node.create_publisher(diagnostics, '/diagnostics', 10)
         self.node.create_timer(TICK, self._tick)

@@ -87,7 +87,7 @@ def clock_check(args) -> None:
     node = rclpy.create_node('clock_check')
     state = {'clock': None, 'clock_first': None, 'clock_monotonic': True, 'messages': 0, 'in_order': True,
              'last_stamp': None, 'stamp_after_clock': 0, 'first_wall': None, 'span': 0.0, 'first_stamp': None,
-             'final_stamp': None}
+             'final_stamp': None, 'clock_count': 0}
 
     def on_clock(message) -> None:
         value = message.clock.sec * 1_000_000_000 + message.clock.nanosec
@@ -96,6 +96,7 @@ def clock_check(args) -> None:
         if state['clock_first'] is None:
             state['clock_first'] = value
         state['clock'] = value
+        state['clock_count'] += 1
 
     def on_message(message) -> None:
         stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
@@ -243,6 +244,38 @@ def trigger_call(args) -> None:
     print(json.dumps({'success': response.success, 'message': response.message, 'seconds': seconds}), flush=True)
 
 
+def anchor_calls(args) -> None:
+    """Call the anchor's nine services in a fixed order; print each answer as a JSON line."""
+    names = ['ListFaults', 'SetFaultState', 'SetFaultState', 'GetFaultStatus', 'SetFaultConfig', 'SetFaultConfig',
+             'GetFaultConfig', 'GetFaultSchema', 'GetScenario', 'RequestReport', 'ReloadScenario', 'ListFaults']
+    fault = args.fault
+    requests = [{}, {'fault_id': 'no_such_fault', 'active': True}, {'fault_id': fault, 'active': True}, {},
+                {'fault_id': fault, 'key': 'gain', 'value': '2'},
+                {'fault_id': fault, 'key': 'angular_velocity_z_bias', 'value': '0.2'}, {'fault_id': fault},
+                {'fault_id': fault}, {}, {}, {}, {}]
+    node = rclpy.create_node('anchor_client')
+    for name, fields in zip(names, requests):
+        kind = interface(f'ros2_fault_injection/srv/{name}')
+        snake = ''.join(f'_{c.lower()}' if c.isupper() else c for c in name).lstrip('_')
+        client = node.create_client(kind, f'/fault_injection/{snake}')
+        if not client.wait_for_service(timeout_sec=20.0):
+            print(json.dumps({'service': name, 'error': 'not available'}), flush=True)
+            return
+        future = client.call_async(kind.Request(**fields))
+        rclpy.spin_until_future_complete(node, future, timeout_sec=20.0)
+        answer = future.result()
+        row = {'service': name}
+        for slot in answer.get_fields_and_field_types():
+            value = getattr(answer, slot)
+            if slot == 'faults':
+                value = [{'fault_id': f.fault_id, 'injector_id': f.injector_id, 'state': f.state, 'details': f.details}
+                         for f in value]
+            elif not isinstance(value, (str, bool, int, float)):
+                value = list(value)
+            row[slot] = value
+        print(json.dumps(row), flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     sub = parser.add_subparsers(dest='command', required=True)
@@ -280,11 +313,13 @@ def main() -> None:
     p = sub.add_parser('trigger-call')
     p.add_argument('service')
     p.add_argument('--timeout', type=float, default=10.0)
+    p = sub.add_parser('anchor-calls')
+    p.add_argument('fault')
     args = parser.parse_args()
     rclpy.init()
     try:
         {'publish-imu': publish_imu, 'echo': echo, 'clock-check': clock_check, 'imu-monitor': imu_monitor, 'set-param': set_param, 'trigger-server': trigger_server,
-         'trigger-call': trigger_call, 'describe-params': describe_params}[args.command](args)
+         'trigger-call': trigger_call, 'describe-params': describe_params, 'anchor-calls': anchor_calls}[args.command](args)
     finally:
         rclpy.try_shutdown()
 

@@ -190,3 +190,18 @@ def test_a_killed_recording_is_recovered_up_to_its_last_second(graph, scenarios:
     numbers = [int(m.orientation_covariance[0]) for _, m in raw]
     assert numbers == list(range(numbers[0], numbers[0] + len(numbers)))  # no gap: whole chunks only
     assert len(numbers) >= 500 * 2  # 4 s of 500 Hz, less at most a second unflushed and the start-up
+
+
+def test_play_clock_rate_between_messages(graph, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'slow.mcap', [('/sensors/imu_raw', IMU, 2.0)], 3.0)  # 6 messages over 2.5 s
+    counts = {}
+    for hz in ('10', '100'):
+        checker = graph.peer('clock-check', '/sensors/imu_raw', IMU, '--seconds', '9', name=f'clock{hz}')
+        graph.wait_for(checker, 'ready')
+        play = graph.bagfault('play', str(bag), '--clock', hz, '--wait-for', '/sensors/imu_raw', name=f'play{hz}')
+        assert play.wait(timeout=60) == 0
+        checker.wait(timeout=30)
+        counts[hz] = graph.lines(checker)[-1]['clock_count']
+    # 2.5 s between the first and the last message: about 25 ticks at 10 Hz and 250 at 100 Hz (plus one per message)
+    assert 15 <= counts['10'] <= 40
+    assert 150 <= counts['100'] <= 300
