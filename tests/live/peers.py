@@ -254,7 +254,7 @@ def anchor_calls(args) -> None:
                 {'fault_id': fault, 'key': 'angular_velocity_z_bias', 'value': '0.2'}, {'fault_id': fault},
                 {'fault_id': fault}, {}, {}, {}, {}]
     node = rclpy.create_node('anchor_client')
-    for name, fields in zip(names, requests):
+    for name, fields in zip(names, requests, strict=True):
         kind = interface(f'ros2_fault_injection/srv/{name}')
         snake = ''.join(f'_{c.lower()}' if c.isupper() else c for c in name).lstrip('_')
         client = node.create_client(kind, f'/fault_injection/{snake}')
