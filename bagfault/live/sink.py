@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from bagfault.live.pacer import View
 
 MATCH_WAIT = 5.0  # seconds after the settle time to wait for subscribers the graph knows to be matched
+MATCH_SETTLE = 0.25  # seconds after a publisher sees its subscriber until the subscriber has matched it too
 
 
 class LiveSink(Pacer):
@@ -95,6 +96,8 @@ class LiveSink(Pacer):
         while True:
             waiting = [t for t in topics if publishers[t].get_subscription_count() == 0]
             if not waiting:
+                if self.stop.wait(MATCH_SETTLE):  # the subscriber's side of the match completes a moment later
+                    raise Stopped(self.stop.reason)
                 return
             if time.monotonic() > deadline:
                 raise LiveError(f'no subscriber on {", ".join(waiting)} within {self.wait_timeout:g} s')

@@ -59,7 +59,7 @@ def test_the_proxy_answers_the_anchors_services_and_publishes_its_events(graph, 
     graph.env['LD_LIBRARY_PATH'] = os.pathsep.join(filter(None, [str(anchor_prefix / 'lib'),
                                                                  graph.env.get('LD_LIBRARY_PATH')]))
     graph.env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(anchor_prefix), sys.prefix])
-    events = graph.peer('echo', '/fault_injection/events', 'ros2_fault_injection/msg/FaultEvent', '--seconds', '30',
+    events = graph.peer('echo', '/fault_injection/events', 'ros2_fault_injection/msg/FaultEvent', '--seconds', '300',
                         '--fields', 'fault_id', 'state', 'source', 'details', name='events')
     graph.wait_for(events, 'ready')
     scenario = scenarios / 'imu.yaml'
@@ -91,7 +91,7 @@ def test_the_proxy_answers_the_anchors_services_and_publishes_its_events(graph, 
     assert again['active_fault_ids'] == ['imu_yaw_rate_bias']  # the reload kept the switch
     time.sleep(0.5)
     assert graph.stop(proxy) == 0
-    events.wait(timeout=60)
+    graph.stop(events)  # it prints each event as it comes; it listens until now, however slow the machine
     seen = [(e['fault_id'], e['state'], e['source']) for e in graph.lines(events)]
     assert ('imu_yaw_rate_bias', 'active', 'manual') in seen
     assert ('imu_yaw_rate_bias', 'config_updated', 'manual') in seen
