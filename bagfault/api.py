@@ -31,6 +31,8 @@ from bagfault.scenario.yamlnodes import format_path
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
 
+    from bagfault.campaign.model import Campaign
+    from bagfault.campaign.runner import CampaignResult, JobProgress
     from bagfault.engine.offline import Progress
     from bagfault.engine.run import Observer
     from bagfault.live.recorder import RecordResult
@@ -325,6 +327,20 @@ def recover(recording: str | Path, output: str | Path | None = None) -> Recovere
     return copy_readable(source, out)
 
 
+def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int | None = None,
+             ray: str | None = None, resume: bool = False, progress: JobProgress | None = None) -> CampaignResult:
+    """Run a campaign file's jobs (bag x sweep point x seed, and the search) on a local pool of `workers`
+    processes (default: one per core) or, with `ray` ('' for a local instance, or a cluster address), as Ray
+    tasks; results, tables and report in `directory`."""
+    from bagfault.campaign.loader import load_campaign  # noqa: PLC0415
+    from bagfault.campaign.runner import run_campaign  # noqa: PLC0415
+
+    if workers is not None and workers < 1:
+        raise UsageError(f'--workers {workers}: must be 1 or more')
+    loaded = file if not isinstance(file, (str, Path)) else load_campaign(file)
+    return run_campaign(loaded, Path(directory), workers=workers, ray=ray, resume=resume, progress=progress)
+
+
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     scenarios, problems = [], []
@@ -342,6 +358,7 @@ __all__ = [
     'BagfaultError',
     'RunResult',
     'StopFlag',
+    'campaign',
     'check',
     'load_scenario',
     'play',

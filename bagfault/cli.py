@@ -153,6 +153,20 @@ def _parser() -> argparse.ArgumentParser:
     system.add_argument('--no-sim-time', action='store_true', help='do not pass use_sim_time:=true')
     _report_options(test)
 
+    campaign = sub.add_parser('campaign', help='sweep a scenario over bags, fault parameters and seeds',
+                              usage='bagfault campaign FILE -o DIR [--workers N] [--ray [ADDRESS]] [--resume] '
+                                    '[--dry-run]')
+    campaign.add_argument('campaign', type=Path, metavar='FILE')
+    campaign.add_argument('-o', '--output-dir', type=Path, metavar='DIR',
+                          help='results.parquet, results.csv, campaign.json, report.html, jobs/, outputs/')
+    campaign.add_argument('--workers', type=int, default=None, metavar='N',
+                          help='jobs at a time (default: one per core; with --ray: all the cluster takes)')
+    campaign.add_argument('--ray', nargs='?', const='', default=None, metavar='ADDRESS',
+                          help='run the jobs as Ray tasks: on a local Ray instance, or on the cluster at ADDRESS')
+    campaign.add_argument('--resume', action='store_true',
+                          help='keep the results already in DIR; run only what is missing or changed')
+    campaign.add_argument('--dry-run', action='store_true', help='print the plan and its size, run nothing')
+
     recover = sub.add_parser('recover', help='make a recording cut short by a kill a valid MCAP again')
     recover.add_argument('recording', type=Path, metavar='FILE',
                          help='the partial file (.NAME.*.partial), or the name that was requested')
@@ -338,6 +352,39 @@ def _cmd_test(args: argparse.Namespace) -> int:
     return _finish(reports, result)
 
 
+def _cmd_campaign(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.campaign.loader import load_campaign  # noqa: PLC0415
+    from bagfault.campaign.plan import make_plan  # noqa: PLC0415
+    from bagfault.campaign.runner import JobProgress  # noqa: PLC0415
+
+    campaign = load_campaign(args.campaign)
+    if args.dry_run:
+        plan = make_plan(campaign)
+        print(plan.summary())
+        return EXIT_OK
+    if args.output_dir is None:
+        raise UsageError('campaign: -o DIR is required (or --dry-run)')
+    try:
+        result = api.campaign(campaign, args.output_dir, workers=args.workers, ray=args.ray, resume=args.resume,
+                              progress=JobProgress())
+    except KeyboardInterrupt:
+        print(f'bagfault: interrupted; finished jobs are kept in {args.output_dir / "jobs"}, --resume continues',
+              file=sys.stderr)
+        return EXIT_ERROR
+    c = result.counts
+    search = f', {len(result.table.rows) - len(result.table.sweep_rows())} search jobs' \
+        if campaign.search is not None else ''
+    print(f'{campaign.name}: {sum(c.values())} jobs: {c["passed"]} passed, {c["failed"]} failed, {c["error"]} error'
+          f'{search} ({result.ran} run now, on {result.engine})')
+    for point in result.breaking_points:
+        where = f'holds from {point.value:g}' if point.value is not None else 'never holds'
+        print(f'breaking point {point.parameter} on {point.bag.name}: {where} ({point.note})')
+    print(f'results   {args.output_dir / "results.parquet"}, {args.output_dir / "results.csv"}')
+    print(f'report    {args.output_dir / "report.html"}')
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
 def _cmd_recover(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
 
@@ -440,6 +487,7 @@ COMMANDS = {
     'record': _cmd_record,
     'test': _cmd_test,
     'recover': _cmd_recover,
+    'campaign': _cmd_campaign,
     'latency': _cmd_latency,
 }
 

@@ -33,6 +33,8 @@ class AssertionResult:
     state: AssertionState = PENDING
     time: int | None = None
     message: str = ''
+    value: float | None = None  # what was measured, in the assertion's own unit (see `unit`)
+    unit: str = ''
 
 
 class AssertionType:
@@ -108,16 +110,18 @@ class AssertionType:
         return f'{self.spec.type} {self.spec.id}'
 
     # -- decisions ------------------------------------------------------------
-    def passed(self, time: int, message: str) -> None:
-        """Decide: passed at `time`."""
+    def passed(self, time: int, message: str, value: float | None = None, unit: str = '') -> None:
+        """Decide: passed at `time`, having measured `value` (campaigns tabulate it)."""
         if self.pending:
             self.result.state, self.result.time, self.result.message = PASSED, time, message
+            self.result.value, self.result.unit = value, unit
             self.runner.decided(self)
 
-    def fail(self, time: int, message: str) -> None:
-        """Decide: failed at `time`."""
+    def fail(self, time: int, message: str, value: float | None = None, unit: str = '') -> None:
+        """Decide: failed at `time`, having measured `value`."""
         if self.pending:
             self.result.state, self.result.time, self.result.message = FAILED, time, message
+            self.result.value, self.result.unit = value, unit
             self.runner.decided(self)
 
 

@@ -79,10 +79,11 @@ class FaultStatusAssertion(AssertionType):
             return
         since = f", {(time - self.armed) / NS:.3f} s after {self.params['after']} activated" if self.armed else ''
         text = f'{code} reached {status} at {self.runner.t(time)}{since}'
+        seconds = (time - (self.armed if self.armed is not None else self.runner.origin)) / NS
         if self.params.get('never'):
-            self.fail(time, text)
+            self.fail(time, text, seconds, 's')
         else:
-            self.passed(time, text)
+            self.passed(time, text, seconds, 's')
 
     def on_deadline(self, time: int) -> None:
         """Not reached in time."""
@@ -138,8 +139,8 @@ class FaultCountAssertion(AssertionType):
         low, high = self.params.get('min', 0), self.params.get('max')
         text = f'{len(codes)} confirmed faults at {self.runner.t(time)}: {", ".join(codes) or "none"}'
         if len(codes) < low or (high is not None and len(codes) > high):
-            self.fail(time, f'{text}; expected [{low}, {high if high is not None else "inf"}]')
+            self.fail(time, f'{text}; expected [{low}, {high if high is not None else "inf"}]', len(codes), 'faults')
         else:
-            self.passed(time, text)
+            self.passed(time, text, len(codes), 'faults')
 
 

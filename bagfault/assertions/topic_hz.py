@@ -78,7 +78,7 @@ class TopicHzAssertion(AssertionType):
         self.best = max(self.best, rate)
         if rate >= self.params['min_hz']:
             self.passed(time, f"{self.params['topic']} at {rate:.2f} Hz over {self.params['window']:g} s at "
-                              f"{self.runner.t(time)} (min {self.params['min_hz']:g} Hz)")
+                              f"{self.runner.t(time)} (min {self.params['min_hz']:g} Hz)", rate, 'Hz')
         elif self.spec.within is not None and time - self.runner.origin > round(self.spec.within * NS):
             self.fail(time, f'{self.waiting_for()} within {self.spec.within:g} s (looked at {self.runner.t(time)})')
         else:

@@ -1,0 +1,75 @@
+"""Dotted paths into a scenario (`faults.imu_bias.config.angular_velocity_z_bias`) and the scenario they make.
+
+In `faults`, `injectors` and `assertions` an element is named by its id;
+elsewhere a segment is a mapping key. The single-injector layout
+(`injector:`) answers to `injectors.<id>` too. Setting a value edits the
+scenario's plain data, which is written back as YAML and loaded and
+validated like any scenario file (relative paths stay relative to the
+original file).
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import TYPE_CHECKING, Any
+
+import yaml
+
+from bagfault.scenario import parse_scenario
+from bagfault.scenario.yamlnodes import load_located
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from bagfault.scenario.model import Scenario
+
+BY_ID = ('faults', 'injectors', 'assertions')
+
+
+class PathError(ValueError):
+    """A dotted path that does not lead anywhere in the scenario."""
+
+
+def scenario_data(text: str) -> Any:
+    """The scenario's plain data, numbers read as the loader reads them."""
+    return load_located(text).data
+
+
+def set_path(data: Any, path: str, value: Any) -> Any:
+    """A copy of `data` with the value at `path` set (the last key may be new)."""
+    out = copy.deepcopy(data)
+    parts = path.split('.')
+    node: Any = out
+    for depth, part in enumerate(parts[:-1]):
+        node = _step(node, part, parts[depth - 1] if depth else None, path)
+    last = parts[-1]
+    if not isinstance(node, dict):
+        raise PathError(f'{".".join(parts[:-1]) or "the scenario"} is not a mapping')
+    node[last] = value
+    return out
+
+
+def _step(node: Any, part: str, parent: str | None, path: str) -> Any:
+    if parent in BY_ID:
+        if not isinstance(node, list):
+            raise PathError(f'{parent} is not a list')
+        for item in node:
+            if isinstance(item, dict) and item.get('id') == part:
+                return item
+        known = ', '.join(str(i.get('id')) for i in node if isinstance(i, dict))
+        raise PathError(f'no {parent[:-1]} {part!r} (there are: {known or "none"})')
+    if not isinstance(node, dict):
+        raise PathError(f'{part!r} is not below a mapping')
+    if part == 'injectors' and 'injectors' not in node and isinstance(node.get('injector'), dict):
+        return [node['injector']]
+    if part not in node:
+        raise PathError(f'the scenario has no {part!r} here')
+    return node[part]
+
+
+def expanded(data: Any, values: dict[str, Any], source: Path | None) -> tuple[str, Scenario]:
+    """The scenario text with `values` set, and that text loaded and validated (ScenarioError if it is not)."""
+    for path, value in values.items():
+        data = set_path(data, path, value)
+    text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+    return text, parse_scenario(text, source=source)

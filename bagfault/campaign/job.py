@@ -1,0 +1,47 @@
+"""One job: the scenario's run (or closed-loop test) on one bag with one seed, as a plain result dict.
+
+The engines call it in a process of its own per job: a crash, a hang or a
+leak of one job never touches the others (the engine kills it at its
+timeout), and every job starts from the same fresh state, so results do not
+depend on which worker ran what.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+
+def run_job(spec: dict[str, Any]) -> dict[str, Any]:
+    """Run a job spec (see Job.spec); the result row's job-specific part."""
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.scenario import parse_scenario  # noqa: PLC0415
+
+    started = time.monotonic()
+    output = Path(spec['output']) if spec.get('output') else None
+    try:
+        scenario = parse_scenario(spec['scenario_text'], source=Path(spec['scenario_source']))
+        if spec['mode'] == 'test':
+            result = api.test(scenario, [spec['bag']], output, seed=spec['seed'])
+        else:
+            assert output is not None
+            result = api.run(scenario, [spec['bag']], output, seed=spec['seed'])
+    except Exception as exc:  # noqa: BLE001 - any failure of a job is its row, never the campaign's end
+        message = ' '.join(str(exc).split()) or type(exc).__name__
+        return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {},
+                'seconds': round(time.monotonic() - started, 3), 'output': None}
+    origin = result.stats.origin
+    assertions = {a.id: {'state': a.state, 'message': a.message, 'value': a.value, 'unit': a.unit,
+                         't_s': None if a.time is None or origin is None else round((a.time - origin) / 1e9, 9)}
+                  for a in result.assertions}
+    detections: dict[str, float] = {}
+    for event in (result.fault_manager or {}).get('events', []):
+        if event.get('status') == 'CONFIRMED' and event.get('fault_code') not in detections:
+            detections[event['fault_code']] = event.get('t_s')
+    failed = [a for a in result.assertions if a.state != 'passed']
+    return {'status': 'failed' if failed else 'passed',
+            'message': '; '.join(f'{a.id}: {a.message}' for a in failed)[:2000],
+            'assertions': assertions, 'detections': detections,
+            'seconds': round(time.monotonic() - started, 3), 'output': str(output) if output else None}
+

@@ -1,0 +1,201 @@
+"""Read and check a campaign file: every problem with its line and column, as for scenarios."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from bagfault.campaign.edit import PathError, expanded, scenario_data
+from bagfault.campaign.model import Campaign, Search, Until
+from bagfault.errors import CampaignError, ScenarioError, one_line
+from bagfault.scenario.yamlnodes import YamlSyntaxError, format_path, load_located
+
+if TYPE_CHECKING:
+    from bagfault.scenario.yamlnodes import LocatedYaml, PathKey
+
+KEYS = {'campaign', 'scenario', 'mode', 'bags', 'sweep', 'seeds', 'design', 'search', 'keep', 'timeout'}
+MAX_RANGE = 100_000
+
+
+class _Problems:
+    def __init__(self, name: str, located: LocatedYaml) -> None:
+        self.name = name
+        self.located = located
+        self.lines: list[str] = []
+
+    def add(self, path: PathKey, message: str) -> None:
+        where = self.located.where(path)
+        self.lines.append(f'{self.name}:{where}: {format_path(path) or "<top>"}: {message}')
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    """The campaign, checked (its scenario and every swept path included); CampaignError with all problems."""
+    file = Path(path)
+    try:
+        text = file.read_text(encoding='utf-8')
+    except OSError as exc:
+        raise CampaignError(f'{file}: cannot read the campaign file: {exc.strerror}') from None
+    try:
+        located = load_located(text)
+    except YamlSyntaxError as exc:
+        raise CampaignError(f'{file}: {one_line(exc)}') from None
+    problems = _Problems(str(file), located)
+    data = located.data
+    if not isinstance(data, dict):
+        raise CampaignError(f'{file}: a campaign file is a mapping (campaign, scenario, bags, sweep, ...)')
+    for key in data:
+        if key not in KEYS:
+            problems.add((key,), f'unknown key {key!r} (known: {", ".join(sorted(KEYS))})')
+    campaign = Campaign(name=str(data.get('campaign') or file.stem), scenario=file.parent / 'missing',
+                        source=file, text=text)
+    scenario_file = data.get('scenario')
+    if not isinstance(scenario_file, str) or not scenario_file:
+        problems.add(('scenario',), 'must name a scenario file (relative to this file)')
+    else:
+        campaign.scenario = file.parent / scenario_file
+    mode = data.get('mode', 'run')
+    if mode not in ('run', 'test'):
+        problems.add(('mode',), f'{mode!r} is not run or test')
+    else:
+        campaign.mode = mode
+    bags = data.get('bags')
+    if not isinstance(bags, list) or not bags or not all(isinstance(b, str) and b for b in bags):
+        problems.add(('bags',), 'must be a list of bag files, rosbag2 folders or globs (relative to this file)')
+    else:
+        campaign.bags = list(bags)
+    campaign.sweep = _sweep(data.get('sweep', {}), problems)
+    seeds = _values(data['seeds'], ('seeds',), problems, integers=True) if 'seeds' in data else []
+    if seeds and not all(isinstance(s, int) and 0 <= s < 2**64 for s in seeds):
+        problems.add(('seeds',), 'seeds are integers from 0 to 2^64 - 1')
+    elif seeds:
+        campaign.seeds = [int(s) for s in seeds]
+    _design(data.get('design', 'grid'), campaign, problems)
+    if 'search' in data:
+        campaign.search = _search(data['search'], problems)
+    keep = data.get('keep', 'failed')
+    if keep not in ('all', 'failed', 'none'):
+        problems.add(('keep',), f'{keep!r} is not all, failed or none')
+    else:
+        campaign.keep = keep
+    timeout = data.get('timeout', 3600)
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout <= 86400:
+        problems.add(('timeout',), f'{timeout!r} must be seconds a job may take, above 0 and at most a day')
+    else:
+        campaign.timeout = float(timeout)
+    if not problems.lines:
+        _check_scenario(campaign, problems, seeded='seeds' in data)
+    if problems.lines:
+        raise CampaignError('\n'.join(problems.lines))
+    return campaign
+
+
+def _values(node: object, path: PathKey, problems: _Problems, *, integers: bool = False) -> list[Any]:
+    """A list, or {range: [start, stop, step]} (stop excluded for integers, included within a tolerance else)."""
+    if isinstance(node, list) and node:
+        return list(node)
+    if isinstance(node, dict) and set(node) == {'range'}:
+        spec = node['range']
+        numbers = isinstance(spec, list) and 2 <= len(spec) <= 3 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in spec)
+        if not numbers:
+            problems.add((*path, 'range'), 'must be [start, stop] or [start, stop, step]')
+            return []
+        start, stop = spec[0], spec[1]
+        step = spec[2] if len(spec) == 3 else 1
+        if step <= 0 or (stop - start) / step > MAX_RANGE:
+            problems.add((*path, 'range'), f'step must be above 0 and give at most {MAX_RANGE} values')
+            return []
+        if integers or all(isinstance(v, int) for v in spec):
+            return list(range(int(start), int(stop), int(step)))
+        count = math.floor((stop - start) / step + 1e-9) + 1
+        return [round(start + i * step, 12) for i in range(count)]
+    problems.add(path, 'must be a list of values or {range: [start, stop, step]}')
+    return []
+
+
+def _sweep(node: object, problems: _Problems) -> dict[str, list[Any]]:
+    if not isinstance(node, dict):
+        problems.add(('sweep',), 'must map dotted scenario paths to values')
+        return {}
+    return {str(key): values for key, raw in node.items()
+            if (values := _values(raw, ('sweep', key), problems))}
+
+
+def _design(node: object, campaign: Campaign, problems: _Problems) -> None:
+    if node == 'grid':
+        return
+    if isinstance(node, dict) and set(node) == {'random'} and isinstance(node['random'], dict):
+        samples, seed = node['random'].get('samples'), node['random'].get('seed', 0)
+        if isinstance(samples, int) and not isinstance(samples, bool) and 0 < samples <= MAX_RANGE \
+                and isinstance(seed, int) and not isinstance(seed, bool):
+            campaign.design, campaign.samples, campaign.design_seed = 'random', samples, seed
+            return
+        problems.add(('design', 'random'), 'needs samples (1 to 100000) and an integer seed')
+        return
+    problems.add(('design',), 'must be grid or {random: {samples: N, seed: S}}')
+
+
+def _search(node: object, problems: _Problems) -> Search | None:
+    if not isinstance(node, dict):
+        problems.add(('search',), 'must be a mapping: parameter, low, high, tolerance, until')
+        return None
+    numbers = {k: node.get(k) for k in ('low', 'high', 'tolerance')}
+    bad = [k for k, v in numbers.items()
+           if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)]
+    for key in bad:
+        problems.add(('search', key), 'must be a finite number')
+    until = node.get('until')
+    parameter = node.get('parameter')
+    if not isinstance(parameter, str) or not parameter:
+        problems.add(('search', 'parameter'), 'must be a dotted scenario path')
+    if not (isinstance(until, dict) and isinstance(until.get('assertion'), str)
+            and until.get('state', 'passed') in ('passed', 'failed')):
+        problems.add(('search', 'until'), 'must be {assertion: ID, state: passed|failed}')
+    if bad or not isinstance(parameter, str) or not isinstance(until, dict):
+        return None
+    low, high, tolerance = (float(numbers[k]) for k in ('low', 'high', 'tolerance'))  # type: ignore[arg-type]
+    if not (low < high and tolerance > 0):
+        problems.add(('search',), 'needs low < high and a tolerance above 0')
+        return None
+    return Search(parameter, low, high, tolerance, Until(str(until['assertion']), until.get('state', 'passed')))
+
+
+def _check_scenario(campaign: Campaign, problems: _Problems, *, seeded: bool) -> None:
+    """The scenario loads, and every swept path takes its first and last value (as it would in a job)."""
+    try:
+        text = campaign.scenario.read_text(encoding='utf-8')
+    except OSError as exc:
+        problems.add(('scenario',), f'cannot read {campaign.scenario}: {exc.strerror}')
+        return
+    try:
+        data = scenario_data(text)
+        _, scenario = expanded(data, {}, campaign.scenario)
+    except (ScenarioError, YamlSyntaxError) as exc:
+        problems.add(('scenario',), f'{campaign.scenario} does not load: {one_line(exc)}')
+        return
+    if not seeded:
+        campaign.seeds = [scenario.seed if scenario.seed is not None else 0]  # the scenario's own seed
+    if campaign.mode == 'test' and scenario.system is None:
+        problems.add(('mode',), 'test needs a system_under_test section in the scenario')
+    paths = dict(campaign.sweep)
+    if campaign.search is not None:
+        paths[campaign.search.parameter] = [campaign.search.low, campaign.search.high]
+    for path, values in paths.items():
+        key: PathKey = ('search', 'parameter') if campaign.search is not None and path == \
+            campaign.search.parameter and path not in campaign.sweep else ('sweep', path)
+        for value in {id(v): v for v in (values[0], values[-1])}.values():
+            try:
+                expanded(data, {path: value}, campaign.scenario)
+            except PathError as exc:
+                problems.add(key, str(exc))
+                break
+            except ScenarioError as exc:
+                problems.add(key, f'{value!r} makes the scenario invalid: {exc.problems[0].message}')
+                break
+    if campaign.search is not None:
+        ids = {a.id for a in scenario.assertions}
+        if campaign.search.until.assertion not in ids:
+            problems.add(('search', 'until', 'assertion'),
+                         f'no assertion {campaign.search.until.assertion!r} in the scenario '
+                         f'(there are: {", ".join(sorted(ids)) or "none"})')

@@ -1,0 +1,160 @@
+"""A campaign expanded into jobs: bag x sweep point x seed, each with the hash its result is stored under."""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import itertools
+import json
+import math
+import random
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+from bagfault import __version__
+from bagfault.campaign.edit import expanded, scenario_data
+from bagfault.errors import CampaignError
+from bagfault.io.sources import fingerprint
+
+if TYPE_CHECKING:
+    from bagfault.campaign.model import Campaign
+
+Kind = Literal['sweep', 'search']
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run: a bag, swept values, a seed, and the scenario they make."""
+
+    index: int
+    bag: Path
+    values: dict[str, Any]
+    seed: int
+    scenario_text: str
+    key: str  # sha256 of bag content, expanded scenario, seed, mode and bagfault version
+    kind: Kind = 'sweep'
+
+    @property
+    def scenario_sha(self) -> str:
+        """sha256 of the expanded scenario (as in the output's provenance)."""
+        return hashlib.sha256(self.scenario_text.encode()).hexdigest()
+
+    def spec(self, campaign: Campaign, output: Path | None) -> dict[str, Any]:
+        """What a worker needs (plain JSON)."""
+        return {'mode': campaign.mode, 'scenario_text': self.scenario_text,
+                'scenario_source': str(campaign.scenario.resolve()), 'bag': str(self.bag.resolve()), 'seed': self.seed,
+                'output': str(output) if output else None,
+                'timeout': campaign.timeout}
+
+
+@dataclass
+class Plan:
+    """Every job of the sweep, in table order; the bags with their fingerprints."""
+
+    campaign: Campaign
+    bags: list[Path]
+    jobs: list[Job] = field(default_factory=list)
+    fingerprints: dict[str, str] = field(default_factory=dict)  # bag -> digest of its files
+
+    def describe(self) -> dict[str, Any]:
+        """campaign.json: the expanded plan with hashes."""
+        c = self.campaign
+        return {
+            'campaign': c.name, 'scenario': str(c.scenario), 'mode': c.mode, 'bagfault': __version__,
+            'bags': [{'path': str(b), 'sha256': self.fingerprints[str(b)]} for b in self.bags],
+            'sweep': c.sweep, 'seeds': c.seeds, 'design': c.design, 'samples': c.samples, 'keep': c.keep,
+            'search': asdict(c.search) if c.search is not None else None,
+            'jobs': [{'index': j.index, 'bag': str(j.bag), 'values': j.values, 'seed': j.seed, 'key': j.key,
+                      'kind': j.kind, 'scenario': scenario_file(j, c)} for j in self.jobs],
+        }
+
+
+    def summary(self) -> str:
+        """--dry-run: the plan's size and its jobs, one line each."""
+        c = self.campaign
+        sizes = ' x '.join([f'{len(self.bags)} bags', *(f'{len(v)} {k}' for k, v in c.sweep.items()),
+                            f'{len(c.seeds)} seeds'])
+        lines = [f'campaign {c.name}: {len(self.jobs)} jobs ({sizes}'
+                 + (f', random design of {c.samples} points' if c.design == 'random' else '') + f'), mode {c.mode}']
+        if c.search is not None:
+            lines.append(f'then a search of {c.search.parameter} in [{c.search.low:g}, {c.search.high:g}] to '
+                         f'{c.search.tolerance:g}: at most {search_jobs(c)} jobs per bag')
+        for job in self.jobs:
+            values = ', '.join(f'{k}={v!r}' for k, v in job.values.items())
+            lines.append(f'  {job.index:>5}  {job.bag}  {values}  seed={job.seed}  key={job.key}')
+        return '\n'.join(lines)
+
+
+def scenario_file(job: Job, campaign: Campaign) -> str:
+    """Where the campaign folder keeps a job's expanded scenario, under the original file name (which the
+    output's provenance records), so `bagfault run` on it by hand writes the job's output byte for byte."""
+    return f'scenarios/{job.scenario_sha[:16]}/{campaign.scenario.name}'
+
+
+def search_jobs(campaign: Campaign) -> int:
+    """The most jobs the bisection runs for one bag: both ends, then one value per halving."""
+    s = campaign.search
+    assert s is not None
+    halvings = max(0, math.ceil(math.log2((s.high - s.low) / s.tolerance)))
+    return (2 + halvings) * len(campaign.seeds)
+
+
+def bags_of(campaign: Campaign) -> list[Path]:
+    """Each glob expanded (sorted), relative to the campaign file; CampaignError for a glob that finds nothing."""
+    base = campaign.source.parent if campaign.source is not None else Path('.')
+    found: list[Path] = []
+    for pattern in campaign.bags:
+        full = pattern if Path(pattern).is_absolute() else str(base / pattern)
+        matches = sorted(Path(m.rstrip('/')) for m in glob.glob(full))
+        if not matches:
+            raise CampaignError(f'{campaign.source}: bags: {pattern!r} matches no file or folder')
+        found += [m for m in matches if m not in found]
+    return found
+
+
+def points(campaign: Campaign) -> list[dict[str, Any]]:
+    """Sweep points: the full grid in file order, or `samples` points of it drawn with the design seed."""
+    keys = list(campaign.sweep)
+    grid = list(itertools.product(*(campaign.sweep[k] for k in keys)))
+    if campaign.design == 'random' and campaign.samples < len(grid):
+        picked = sorted(random.Random(campaign.design_seed).sample(range(len(grid)), campaign.samples))
+        grid = [grid[i] for i in picked]
+    return [dict(zip(keys, values, strict=True)) for values in grid]
+
+
+def bag_digest(path: Path) -> str:
+    """One digest over the bag's files (names, sizes, sha256)."""
+    return hashlib.sha256(json.dumps([asdict(f) for f in fingerprint(path)], sort_keys=True).encode()).hexdigest()
+
+
+def job_key(bag_sha: str, scenario_text: str, seed: int, mode: str) -> str:
+    """Where a job's result is stored: changes when the bag, the expanded scenario, the seed or bagfault does."""
+    text = json.dumps({'bag': bag_sha, 'scenario': scenario_text, 'seed': seed, 'mode': mode, 'version': __version__},
+                      sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def make_plan(campaign: Campaign) -> Plan:
+    """The sweep's jobs, bag-major, then point, then seed."""
+    bags = bags_of(campaign)
+    plan = Plan(campaign, bags, fingerprints={str(b): bag_digest(b) for b in bags})
+    data = scenario_data(campaign.scenario.read_text(encoding='utf-8'))
+    texts = [(point, expanded(data, point, campaign.scenario)[0]) for point in points(campaign)]
+    for bag in bags:
+        for point, text in texts:
+            for seed in campaign.seeds:
+                key = job_key(plan.fingerprints[str(bag)], text, seed, campaign.mode)
+                plan.jobs.append(Job(len(plan.jobs), bag, point, seed, text, key))
+    return plan
+
+
+def search_job(plan: Plan, index: int, bag: Path, value: float, seed: int) -> Job:
+    """A job of the bisection: the searched parameter at `value` (with the first sweep point's other values)."""
+    campaign = plan.campaign
+    assert campaign.search is not None
+    data = scenario_data(campaign.scenario.read_text(encoding='utf-8'))
+    values = {campaign.search.parameter: value}
+    text = expanded(data, values, campaign.scenario)[0]
+    return Job(index, bag, values, seed, text, job_key(plan.fingerprints[str(bag)], text, seed, campaign.mode),
+               'search')

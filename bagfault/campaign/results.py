@@ -1,0 +1,236 @@
+"""The campaign's tables and report: results.parquet, results.csv, campaign.json, report.html.
+
+One row per job, in job order (sweep jobs bag-major, then search rounds), so
+the table is the same whatever ran the jobs. `seconds` is the only column
+that is not a function of the inputs.
+"""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from bagfault.errors import CampaignError
+from bagfault.io.outputs import write_atomic
+
+if TYPE_CHECKING:
+    from bagfault.campaign.plan import Job, Plan
+    from bagfault.campaign.search import BreakingPoint
+
+FIXED = ('job', 'kind', 'bag', 'seed')
+TAIL = ('status', 'message')
+
+
+@dataclass
+class Table:
+    """Columns in order and one dict per row."""
+
+    columns: list[str]
+    rows: list[dict[str, Any]]
+    parameters: list[str]
+    assertions: list[str]
+
+    def sweep_rows(self) -> list[dict[str, Any]]:
+        """The rows of the sweep (not of the search)."""
+        return [r for r in self.rows if r['kind'] == 'sweep']
+
+
+def bag_name(plan: Plan, bag: Path) -> str:
+    """A bag as the table shows it: relative to the campaign file's folder when inside it."""
+    base = plan.campaign.source.parent.resolve() if plan.campaign.source is not None else Path.cwd()
+    try:
+        return str(bag.resolve().relative_to(base))
+    except ValueError:
+        return str(bag.resolve())
+
+
+def make_table(plan: Plan, done: list[tuple[Job, dict[str, Any], str]], assertions: list[str]) -> Table:
+    """Rows of (job, its result, its kept output relative to the campaign folder or '')."""
+    parameters = list(plan.campaign.sweep)
+    search = plan.campaign.search
+    if search is not None and search.parameter not in parameters:
+        parameters.append(search.parameter)
+    codes = sorted({code for _, result, _ in done for code in result.get('detections', {})})
+    columns = [*FIXED, *parameters, *TAIL]
+    for a in assertions:
+        columns += [a, f'{a}.value', f'{a}.unit', f'{a}.t_s']
+    columns += [f'detected.{code}' for code in codes] + ['seconds', 'output', 'key']
+    rows = []
+    for job, result, output in done:
+        row: dict[str, Any] = {'job': job.index, 'kind': job.kind, 'bag': bag_name(plan, job.bag), 'seed': job.seed}
+        row.update({p: job.values.get(p) for p in parameters})
+        row['status'], row['message'] = result['status'], result.get('message', '')
+        for a in assertions:
+            got = result.get('assertions', {}).get(a, {})
+            row[a], row[f'{a}.value'] = got.get('state'), got.get('value')
+            row[f'{a}.unit'], row[f'{a}.t_s'] = got.get('unit') or None, got.get('t_s')
+        for code in codes:
+            row[f'detected.{code}'] = result.get('detections', {}).get(code)
+        row['seconds'], row['output'], row['key'] = result.get('seconds'), output or None, job.key
+        rows.append(row)
+    return Table(columns, rows, parameters, assertions)
+
+
+def _kind(values: list[Any]) -> str:
+    present = [v for v in values if v is not None]
+    if all(isinstance(v, bool) for v in present) and present:
+        return 'bool'
+    if all(isinstance(v, int) and not isinstance(v, bool) for v in present):
+        return 'int'
+    if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
+        return 'float'
+    return 'string'
+
+
+def _cell(value: Any, kind: str) -> Any:
+    if value is None:
+        return None
+    if kind == 'string' and not isinstance(value, str):
+        return json.dumps(value, sort_keys=True)
+    if kind == 'float':
+        return float(value)
+    return value
+
+
+def write_parquet(table: Table, path: Path) -> None:
+    """results.parquet, typed columns (parameters numeric when every value is a number)."""
+    try:
+        import pyarrow as pa  # noqa: PLC0415
+        import pyarrow.parquet as pq  # noqa: PLC0415
+    except ImportError:
+        raise CampaignError('results.parquet needs pyarrow: pip install "bagfault[campaign]"') from None
+    arrays, fields = [], []
+    types = {'bool': pa.bool_(), 'int': pa.int64(), 'float': pa.float64(), 'string': pa.string()}
+    for column in table.columns:
+        values = [row.get(column) for row in table.rows]
+        kind = 'int' if column == 'seed' else _kind(values)
+        arrays.append(pa.array([_cell(v, kind) for v in values], type=types[kind] if column != 'seed' else pa.uint64()))
+        fields.append(pa.field(column, arrays[-1].type))
+    buffer = pa.BufferOutputStream()
+    pq.write_table(pa.Table.from_arrays(arrays, schema=pa.schema(fields)), buffer)
+    write_atomic(path, buffer.getvalue().to_pybytes())
+
+
+def write_csv(table: Table, path: Path) -> None:
+    """results.csv, the same columns; empty cells for missing values."""
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator='\n')
+    writer.writerow(table.columns)
+    for row in table.rows:
+        writer.writerow(['' if row.get(c) is None else _csv(row[c]) for c in table.columns])
+    write_atomic(path, text.getvalue())
+
+
+def _csv(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (dict, list)):
+        return json.dumps(value, sort_keys=True)
+    return str(value)
+
+
+# -- report.html --------------------------------------------------------------------------------------
+
+STYLE = """
+body{font-family:system-ui,sans-serif;margin:2em;color:#222}h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right}
+th{background:#f4f4f4}td.l,th.l{text-align:left}.muted{color:#777}code{background:#f4f4f4;padding:0 .2em}
+"""
+
+
+def _rate_cell(passed: int, total: int) -> str:
+    if total == 0:
+        return '<td class="muted">-</td>'
+    rate = passed / total
+    color = f'hsl({round(120 * rate)},65%,82%)'
+    return f'<td style="background:{color}" title="{passed} of {total}">{rate * 100:.0f}% <span class="muted">' \
+           f'({passed}/{total})</span></td>'
+
+
+def _label(value: Any) -> str:
+    return html.escape(f'{value:g}' if isinstance(value, float) else str(value))
+
+
+def _order(values: list[Any]) -> list[Any]:
+    seen: list[Any] = []
+    for v in values:
+        if v not in seen:
+            seen.append(v)
+    return seen
+
+
+def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine: str) -> str:
+    """A one-file HTML page: pass rates per parameter value, a heatmap of two parameters, breaking points,
+    failed jobs with links to their kept outputs."""
+    c = plan.campaign
+    rows = table.sweep_rows()
+    counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}
+    parts = [f'<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(c.name)}: bagfault campaign'
+             f'</title><style>{STYLE}</style></head><body>',
+             f'<h1>Campaign {html.escape(c.name)}</h1>',
+             f'<p>scenario <code>{html.escape(str(c.scenario))}</code>, mode <code>{c.mode}</code>, '
+             f'{len(plan.bags)} bag(s), {len(rows)} sweep job(s): <b>{counts["passed"]} passed</b>, '
+             f'{counts["failed"]} failed, {counts["error"]} error; ran on {html.escape(engine)}.</p>']
+    columns = ['job passed', *table.assertions]
+    for parameter in table.parameters:
+        values = _order([r[parameter] for r in rows if parameter in c.sweep])
+        if not values:
+            continue
+        parts.append(f'<h2>Pass rate against <code>{html.escape(parameter)}</code></h2><table><tr>'
+                     f'<th class="l">{html.escape(parameter)}</th>'
+                     + ''.join(f'<th>{html.escape(a)}</th>' for a in columns) + '</tr>')
+        for value in values:
+            group = [r for r in rows if r[parameter] == value]
+            cells = [_rate_cell(sum(r['status'] == 'passed' for r in group), len(group))]
+            for a in table.assertions:
+                decided = [r for r in group if r[a] is not None]
+                cells.append(_rate_cell(sum(r[a] == 'passed' for r in decided), len(decided)))
+            parts.append(f'<tr><td class="l">{_label(value)}</td>{"".join(cells)}</tr>')
+        parts.append('</table>')
+    swept = list(c.sweep)
+    if len(swept) >= 2:
+        first, second = swept[0], swept[1]
+        xs, ys = _order([r[second] for r in rows]), _order([r[first] for r in rows])
+        parts.append(f'<h2>Jobs passed: <code>{html.escape(first)}</code> against <code>{html.escape(second)}'
+                     f'</code></h2><table><tr><th class="l">{html.escape(first)} \\ {html.escape(second)}</th>'
+                     + ''.join(f'<th>{_label(x)}</th>' for x in xs) + '</tr>')
+        for y in ys:
+            cells = []
+            for x in xs:
+                group = [r for r in rows if r[first] == y and r[second] == x]
+                cells.append(_rate_cell(sum(r['status'] == 'passed' for r in group), len(group)))
+            parts.append(f'<tr><td class="l">{_label(y)}</td>{"".join(cells)}</tr>')
+        parts.append('</table>')
+    if points:
+        assert c.search is not None
+        parts.append(f'<h2>Breaking point of <code>{html.escape(c.search.parameter)}</code> '
+                     f'({html.escape(c.search.until.assertion)} {c.search.until.state}, tolerance '
+                     f'{c.search.tolerance:g})</h2><table><tr><th class="l">bag</th><th>holds from</th>'
+                     '<th>not at</th><th>jobs</th><th class="l">note</th></tr>')
+        for p in points:
+            parts.append(f'<tr><td class="l">{html.escape(bag_name(plan, p.bag))}</td>'
+                         f'<td>{"-" if p.value is None else _label(p.value)}</td>'
+                         f'<td>{"-" if p.below is None else _label(p.below)}</td><td>{p.jobs}</td>'
+                         f'<td class="l">{html.escape(p.note)}</td></tr>')
+        parts.append('</table>')
+    bad = [r for r in rows if r['status'] != 'passed']
+    if bad:
+        parts.append('<h2>Jobs that did not pass</h2><table><tr><th>job</th><th class="l">bag</th>'
+                     + ''.join(f'<th>{html.escape(p)}</th>' for p in swept)
+                     + '<th>seed</th><th class="l">status</th><th class="l">why</th><th class="l">output</th></tr>')
+        for r in bad:
+            link = f'<a href="{html.escape(r["output"])}">{html.escape(Path(r["output"]).name)}</a>' \
+                if r['output'] else '<span class="muted">not kept</span>'
+            parts.append(f'<tr><td>{r["job"]}</td><td class="l">{html.escape(r["bag"])}</td>'
+                         + ''.join(f'<td>{_label(r[p])}</td>' for p in swept)
+                         + f'<td>{r["seed"]}</td><td class="l">{r["status"]}</td>'
+                         f'<td class="l">{html.escape(r["message"] or "")}</td><td class="l">{link}</td></tr>')
+        parts.append('</table>')
+    parts.append('</body></html>\n')
+    return '\n'.join(parts)
+

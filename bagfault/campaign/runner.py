@@ -1,0 +1,204 @@
+"""Run a campaign: its jobs on an engine, each result stored as it comes, then the tables and the report.
+
+DIR/jobs/<key>.json holds each finished job's result, keyed by the hash of
+(bag content, expanded scenario, seed, mode, bagfault version): `resume`
+reuses every result whose key is still in the plan, so an interrupted or
+edited campaign reruns only what is missing or changed. The tables are
+written at the end, each under a temporary name first.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
+
+from bagfault.campaign.edit import expanded, scenario_data
+from bagfault.campaign.engines import make_engine
+from bagfault.campaign.plan import make_plan, scenario_file
+from bagfault.campaign.results import make_table, render_report, write_csv, write_parquet
+from bagfault.campaign.search import find_breaking_points
+from bagfault.errors import CampaignError
+from bagfault.io.outputs import write_atomic
+from bagfault.progress import _clock
+
+if TYPE_CHECKING:
+    from bagfault.campaign.model import Campaign
+    from bagfault.campaign.plan import Job, Plan
+    from bagfault.campaign.results import Table
+    from bagfault.campaign.search import BreakingPoint
+
+
+@dataclass
+class CampaignResult:
+    """What a campaign produced: the plan, the table (sweep and search rows), the breaking points."""
+
+    plan: Plan
+    table: Table
+    breaking_points: list[BreakingPoint]
+    directory: Path
+    engine: str
+    ran: int  # jobs run now (the others came from DIR/jobs)
+    counts: dict[str, int] = field(default_factory=dict)  # sweep jobs by status
+
+    @property
+    def failed(self) -> bool:
+        """True when a sweep job failed or could not run: exit code 1."""
+        return bool(self.counts.get('failed') or self.counts.get('error'))
+
+
+class JobProgress:
+    """A one-line bar on a terminal: jobs done, passed/failed/error so far, ETA."""
+
+    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.total = 0
+        self.done = 0
+        self.cached = 0
+        self.counts = {'passed': 0, 'failed': 0, 'error': 0}
+        self.began = time.monotonic()
+
+    def add(self, total: int, cached: int) -> None:
+        """More jobs to do (a search round), `cached` of them already done."""
+        self.total += total
+        self.done += cached
+        self.cached += cached
+
+    def finished(self, status: str) -> None:
+        """A job ended."""
+        self.done += 1
+        self.counts[status] = self.counts.get(status, 0) + 1
+        self.draw()
+
+    def line(self) -> str:
+        """The text of the bar."""
+        width = 24
+        fraction = self.done / self.total if self.total else 1.0
+        filled = int(fraction * width)
+        ran = self.done - self.cached
+        elapsed = time.monotonic() - self.began
+        left = self.total - self.done
+        eta = f' ETA {_clock(elapsed / ran * left)}' if ran and left else ''
+        c = self.counts
+        return (f'[{"#" * filled}{"." * (width - filled)}] {self.done}/{self.total} jobs  {c["passed"]} passed  '
+                f'{c["failed"]} failed  {c["error"]} error{eta}')
+
+    def draw(self) -> None:
+        """Redraw on the terminal."""
+        if self.enabled:
+            self.stream.write('\r' + self.line() + '\x1b[K')
+            self.stream.flush()
+
+    def close(self) -> None:
+        """End the line."""
+        if self.enabled and self.total:
+            self.stream.write('\n')
+            self.stream.flush()
+
+
+class _Store:
+    """DIR/jobs: finished results by key; DIR/outputs: the kept output files."""
+
+    def __init__(self, directory: Path, plan: Plan) -> None:
+        self.directory = directory
+        self.plan = plan
+        self.jobs = directory / 'jobs'
+        self.outputs = directory / 'outputs'
+        self.results: dict[str, dict[str, Any]] = {}
+
+    def open(self, resume: bool) -> None:
+        """Make the folders; load what is there when resuming, refuse a used folder otherwise."""
+        if self.directory.exists() and not self.directory.is_dir():
+            raise CampaignError(f'{self.directory}: not a folder (-o names the campaign folder)')
+        stored = sorted(self.jobs.glob('*.json')) if self.jobs.is_dir() else []
+        if stored and not resume:
+            raise CampaignError(f'{self.directory}: holds {len(stored)} results of a campaign already; '
+                                f'--resume continues it (reruns only what is missing or changed), or choose another -o')
+        try:
+            for folder in (self.jobs, self.outputs):
+                folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CampaignError(f'{self.directory}: cannot make the campaign folder: {exc.strerror}') from None
+        for path in stored:
+            try:
+                self.results[path.stem] = json.loads(path.read_text(encoding='utf-8'))['result']
+            except (OSError, ValueError, KeyError, TypeError):
+                continue  # unreadable: the job runs again
+
+    def output(self, job: Job) -> Path:
+        """Where the job writes its output file."""
+        return (self.outputs / f'{job.key}.mcap').resolve()
+
+    def put(self, job: Job, result: dict[str, Any]) -> None:
+        """Keep the result (and the output, by the keep policy)."""
+        keep = self.plan.campaign.keep
+        path = self.output(job)
+        if keep == 'none' or (keep == 'failed' and result['status'] == 'passed'):
+            path.unlink(missing_ok=True)
+        self.results[job.key] = result
+        write_atomic(self.jobs / f'{job.key}.json', json.dumps({'job': job.index, 'bag': str(job.bag),
+                                                                 'values': job.values, 'seed': job.seed,
+                                                                 'result': result}, sort_keys=True, indent=1))
+
+    def kept(self, job: Job) -> str:
+        """The job's output relative to the folder, if it is kept."""
+        path = self.output(job)
+        return str(path.relative_to(self.directory.resolve())) if path.exists() else ''
+
+
+def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = None, ray: str | None = None,
+                 resume: bool = False, progress: JobProgress | None = None) -> CampaignResult:
+    """Every job of the plan (and the search rounds), then the tables and the report in `directory`."""
+    plan = make_plan(campaign)
+    store = _Store(directory, plan)
+    store.open(resume)
+    bar = progress or JobProgress(enabled=False)
+    engine = make_engine(workers, ray)
+    ran = 0
+    try:
+        def run_jobs(jobs: list[Job]) -> dict[str, dict[str, Any]]:
+            nonlocal ran
+            todo = list({job.key: job for job in jobs if job.key not in store.results}.values())
+            bar.add(len({j.key for j in jobs}), len({j.key for j in jobs}) - len(todo))
+            bar.draw()
+
+            def done(i: int, result: dict[str, Any]) -> None:
+                store.put(todo[i], result)
+                bar.finished(result['status'])
+
+            engine.run([job.spec(campaign, store.output(job)) for job in todo], done)
+            ran += len(todo)
+            return {job.key: store.results[job.key] for job in jobs}
+
+        run_jobs(plan.jobs)
+        points, search_jobs = ([], []) if campaign.search is None else \
+            find_breaking_points(plan, run_jobs, len(plan.jobs))
+    finally:
+        bar.close()
+        engine.close()
+    plan.jobs += search_jobs
+    _, scenario = expanded(scenario_data(campaign.scenario.read_text(encoding='utf-8')), {}, campaign.scenario)
+    table = make_table(plan, [(job, store.results[job.key], store.kept(job)) for job in plan.jobs],
+                       [a.id for a in scenario.assertions])
+    description = getattr(engine, 'description', type(engine).__name__)
+    _write_scenarios(directory, plan)
+    write_parquet(table, directory / 'results.parquet')
+    write_csv(table, directory / 'results.csv')
+    write_atomic(directory / 'campaign.json', json.dumps(plan.describe(), indent=1, sort_keys=True) + '\n')
+    write_atomic(directory / 'report.html', render_report(plan, table, points, description))
+    rows = table.sweep_rows()
+    counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}
+    return CampaignResult(plan, table, points, directory, description, ran, counts)
+
+
+def _write_scenarios(directory: Path, plan: Plan) -> None:
+    """DIR/scenarios/<sha256[:16]>/<scenario name>: each expanded scenario once (campaign.json names it per job)."""
+    for job in {job.scenario_text: job for job in plan.jobs}.values():
+        path = directory / scenario_file(job, plan.campaign)
+        if not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(path, job.scenario_text)

@@ -1,0 +1,255 @@
+"""Campaigns run for real: job processes on a local pool, Ray tasks on a local instance and on a Ray head.
+
+Expected states come from corpus.py's arithmetic (z + bias > 0.1 is detected,
+40 ms after the fault starts) and from separate `api.run` calls on scenario
+texts written here, not from the campaign code.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import pytest
+from corpus import SCENARIO, campaign_file, write_imu_bag
+
+from bagfault import api
+from bagfault.cli import main
+from bagfault.scenario import parse_scenario
+
+pq = pytest.importorskip('pyarrow.parquet', reason='campaign extra not installed')
+BIAS = 'faults.bias.config.angular_velocity_z_bias'
+CAMPAIGN = f"""
+    campaign: drift
+    scenario: drift.yaml
+    bags: [bags/*.mcap]
+    sweep:
+      {BIAS}: [0.05, 0.09, 0.2]
+    seeds: [0, 1]
+    keep: all
+"""
+BASE_Z = {'bags/a.mcap': 0.02, 'bags/b.mcap': 0.0}
+
+
+def table(directory: Path) -> list[dict[str, Any]]:
+    """results.parquet without the wall-time column."""
+    rows = pq.read_table(directory / 'results.parquet').to_pylist()
+    return [{k: v for k, v in row.items() if k != 'seconds'} for row in rows]
+
+
+@pytest.fixture(scope='module')
+def sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The 2 bags x 3 biases x 2 seeds campaign, run once on one local worker."""
+    folder = tmp_path_factory.mktemp('sweep')
+    (folder / 'bags').mkdir()
+    for name, z in BASE_Z.items():
+        write_imu_bag(folder / name, z)
+    (folder / 'drift.yaml').write_text(SCENARIO % {'bias': '0.0'})
+    campaign_file(folder, CAMPAIGN)
+    assert main(['campaign', str(folder / 'campaign.yaml'), '-o', str(folder / 'one'), '--workers', '1']) == 1
+    return folder
+
+
+def test_twelve_rows_match_twelve_separate_runs(sweep: Path, tmp_path: Path) -> None:
+    rows = table(sweep / 'one')
+    assert len(rows) == 12
+    assert [(r['bag'], r[BIAS], r['seed']) for r in rows] == [
+        (bag, bias, seed) for bag in BASE_Z for bias in (0.05, 0.09, 0.2) for seed in (0, 1)]
+    for row in rows:
+        detected = BASE_Z[row['bag']] + row[BIAS] > 0.1
+        assert row['status'] == ('passed' if detected else 'failed')
+        assert row['drift_detected'] == row['status']
+        if detected:
+            assert row['drift_detected.value'] == pytest.approx(0.04) and row['drift_detected.unit'] == 's'
+            assert row['detected.IMU_DRIFT'] == pytest.approx(1.04)
+        else:
+            assert row['detected.IMU_DRIFT'] is None and 'did not reach CONFIRMED' in row['message']
+        # the same run by hand, from a scenario text written here
+        scenario = parse_scenario(SCENARIO % {'bias': repr(row[BIAS])})
+        result = api.run(scenario, [sweep / row['bag']], tmp_path / f'{row["job"]}.mcap', seed=row['seed'])
+        (by_hand,) = result.assertions
+        assert (by_hand.state, by_hand.value) == (row['drift_detected'], row['drift_detected.value'])
+
+
+def test_a_job_writes_what_bagfault_run_writes_by_hand(sweep: Path, tmp_path: Path) -> None:
+    import json
+
+    plan = json.loads((sweep / 'one' / 'campaign.json').read_text())
+    for job in plan['jobs'][::5]:
+        hand = tmp_path / f'hand{job["index"]}.mcap'
+        scenario = sweep / 'one' / job['scenario']
+        assert parse_scenario(scenario.read_text()).fault('bias').config['angular_velocity_z_bias'] == \
+            job['values'][BIAS]
+        code = main(['run', str(scenario), job['bag'], '-o', str(hand), '--seed', str(job['seed'])])
+        assert code == (0 if BASE_Z[str(Path(job['bag']).relative_to(sweep))] + job['values'][BIAS] > 0.1 else 1)
+        assert hand.read_bytes() == (sweep / 'one' / 'outputs' / f'{job["key"]}.mcap').read_bytes()
+
+
+def test_the_table_is_the_same_on_two_workers_and_on_ray(sweep: Path) -> None:
+    pytest.importorskip('ray')
+    assert main(['campaign', str(sweep / 'campaign.yaml'), '-o', str(sweep / 'two'), '--workers', '2']) == 1
+    assert table(sweep / 'two') == table(sweep / 'one')
+    assert (sweep / 'two' / 'results.csv').read_text().count('\n') == 13
+    assert main(['campaign', str(sweep / 'campaign.yaml'), '-o', str(sweep / 'ray'), '--ray', '--workers', '2']) == 1
+    assert table(sweep / 'ray') == table(sweep / 'one')
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return int(s.getsockname()[1])
+
+
+def test_a_campaign_on_a_ray_head_started_on_loopback(sweep: Path) -> None:
+    pytest.importorskip('ray')
+    ray_cli = Path(sys.executable).parent / 'ray'
+    temp = Path(tempfile.mkdtemp(prefix='rh', dir='/tmp'))  # Ray's socket paths must stay short
+    port = _free_port()
+    env = {**os.environ, 'RAY_USAGE_STATS_ENABLED': '0'}
+    started = subprocess.run([str(ray_cli), 'start', '--head', '--node-ip-address', '127.0.0.1', '--port', str(port),
+                              '--temp-dir', str(temp), '--num-cpus', '2', '--include-dashboard', 'false',
+                              '--disable-usage-stats'], env=env, capture_output=True, text=True, timeout=180,
+                             check=False)
+    try:
+        assert started.returncode == 0, started.stderr[-2000:]
+        done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'campaign', str(sweep / 'campaign.yaml'), '-o',
+                               str(sweep / 'head'), '--ray', f'127.0.0.1:{port}'], env=env, capture_output=True,
+                              text=True, timeout=300, check=False)
+        assert done.returncode == 1, done.stderr[-3000:]
+        assert f'on Ray at 127.0.0.1:{port} (2 CPUs)' in done.stdout
+        assert table(sweep / 'head') == table(sweep / 'one')
+    finally:
+        subprocess.run([str(ray_cli), 'stop', '--force'], env=env, capture_output=True, timeout=120, check=False)
+        shutil.rmtree(temp, ignore_errors=True)
+
+
+def test_search_finds_the_breaking_point_known_from_the_thresholds(corpus: Path) -> None:
+    (corpus / 'bags' / 'b.mcap').unlink()
+    path = campaign_file(corpus, f"""
+        campaign: breaking
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+        search:
+          parameter: {BIAS}
+          low: 0.0
+          high: 0.5
+          tolerance: 0.01
+          until: {{assertion: drift_detected, state: passed}}
+        keep: none
+    """)
+    result = api.campaign(path, corpus / 'out', workers=2)
+    (point,) = result.breaking_points
+    # detected iff 0.02 + bias > 0.1: the point is 0.08, bracketed to the tolerance
+    assert point.below is not None and point.value is not None
+    assert point.below <= 0.08 < point.value and point.value - point.below <= 0.01
+    # both ends, then halvings of 0.5 down to 0.01: ceil(log2(50)) = 6
+    assert point.jobs == 8
+    search = [r for r in result.table.rows if r['kind'] == 'search']
+    assert len(search) == 8 and [r['job'] for r in search] == list(range(1, 9))
+    for row in search:
+        assert row['status'] == ('passed' if 0.02 + row[BIAS] > 0.1 else 'failed')
+    assert not list((corpus / 'out' / 'outputs').iterdir())  # keep: none
+    html = (corpus / 'out' / 'report.html').read_text()
+    assert 'Breaking point of' in html and f'{point.value:g}' in html
+
+
+def test_a_corrupt_bag_is_an_error_row_and_the_others_complete(corpus: Path) -> None:
+    (corpus / 'bags' / 'c.mcap').write_bytes(b'\x89MCAP0\r\n' + os.urandom(64))
+    path = campaign_file(corpus, f"""
+        campaign: corrupt
+        scenario: drift.yaml
+        bags: [bags/*.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+    """)
+    assert main(['campaign', str(path), '-o', str(corpus / 'out')]) == 1
+    rows = table(corpus / 'out')
+    assert [(r['bag'], r['status']) for r in rows] == [('bags/a.mcap', 'passed'), ('bags/b.mcap', 'passed'),
+                                                      ('bags/c.mcap', 'error')]
+    assert 'c.mcap' in rows[2]['message'] and rows[2]['drift_detected'] is None
+    html = (corpus / 'out' / 'report.html').read_text()
+    assert 'Jobs that did not pass' in html and 'bags/c.mcap' in html
+
+
+class _InterruptAfter:
+    """A progress display that presses Ctrl-C after `count` finished jobs."""
+
+    def __init__(self, count: int) -> None:
+        from bagfault.campaign.runner import JobProgress
+
+        self.bar = JobProgress(enabled=False)
+        self.count = count
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.bar, name)
+
+    def finished(self, status: str) -> None:
+        self.bar.finished(status)
+        if self.bar.done >= self.count:
+            raise KeyboardInterrupt
+
+
+def test_resume_reruns_only_unfinished_and_changed_jobs(corpus: Path) -> None:
+    body = f"""
+        campaign: resumable
+        scenario: drift.yaml
+        bags: [bags/*.mcap]
+        sweep: {{{BIAS}: [0.05, 0.2]}}
+        seeds: [0, 1, 2]
+    """
+    path = campaign_file(corpus, body)
+    out = corpus / 'out'
+    with pytest.raises(KeyboardInterrupt):
+        api.campaign(path, out, workers=1, progress=_InterruptAfter(5))  # type: ignore[arg-type]
+    stored = {p.name: p.stat().st_mtime_ns for p in (out / 'jobs').glob('*.json')}
+    assert len(stored) == 5 and not (out / 'results.parquet').exists()
+    assert not [p for p in (out / 'outputs').iterdir() if p.name.endswith('.partial')]
+    assert main(['campaign', str(path), '-o', str(out)]) == 2  # a used folder needs --resume
+    resumed = api.campaign(path, out, workers=2, resume=True)
+    assert resumed.ran == 12 - 5 and len(resumed.table.rows) == 12
+    assert {p.name: p.stat().st_mtime_ns for p in (out / 'jobs').glob('*.json') if p.name in stored} == stored
+    fresh = api.campaign(path, corpus / 'fresh', workers=2)
+    assert [{k: v for k, v in r.items() if k != 'seconds'} for r in resumed.table.rows] == \
+        [{k: v for k, v in r.items() if k != 'seconds'} for r in fresh.table.rows]
+    # a changed campaign: one more value reruns only its 6 jobs
+    campaign_file(corpus, body.replace('[0.05, 0.2]', '[0.05, 0.2, 0.09]'))
+    changed = api.campaign(path, out, workers=2, resume=True)
+    assert changed.ran == 6 and len(changed.table.rows) == 18
+
+
+def test_dry_run_prints_the_plan_and_its_size(corpus: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = campaign_file(corpus, f"""
+        campaign: plan
+        scenario: drift.yaml
+        bags: [bags/*.mcap]
+        sweep:
+          {BIAS}: {{range: [0.0, 0.3, 0.1]}}
+          faults.bias.start: [0.5, 1.0]
+        seeds: {{range: [0, 3]}}
+    """)
+    assert main(['campaign', str(path), '--dry-run']) == 0
+    out = capsys.readouterr().out.splitlines()
+    # 2 bags x 4 biases (0.0 to 0.3 inclusive) x 2 starts x 3 seeds (0, 1, 2)
+    assert out[0].startswith('campaign plan: 48 jobs (2 bags x 4 ')
+    assert len(out) == 1 + 48
+    assert not (corpus / 'out').exists()
+
+
+def test_a_job_past_its_timeout_is_an_error_row(corpus: Path) -> None:
+    path = campaign_file(corpus, f"""
+        campaign: slow
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+        timeout: 0.001
+    """)
+    result = api.campaign(path, corpus / 'out', workers=1)
+    (row,) = result.table.rows
+    assert (row['status'], row['message']) == ('error', 'timed out after 0.001 s (the campaign timeout)')
+    assert result.failed and result.counts == {'passed': 0, 'failed': 0, 'error': 1}
