@@ -14,8 +14,10 @@ import multiprocessing
 import multiprocessing.context
 import os
 import signal
+import sys
 import tempfile
 import threading
+import types
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -24,7 +26,7 @@ from bagfault.campaign.job import run_job
 from bagfault.errors import CampaignError
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Sequence
+    from collections.abc import Callable, Iterator, Sequence
     from multiprocessing.connection import Connection
     from multiprocessing.process import BaseProcess
 
@@ -48,6 +50,29 @@ def _forkserver() -> multiprocessing.context.ForkServerContext:
         return _context
 
 
+@contextlib.contextmanager
+def _without_main() -> Iterator[None]:
+    """While a job process starts: multiprocessing would import the caller's main script in it again (spawn
+    semantics), running a script that calls `api.campaign` without a `__name__` guard once per job. The job
+    needs nothing from it. Held under Running.lock, for the instant of `start()`."""
+    main = sys.modules.get('__main__')
+    sys.modules['__main__'] = types.ModuleType('__main__')
+    try:
+        yield
+    finally:
+        if main is not None:
+            sys.modules['__main__'] = main
+
+
+def warm_up() -> int:
+    """Start this process's fork server (bagfault imported) before the first job needs it; its pid."""
+    from multiprocessing import forkserver  # noqa: PLC0415
+
+    _forkserver()
+    forkserver.ensure_running()
+    return os.getpid()
+
+
 def _die_with_parent() -> None:
     """In the job process: killed when its parent dies (a worker or a Ray task cancelled by force)."""
     with contextlib.suppress(Exception):
@@ -58,6 +83,8 @@ def _job_process(spec: Spec, log: str, conn: Connection) -> None:
     """The job process: its own session, its output in `log`, its result sent back on `conn`."""
     _die_with_parent()
     os.setsid()
+    with contextlib.suppress(OSError):  # a Ray worker runs at nice 15; a job is the work, not housekeeping
+        os.setpriority(os.PRIO_PROCESS, 0, 0)
 
     def interrupt(number: int, _frame: object) -> None:  # the engine's timeout: stop what the run started
         raise KeyboardInterrupt(signal.Signals(number).name)
@@ -97,7 +124,7 @@ def execute(spec: Spec) -> dict[str, Any]:
     receiver, sender = context.Pipe(duplex=False)
     with tempfile.NamedTemporaryFile(prefix='bagfault-job-', suffix='.log') as log:
         process = context.Process(target=_job_process, args=(spec, log.name, sender), name='bagfault-job')
-        with Running.lock:
+        with Running.lock, _without_main():
             process.start()
             Running.processes.add(process)
         sender.close()
@@ -147,6 +174,7 @@ class LocalEngine:
     def __init__(self, workers: int) -> None:
         self.workers = workers
         self.description = f'local pool of {workers} worker{"s" if workers != 1 else ""}'
+        warm_up()
 
     def run(self, specs: Sequence[Spec], done: Done) -> None:
         """All specs; KeyboardInterrupt ends the running jobs and is raised again."""
@@ -194,6 +222,8 @@ class RayEngine:
         cpus = int(self.ray.cluster_resources().get('CPU', 1))
         self.description = f'Ray at {address} ({cpus} CPUs)' if address else f'a local Ray instance ({cpus} CPUs)'
         self.task = ray.remote(num_cpus=1, max_retries=0)(execute)
+        warm = ray.remote(num_cpus=1)(warm_up)
+        ray.get([warm.remote() for _ in range(min(cpus, workers or cpus))])  # each worker's fork server
 
     def run(self, specs: Sequence[Spec], done: Done) -> None:
         """All specs as tasks (at most `workers` at a time when given); KeyboardInterrupt cancels them."""

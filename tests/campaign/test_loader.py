@@ -100,3 +100,21 @@ def test_a_glob_that_finds_nothing_is_named(corpus: Path) -> None:
     """)
     with pytest.raises(CampaignError, match=r"bags: 'fleet/\*.mcap' matches no file or folder"):
         make_plan(load_campaign(path))
+
+
+def test_the_progress_line_counts_jobs_and_estimates_what_is_left(monkeypatch: pytest.MonkeyPatch) -> None:
+    import io
+
+    from bagfault.campaign import runner
+
+    now = [100.0]
+    monkeypatch.setattr(runner.time, 'monotonic', lambda: now[0])
+    stream = io.StringIO()
+    bar = runner.JobProgress(stream=stream, enabled=True)
+    bar.add(10, 2)  # 2 of 10 already stored
+    now[0] = 130.0
+    for status in ('passed', 'failed', 'error'):
+        bar.finished(status)
+    # 3 jobs ran in 30 s: the 5 left take 50 s
+    assert bar.line() == '[############............] 5/10 jobs  1 passed  1 failed  1 error ETA 00:50'
+    assert stream.getvalue().endswith(bar.line() + '\x1b[K')
