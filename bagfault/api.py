@@ -104,12 +104,14 @@ def run(
     observers: Sequence[Observer] = (),
     salvage: bool = False,
     msg_paths: Sequence[str | Path] = (),
+    chunk_copy: bool = True,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP.
 
     `observers` see every output record in time order (report collectors). Corruption the file formats
     detect (CRCs, record lengths, impossible rows) stops the run; with `salvage` what can be read is copied
-    and every skipped part is a warning.
+    and every skipped part is a warning. With `chunk_copy` (a single MCAP input), chunks nothing touches
+    are copied as they are; False takes the reference path that decompresses and rewrites every chunk.
     """
     loaded = scenario_of(scenario)
     paths = _paths(inputs)
@@ -118,7 +120,7 @@ def run(
     return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
                        start_offset=_seconds('--start', start_offset), compression=compression, batch=batch,
                        progress=progress, observers=observers, salvage=salvage,
-                       msg_paths=[Path(p) for p in msg_paths])
+                       msg_paths=[Path(p) for p in msg_paths], chunk_copy=chunk_copy)
 
 
 def check(

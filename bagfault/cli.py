@@ -49,6 +49,9 @@ def _parser() -> argparse.ArgumentParser:
                      help='bag time zero is this many seconds after the first message')
     run.add_argument('--compression', choices=['none', 'lz4', 'zstd'], default='zstd')
     _salvage_option(run)
+    run.add_argument('--no-chunk-copy', action='store_true',
+                     help='decompress and rewrite every chunk (the reference path; default: chunks of a single '
+                          'MCAP input that no fault, assertion or report touches are copied as they are)')
     _report_options(run)
 
     check = sub.add_parser('check', help="evaluate a scenario's assertions on an existing recording")
@@ -240,7 +243,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         result = api.run(
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
             start_offset=args.start, compression=args.compression, progress=bar, observers=collectors,
-            salvage=args.salvage, msg_paths=args.msg_path,
+            salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy,
         )
     finally:
         bar.close()

@@ -21,6 +21,7 @@ from mcap.writer import CompressionType, Writer
 
 from bagfault.demo import synthetic
 from bagfault.demo.synthetic import Stream
+from bagfault.io.mcap_sink import DEFAULT_QOS as QOS  # channels as ros2 bag record writes them
 
 NS = 1_000_000_000
 
@@ -79,7 +80,7 @@ def write_bag(path: Path, kind: str, seconds: float) -> int:
         for topic in topics:
             text, _ = ts.generate_msgdef(topic.msgtype, ros_version=2)
             schema = writer.register_schema(topic.msgtype, 'ros2msg', text.encode())
-            channels.append(writer.register_channel(topic.topic, 'cdr', schema, {}))
+            channels.append(writer.register_channel(topic.topic, 'cdr', schema, {'offered_qos_profiles': QOS}))
         for position in order.tolist():
             time, owner, k = int(times[position]), int(owners[position]), int(indexes[position])
             topic = topics[owner]

@@ -11,7 +11,9 @@ own process (peak RSS per job):
   message, bias and noise on the IMU, re-encode, write);
 - bagfault (a) faults defined, none active; (b) IMU bias + noise all along;
   (c) PointCloud2 noise + point dropout all along; (d) drop 20 % + delay
-  50 ms on every topic.
+  50 ms on every topic;
+- chunk copy (--copy, a 300 s sensor-heavy bag): `cp` of the file against
+  (a) and (w) an IMU bias active for 10 s, with and without chunk copy.
 Prints median times, throughput, peak RSS and the ratios, and writes JSON.
 """
 
@@ -87,7 +89,12 @@ with open(SRC, 'rb') as src, open(DST, 'wb') as dst:
 BAGFAULT = """
 from bagfault import api
 from bagfault.scenario import parse_scenario
-api.run(parse_scenario(SCENARIO), [SRC], DST, seed=1)
+api.run(parse_scenario(SCENARIO), [SRC], DST, seed=1, chunk_copy=CHUNK_COPY == 'yes')
+"""
+
+CP = """
+import subprocess
+subprocess.run(['cp', SRC, DST], check=True)
 """
 
 
@@ -97,12 +104,13 @@ def scenario(kind: str, case: str) -> str:
     imus = [t.topic for t in topics if t.msgtype == 'sensor_msgs/msg/Imu']
     lines = ['injectors:']
     faults = ['faults:']
-    if case in ('a', 'b'):
+    if case in ('a', 'b', 'w'):
         for number, topic in enumerate(imus):
             lines.append(f'  - {{id: imu{number}, type: imu, input_topic: {topic}, output_topic: {topic}}}')
             config = ('{angular_velocity_z_bias: 0.05, angular_velocity_z_noise_stddev: 0.02, '
                       'linear_acceleration_z_bias: 0.2, linear_acceleration_z_noise_stddev: 0.05}')
-            schedule = 'active_on_startup: true' if case == 'b' else 'start: 100000.0'
+            schedule = {'a': 'start: 100000.0', 'b': 'active_on_startup: true', 'w': 'start: 100.0, duration: 10.0'}[
+                case]
             faults.append(f'  - {{id: bias{number}, injector_id: imu{number}, {schedule}, config: {config}}}')
     if case == 'c':
         lines.append('  - {id: pc, type: pointcloud2, input_topic: /points, output_topic: /points}')
@@ -174,7 +182,7 @@ def measure(kind: str, seconds: float, repeat: int, include_baselines: bool = Tr
         jobs['limit'] = (LIMIT, {})
         jobs['hand-written'] = (HAND, {})
     for case in CASES[kind]:
-        jobs[f'bagfault ({case})'] = (BAGFAULT, {'SCENARIO': scenario(kind, case)})
+        jobs[f'bagfault ({case})'] = (BAGFAULT, {'SCENARIO': scenario(kind, case), 'CHUNK_COPY': 'yes'})
     samples: dict[str, list[tuple[float, int]]] = {name: [] for name in jobs}
     for _ in range(repeat):
         for name, (code, values) in jobs.items():
@@ -195,6 +203,36 @@ def measure(kind: str, seconds: float, repeat: int, include_baselines: bool = Tr
     return {'bag': bag.name, 'bytes': size, 'messages': messages, 'results': results}
 
 
+def measure_copy(seconds: float, repeat: int) -> dict[str, dict]:
+    """Chunk copy against `cp` of the same file: no fault active, and an IMU bias active 10 s (from 100 s)."""
+    bag = ensure_bag('sensor-heavy', seconds)
+    out = DATA / 'out.mcap'
+    jobs = {'cp': (CP, {})}
+    for case, what in (('a', 'none active'), ('w', 'IMU bias 10 s')):
+        for copy in ('yes', 'no'):
+            name = f'{what}{"" if copy == "yes" else ", --no-chunk-copy"}'
+            jobs[name] = (BAGFAULT, {'SCENARIO': scenario('sensor-heavy', case), 'CHUNK_COPY': copy})
+    samples: dict[str, list[tuple[float, int]]] = {name: [] for name in jobs}
+    for _ in range(repeat):
+        for name, (code, values) in jobs.items():
+            samples[name].append(run_job(code, SRC=str(bag), DST=str(out), **values))
+            out.unlink(missing_ok=True)
+    cp = statistics.median(t for t, _ in samples['cp'])
+    results = {name: {'seconds': statistics.median(t for t, _ in runs), 'runs': [t for t, _ in runs],
+                      'vs_cp': statistics.median(t for t, _ in runs) / cp,
+                      'peak_rss_mb': max(r for _, r in runs) / 1e6} for name, runs in samples.items()}
+    return {'bag': bag.name, 'bytes': bag.stat().st_size, 'results': results}
+
+
+def copy_table(block: dict) -> str:
+    """Printable table of the chunk copy block."""
+    lines = [f'chunk copy: {block["bag"]} ({block["bytes"] / 1e6:.0f} MB)',
+             f'  {"job":<32}{"median s":>10}{"x cp":>8}{"RSS MB":>8}']
+    for name, entry in block['results'].items():
+        lines.append(f'  {name:<32}{entry["seconds"]:>10.2f}{entry["vs_cp"]:>8.2f}{entry["peak_rss_mb"]:>8.0f}')
+    return '\n'.join(lines)
+
+
 def table(title: str, block: dict) -> str:
     """Printable table of one bag's results."""
     lines = [f'{title}: {block["bag"]} ({block["bytes"] / 1e6:.0f} MB, {block["messages"]} messages)',
@@ -213,11 +251,20 @@ def main() -> int:
     parser.add_argument('--seconds', type=float, default=60.0, help='bag length for the speed comparison')
     parser.add_argument('--repeat', type=int, default=3, help='alternating repetitions (medians)')
     parser.add_argument('--long', type=float, default=600.0, help='bag length for the memory check (0: skip)')
+    parser.add_argument('--copy', type=float, default=300.0,
+                        help='sensor-heavy bag length for chunk copy against cp (0: skip)')
+    parser.add_argument('--only-copy', action='store_true', help='run the chunk copy block only')
     parser.add_argument('--json', type=Path, default=None)
     args = parser.parse_args()
     report: dict = {'date': date.today().isoformat(), 'machine': platform.platform(), 'cpus': os.cpu_count(),
                     'python': platform.python_version(), 'seconds': args.seconds, 'repeat': args.repeat,
                     'speed': {}, 'memory': {}}
+    if args.copy:
+        report['chunk_copy'] = measure_copy(args.copy, args.repeat)
+        print(copy_table(report['chunk_copy']), flush=True)
+    if args.only_copy:
+        save(report, args.json or RESULTS / f'bench-copy-{report["date"]}.json')
+        return 0
     for kind in KINDS:
         block = measure(kind, args.seconds, args.repeat)
         report['speed'][kind] = block

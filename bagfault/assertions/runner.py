@@ -80,6 +80,11 @@ class AssertionRunner:
         """Topics any assertion listens to."""
         return set(self._listeners)
 
+    def wanted_topics(self) -> set[str]:
+        """Topics whose messages must pass through here (chunk copy skips the others; deadlines keep their
+        times)."""
+        return set(self._listeners)
+
     def t(self, time: int) -> str:
         """'12.345 s' from bag time zero."""
         return f'{(time - self.origin) / NS:.3f} s'

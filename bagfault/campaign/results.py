@@ -229,7 +229,8 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
             parts.append(f'<tr><td>{r["job"]}</td><td class="l">{html.escape(r["bag"])}</td>'
                          + ''.join(f'<td>{_label(r[p])}</td>' for p in swept)
                          + f'<td>{r["seed"]}</td><td class="l">{r["status"]}</td>'
-                         f'<td class="l">{html.escape(r["message"] or "")}</td><td class="l">{link}</td></tr>')
+                         f'<td class="l" style="min-width:28em">{html.escape(r["message"] or "")}</td>'
+                         f'<td class="l">{link}</td></tr>')
         parts.append('</table>')
     parts.append('</body></html>\n')
     return '\n'.join(parts)

@@ -50,6 +50,11 @@ class TimeOrderedMerge:
             due.append(heapq.heappop(pending))
         yield from heapq.merge(records, due) if records else due
 
+    def holds(self, channel_ids: set[int], start: int, end: int) -> bool:
+        """True when a held record of one of these output channels falls in [start, end] (a delayed message that
+        would interleave with a chunk there)."""
+        return any(start <= r[0] <= end and r[2] != EVENT_RANK and r[4].id in channel_ids for r in self._pending)
+
     def drain(self) -> Iterator[Record]:
         """Everything left, in order (end of input)."""
         pending = self._pending

@@ -9,8 +9,11 @@ messages to the same Run with nothing injected. `run_to_file` wraps
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Protocol
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
+from typing import TYPE_CHECKING, Protocol, cast
 
+from bagfault.engine.chunk_copy import ChunkCopy, chunk_copy_for
 from bagfault.engine.pipeline import Pipeline
 from bagfault.engine.provenance import provenance
 from bagfault.engine.routing import build_routing
@@ -88,13 +91,15 @@ def replay(
     blackbox_numbers: dict[str, int] | None = None,
     hooks: PassHooks | None = None,
     control: FaultControl | None = None,
+    chunks: ChunkCopy | None = None,
 ) -> tuple[Run, bool]:
     """One pass of the inputs through the scenario into `sink`; (the run, True if a Stopped ended it early).
 
     On an error the run's black boxes are removed; on success the caller
     closes the run once its own output is complete.
     """
-    routing = build_routing(inputs, scenario, catalog, sink)
+    keep = None if chunks is None else partial(chunks.keep, cast('McapSink', sink))
+    routing = build_routing(inputs, scenario, catalog, sink, keep)
     stopped = False
     try:
         outside = hooks.prepare(routing) if hooks is not None else {}
@@ -105,8 +110,11 @@ def replay(
     run.notes += routing.notes
     run.warnings += routing.warnings
     run.stats.replaced_topics = list(routing.replaced)
+    if chunks is not None:
+        chunks.wire(routing, run.observers, scenario)
     pipeline = Pipeline(inputs, run, routing.routes, routing.copies, seed=seed, activations=activations,
-                        start_offset=start_offset, batch=batch, progress=progress, control=control)
+                        start_offset=start_offset, batch=batch, progress=progress, control=control,
+                        chunks=chunks if chunks is not None and chunks.passthrough else None)
     if hooks is not None:
         hooks.begin(run)
         run.gate = hooks.gate
@@ -140,23 +148,32 @@ def run_to_file(
     observers: Sequence[Observer] = (),
     salvage: bool = False,
     msg_paths: Sequence[Path] = (),
+    chunk_copy: bool = True,
 ) -> RunResult:
-    """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing)."""
+    """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing); with
+    `chunk_copy`, the untouched chunks of a single MCAP input are copied as they are."""
     definitions = load_definitions([*msg_paths, *scenario.msg_paths])
     inputs = InputSet(paths, salvage=salvage)
     try:
         begin_progress(progress, inputs)
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
         sink = McapSink(output, compression=compression, ros_distro=catalog.distro)
-        try:
-            sink.add_metadata('bagfault', provenance(scenario, paths, seed, activations, start_offset))
+        chunks = chunk_copy_for(inputs) if chunk_copy and batch else None
+        if chunks is not None:
+            chunks.reserve(sink)
+        hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-sha256')
+        try:  # the inputs' sha256 on the second core while the run reads them; the record goes at the end
+            origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset)
             sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
             run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
                             start_offset=start_offset, batch=batch, progress=progress, observers=observers,
-                            blackbox_base=output)
+                            blackbox_base=output, chunks=chunks)
+            sink.add_metadata('bagfault', origin.result())
         except BaseException:
             sink.abort()
             raise
+        finally:
+            hashing.shutdown(wait=True, cancel_futures=True)
         finish(sink, run)
     finally:
         inputs.close()

@@ -31,6 +31,7 @@ from bagfault.injectors.base import ActiveFault, Injector, RawMessage
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
+    from bagfault.engine.chunk_copy import ChunkCopy
     from bagfault.engine.control import FaultChange, FaultControl
     from bagfault.engine.merge import Record
     from bagfault.engine.run import OutputChannel, Run
@@ -75,8 +76,10 @@ class Pipeline:
         batch: bool = True,
         progress: Callable[[int, int], None] | None = None,
         control: FaultControl | None = None,
+        chunks: ChunkCopy | None = None,
     ) -> None:
         self.inputs = inputs
+        self.chunks = chunks  # chunk copy: untouched chunks of a single MCAP input written as they are
         self.control = control  # changes from outside (play with controls): applied message by message
         self.run = run
         self.scenario = run.scenario
@@ -104,6 +107,9 @@ class Pipeline:
         """Process every input message, then end the run's output (a `Stopped` from the sink ends it early)."""
         if self.scenario.faults:
             self.run.event_channel(FaultEvent)
+        if self.chunks is not None:
+            self._process_chunks(self.chunks)
+            return
         batch: list[InputMessage] = []
         order = size = 0
         for item in self.inputs.messages():
@@ -116,6 +122,51 @@ class Pipeline:
                 order += len(batch)
                 batch = []
                 size = 0
+        if batch:
+            self._process(batch, order)
+        self._flush_injectors()
+        self.run.emit(self._merge.drain())
+
+    def _process_chunks(self, chunks: ChunkCopy) -> None:
+        """The chunk copy path: chunk by chunk, read ahead; quiet chunks written as they are, the others'
+        messages processed as in `process` (the pending batch first, so the fault state is current)."""
+        from bagfault.io.chunk_reader import ChunkReader  # noqa: PLC0415
+
+        self._start(next(ref.start for ref in chunks.refs if ref.index_offsets))
+        assert self.scheduler is not None
+        chunks.plan(self.scenario, self.scheduler.origin, self.seed, self.activations)
+        source = chunks.source
+        topic_of = {cid: source.channels[source.channel_number(cid)].topic for cid in chunks.passthrough}
+        reader = ChunkReader(source, chunks.refs, lambda ref: not chunks.likely_copied(ref))
+        self.run.stats.chunks = len(chunks.refs)
+        batch: list[InputMessage] = []
+        order = size = 0
+        try:
+            for raw in reader:
+                ref = raw.ref
+                if chunks.candidate(ref):
+                    if batch:
+                        self._process(batch, order)
+                        order += len(batch)
+                        batch, size = [], 0
+                    if chunks.quiet(ref, self.scheduler) and not self._merge.holds(set(ref.channel_ids), ref.start,
+                                                                                   ref.end):
+                        self.run.read(sum(raw.chunk.counts.values()), ref.end)
+                        self.run.copy_chunk(raw.chunk, topic_of)
+                        self.run.stats.chunks_copied += 1
+                        if self.progress is not None:
+                            self.progress(self.run.stats.input_messages, ref.end)
+                        continue
+                records = raw.records if raw.records is not None else source.records_of(ref, source.read_record(ref))
+                for item in source.messages_of(ref, records):
+                    batch.append(item)
+                    size += len(item[3])
+                    if len(batch) >= BATCH or size >= BATCH_BYTES:
+                        self._process(batch, order)
+                        order += len(batch)
+                        batch, size = [], 0
+        finally:
+            reader.close()
         if batch:
             self._process(batch, order)
         self._flush_injectors()

@@ -30,6 +30,8 @@ class RunStats:
     last_output_time: int | None = None
     malformed: dict[str, int] = field(default_factory=dict)  # input topic -> messages that could not take a fault
     malformed_first: dict[str, tuple[int, str]] = field(default_factory=dict)  # input topic -> (time, reason)
+    chunks: int = 0  # chunk copy: the input's chunks ...
+    chunks_copied: int = 0  # ... and those written as they are
 
     def add(self, other: RunStats) -> None:
         """Fold a later pass (play --loop) into these totals; the first pass keeps the origin."""

@@ -22,7 +22,7 @@ from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
-    from collections.abc import Collection
+    from collections.abc import Callable, Collection
 
     from bagfault.engine.run import Sink
     from bagfault.io.channel import Channel
@@ -85,13 +85,15 @@ def bag_name(name: str, topics: Collection[str]) -> str:
     return other if other in topics else name
 
 
-def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink) -> Routing:
-    """Check the scenario against the bag and register every output channel."""
+def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink,
+                  keep: Callable[[int], int | None] | None = None) -> Routing:
+    """Check the scenario against the bag and register every output channel; `keep(number)` (chunk copy)
+    registers an input channel that passes through under its input id, or says None."""
     _check_encodings(inputs)
     routing = Routing()
     wired = _wire(inputs, scenario, routing)
     _check_no_chains(scenario, wired)
-    _register(inputs, scenario, catalog, sink, wired, routing)
+    _register(inputs, scenario, catalog, sink, wired, routing, keep)
     return routing
 
 
@@ -155,19 +157,21 @@ def _check_no_chains(scenario: Scenario, wired: list[_Wired]) -> None:
 
 
 def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink, wired: list[_Wired],
-              routing: Routing) -> None:
+              routing: Routing, keep: Callable[[int], int | None] | None) -> None:
     """Output channels in input order: copies of untouched topics, then each injector output of the topic."""
     in_place = {w.input_topic for w in wired if w.input_topic == w.output_topic}
     written = {w.output_topic for w in wired}
     rank = COPY_RANK
     for number, channel in enumerate(inputs.channels):
+        kept = keep(number) if keep is not None and (channel.topic not in written or channel.topic in in_place) \
+            else None
         if channel.topic in written and channel.topic not in in_place:
             routing.replaced.append(channel.topic)
             routing.notes.append(f'recorded topic {channel.topic} is replaced by the injector that writes it')
         elif channel.topic not in in_place:
             encoding, text = _schema(channel, catalog)
-            channel_id = sink.add_channel(channel.topic, channel.msgtype, encoding, text,
-                                          channel.message_encoding, dict(channel.metadata))
+            channel_id = kept if kept is not None else sink.add_channel(
+                channel.topic, channel.msgtype, encoding, text, channel.message_encoding, dict(channel.metadata))
             routing.copies[number] = OutputChannel(channel_id, channel.topic, channel.msgtype)
             routing.schemas[channel.topic] = (channel.msgtype, encoding, text)
         for w in wired:
@@ -176,8 +180,11 @@ def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: 
             faults = scenario.faults_of(w.spec.id)
             injector = build_injector(w.spec, channel.msgtype, faults, catalog, scenario.name)
             encoding, text = _schema(channel, catalog)
-            channel_id = sink.add_channel(w.output_topic, channel.msgtype, encoding, text,
-                                          channel.message_encoding, dict(channel.metadata))
+            if kept is not None and w.output_topic == channel.topic:
+                channel_id, kept = kept, None  # the in-place stream keeps the input's channel
+            else:
+                channel_id = sink.add_channel(w.output_topic, channel.msgtype, encoding, text,
+                                              channel.message_encoding, dict(channel.metadata))
             routing.schemas[w.output_topic] = (channel.msgtype, encoding, text)
             rank += 1
             output = OutputChannel(channel_id, w.output_topic, channel.msgtype)

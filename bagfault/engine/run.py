@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from bagfault.engine.oracles import Schema
     from bagfault.engine.result import Mode
     from bagfault.events import Event, EventKind, FaultEvent
+    from bagfault.io.mcap_writer import CopiedChunk
     from bagfault.io.types import Codec, TypeCatalog
     from bagfault.scenario.model import Scenario
 
@@ -181,6 +182,17 @@ class Run:
         stats.output_messages += 1
         stats.last_output_time = time
         stats.per_topic_out[channel.topic] = stats.per_topic_out.get(channel.topic, 0) + 1
+
+    def copy_chunk(self, chunk: CopiedChunk, topic_of: Mapping[int, str]) -> None:
+        """An input chunk written as it is (chunk copy): counted as the messages it holds; nobody observes it."""
+        self.sink.copy_chunk(chunk)  # type: ignore[attr-defined]  # only an McapSink is given chunks
+        stats = self.stats
+        for channel_id, count in chunk.counts.items():
+            topic = topic_of[channel_id]
+            stats.per_topic_out[topic] = stats.per_topic_out.get(topic, 0) + count
+            stats.output_messages += count
+        if chunk.counts:
+            stats.last_output_time = max(stats.last_output_time or chunk.end, chunk.end)
 
     def event(self, event: FaultEvent, *, write: bool = True) -> None:
         """A fault changed state: observed, kept, and written (unless it was read from a recording)."""

@@ -189,6 +189,10 @@ class FaultScheduler:
         """Bag time (ns) of the next pending change, or None."""
         return self._heap[0][0] if self._heap else None
 
+    def next_change_of(self, fault_ids: set[str]) -> int | None:
+        """Bag time (ns) of the next pending change of any of these faults, or None (chunk copy asks)."""
+        return min((entry[0] for entry in self._heap if entry[3] in fault_ids), default=None)
+
     def advance(self, now: int) -> list[FaultEvent]:
         """Apply every change due at or before `now`; return their events in order."""
         events = []

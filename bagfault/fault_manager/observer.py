@@ -80,6 +80,10 @@ class FaultManagerObserver:
         self._codecs[topic] = codec
         return codec
 
+    def wanted_topics(self) -> set[str]:
+        """Topics the oracle reads: snapshots, diagnostics, conditions, injected reports' topics."""
+        return set(self.snapshots.topics) | set(self._codecs) | set(self.injected.watch)
+
     # -- time ---------------------------------------------------------------------
     def start(self, origin: int) -> None:
         """Bag time zero."""

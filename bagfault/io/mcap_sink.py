@@ -18,9 +18,11 @@ import time
 from pathlib import Path
 
 import yaml
+from mcap.records import Channel as McapChannel
+from mcap.records import Schema as McapSchema
 
 from bagfault.errors import OutputError
-from bagfault.io.mcap_writer import McapWriter
+from bagfault.io.mcap_writer import CopiedChunk, McapWriter
 from bagfault.io.outputs import current_umask
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')
@@ -64,7 +66,8 @@ class McapSink:
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
                                   library=f'bagfault {_version()}')
         self._schemas: dict[tuple[str, str, str], int] = {}
-        self._topics: list[tuple[str, str, str, str]] = []  # topic, type, encoding, QoS of each channel id - 1
+        self._topics: dict[int, tuple[str, str, str, str]] = {}  # channel id -> topic, type, encoding, QoS
+        self._kept_schemas: set[int] = set()
 
     def add_channel(
         self,
@@ -87,8 +90,34 @@ class McapSink:
             channel_id = self._writer.register_channel(topic, message_encoding, schema_id, channel_metadata)
         except OSError as exc:
             raise self._failed(exc) from None
-        self._topics.append((topic, msgtype, message_encoding, channel_metadata['offered_qos_profiles']))
+        self._topics[channel_id] = (topic, msgtype, message_encoding, channel_metadata['offered_qos_profiles'])
         return channel_id
+
+    # -- chunk copy: an input's channels kept as they are, its chunks copied -------------------------
+    def reserve(self, schema_ids: int, channel_ids: int) -> None:
+        """Schema and channel ids up to these belong to the input; new ones are numbered above."""
+        self._writer.reserve(schema_ids, channel_ids)
+
+    def keep_channel(self, schema: McapSchema | None, channel: McapChannel, msgtype: str) -> int:
+        """Register an input's channel (and its schema) with its ids and bytes, so its chunks can be copied."""
+        try:
+            if schema is not None and schema.id not in self._kept_schemas:
+                self._writer.register_schema(schema.name, schema.encoding, schema.data, schema_id=schema.id)
+                self._kept_schemas.add(schema.id)
+            self._writer.register_channel(channel.topic, channel.message_encoding, channel.schema_id,
+                                          dict(channel.metadata), channel_id=channel.id)
+        except OSError as exc:
+            raise self._failed(exc) from None
+        qos = channel.metadata.get('offered_qos_profiles', DEFAULT_QOS)
+        self._topics[channel.id] = (channel.topic, msgtype, channel.message_encoding, qos)
+        return channel.id
+
+    def copy_chunk(self, chunk: CopiedChunk) -> None:
+        """Write an input chunk as it is."""
+        try:
+            self._writer.copy_chunk(chunk)
+        except OSError as exc:
+            raise self._failed(exc) from None
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Append one message."""
@@ -173,7 +202,7 @@ class McapSink:
             'topic_metadata': {'name': topic, 'type': msgtype, 'serialization_format': encoding,
                                'offered_qos_profiles': _profiles(qos), 'type_description_hash': ''},
             'message_count': counts.get(number, 0),
-        } for number, (topic, msgtype, encoding, qos) in enumerate(self._topics, start=1)]
+        } for number, (topic, msgtype, encoding, qos) in sorted(self._topics.items())]
         info = {
             'version': 9, 'storage_identifier': 'mcap', 'duration': span, 'starting_time': first,
             'message_count': total, 'topics_with_message_count': topics, 'compression_format': '',

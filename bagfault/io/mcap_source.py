@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import heapq
 import io
+import itertools
 import struct
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 import lz4.frame
 import yaml
@@ -64,6 +65,32 @@ class _Chunk:
     start: int
     end: int
     offset: int
+    length: int = 0  # the whole chunk record (opcode and length included)
+    index_offsets: dict[int, int] | None = None  # channel id -> file offset of its message index record
+    index_length: int = 0
+    compression: str = ''
+    compressed_size: int = 0
+    uncompressed_size: int = 0
+
+
+@dataclass(frozen=True)
+class ChunkRef:
+    """A chunk as the summary describes it: where it is, its time range, the channels it holds messages of."""
+
+    offset: int
+    length: int
+    start: int
+    end: int
+    index_offsets: dict[int, int]  # input channel id -> file offset of its message index record
+    index_length: int
+    compression: str
+    compressed_size: int
+    uncompressed_size: int
+
+    @property
+    def channel_ids(self) -> list[int]:
+        """Input channel ids with messages in this chunk."""
+        return list(self.index_offsets)
 
 
 def _decompress(compression: str, data: bytes | memoryview, size: int) -> memoryview:
@@ -106,6 +133,8 @@ class McapSource:
         self._chunks: list[_Chunk] = []
         self._memory: list[Split] = []
         self._indexed = False
+        self.schema_records: dict[int, Schema] = {}  # as the summary holds them (indexed files)
+        self.channel_records: dict[int, McapChannel] = {}
         try:
             self._file = path.open('rb')
         except OSError as exc:
@@ -162,9 +191,13 @@ class McapSource:
             if index.chunk_start_offset + index.chunk_length > self._size or index.chunk_start_offset < 8:
                 raise Corrupt(f'a chunk index points outside the file (offset {index.chunk_start_offset})')
         self._chunks = sorted(
-            (_Chunk(c.message_start_time, c.message_end_time, c.chunk_start_offset) for c in summary.chunk_indexes),
+            (_Chunk(c.message_start_time, c.message_end_time, c.chunk_start_offset, c.chunk_length,
+                    dict(c.message_index_offsets), c.message_index_length, c.compression, c.compressed_size,
+                    c.uncompressed_size) for c in summary.chunk_indexes),
             key=lambda c: (c.start, c.offset),
         )
+        self.schema_records = dict(summary.schemas)
+        self.channel_records = dict(summary.channels)
         referenced = {cid for c in summary.chunk_indexes for cid in c.message_index_offsets}
         missing_schemas = {s for s, _, _, _ in self._pending_channels.values() if s and s not in self._schemas}
         if not self._pending_channels or referenced - set(self._pending_channels) or missing_schemas:
@@ -261,7 +294,12 @@ class McapSource:
             raise Corrupt(f'the index points at a record of type {opcode:#x}, not a chunk')
         if offset + 9 + length > self._size:
             raise Corrupt(f'the chunk claims {length} bytes, past the end of the file')
-        body = memoryview(self._file.read(length))
+        return self._records(memoryview(self._file.read(length)), offset)
+
+    def _records(self, body: memoryview, offset: int) -> memoryview:
+        """A chunk record's body decompressed and checked against its size and CRC."""
+        if len(body) < _CHUNK_HEAD.size + 4:
+            raise Corrupt(f'the chunk at offset {offset} is shorter than its header')
         _, _, size, crc = _CHUNK_HEAD.unpack_from(body, 0)
         compression, pos = _string(body, _CHUNK_HEAD.size, len(body))
         (records_len,) = _U64.unpack_from(body, pos)
@@ -400,6 +438,66 @@ class McapSource:
                 log_time, _, pos, publish_time, channel_id, payload = heapq.heappop(pending)
                 ready.append((log_time, publish_time, channel_id, pos, payload))
             yield from self._known(ready)
+
+    # -- chunks as they are (chunk copy) -----------------------------------------------------------
+    def chunk_refs(self) -> list[ChunkRef] | None:
+        """The chunks in file order when they can be copied as they are: an indexed file whose chunks follow
+        each other in time, each with its message indexes; None otherwise."""
+        if not self._indexed or self.salvage or not self._chunks:
+            return None
+        chunks = sorted(self._chunks, key=lambda c: c.offset)
+        if chunks != self._chunks or any(a.end > b.start for a, b in itertools.pairwise(chunks)):
+            return None
+        if any(c.index_offsets is None or (c.index_offsets and not c.index_length) for c in chunks):
+            return None
+        if any(cid not in self._ids for c in chunks for cid in c.index_offsets or {}):
+            return None
+        return [ChunkRef(c.offset, c.length, c.start, c.end, dict(c.index_offsets or {}), c.index_length,
+                         c.compression, c.compressed_size, c.uncompressed_size) for c in chunks]
+
+    def channel_number(self, channel_id: int) -> int:
+        """The index in `channels` of an input channel id."""
+        return self._ids[channel_id]
+
+    def read_record(self, ref: ChunkRef, handle: IO[bytes] | None = None) -> bytes:
+        """The chunk record as bytes (from `handle`, a reader thread's own, or this source's file)."""
+        handle = handle or self._file
+        handle.seek(ref.offset)
+        record = handle.read(ref.length)
+        if len(record) != ref.length:
+            raise InputError(f'{self.path}: truncated chunk at offset {ref.offset}')
+        return record
+
+    def read_indexes(self, ref: ChunkRef, handle: IO[bytes]) -> bytes:
+        """The chunk's message index records (they follow it), as bytes."""
+        if not ref.index_offsets:
+            return b''
+        handle.seek(ref.offset + ref.length)
+        indexes = handle.read(ref.index_length)
+        if len(indexes) != ref.index_length or min(ref.index_offsets.values()) != ref.offset + ref.length:
+            raise InputError(f'{self.path}: the message indexes of the chunk at offset {ref.offset} are not where '
+                             'its index says')
+        return indexes
+
+    def fileno(self) -> int:
+        """The input file's descriptor (chunk copy copies from it with explicit offsets)."""
+        return self._file.fileno()
+
+    def records_of(self, ref: ChunkRef, record: bytes) -> memoryview:
+        """The decompressed, checked records of a chunk read by `read_raw`."""
+        try:
+            return self._records(memoryview(record)[9:], ref.offset)
+        except Corrupt as exc:
+            raise InputError(f'{self.path}: corrupt MCAP file: chunk at offset {ref.offset}: {one_line(exc)}') from None
+        except READ_ERRORS as exc:
+            raise InputError(f'{self.path}: corrupt chunk data ({one_line(exc)})') from None
+
+    def messages_of(self, ref: ChunkRef, records: memoryview) -> list[RawItem]:
+        """The messages of a decompressed chunk, in its order (chunks of the copy path are in time order)."""
+        items = self._split(records, ref.offset)
+        if any(items[i][0] > items[i + 1][0] for i in range(len(items) - 1)):
+            items.sort(key=lambda m: (m[0], m[3]))
+        return list(self._known(items))
 
     def close(self) -> None:
         """Release the file."""

@@ -13,10 +13,13 @@ indexes, summary offsets) and is byte-identical from run to run.
 
 from __future__ import annotations
 
+import errno
+import os
 import struct
 import zlib
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from typing import IO
 
 import lz4.frame
@@ -69,6 +72,38 @@ class _OpenChunk:
         self.indexes: dict[int, list[tuple[int, int]]] = {}
 
 
+@dataclass(frozen=True)
+class CopiedChunk:
+    """An input chunk to write as it is: where its record is, its message index records, what its index says."""
+
+    fd: int  # the input file, read with explicit offsets (copy_file_range where the kernel has it)
+    offset: int
+    length: int  # the whole chunk record, opcode and length included
+    indexes: bytes  # its message index records
+    index_offsets: dict[int, int]  # channel id -> offset of its message index record within `indexes`
+    counts: dict[int, int]  # channel id -> messages
+    start: int
+    end: int
+    compression: str
+    compressed_size: int
+    uncompressed_size: int
+
+    @classmethod
+    def of(cls, fd: int, offset: int, length: int, indexes: bytes, start: int, end: int, compression: str,
+           compressed_size: int, uncompressed_size: int) -> CopiedChunk:
+        """Read the message index records: their channel ids and entry counts."""
+        offsets, counts, position = {}, {}, 0
+        while position < len(indexes):
+            opcode, record_length, channel_id, entries = _INDEX_HEAD.unpack_from(indexes, position)
+            if opcode != Opcode.MESSAGE_INDEX:
+                raise ValueError(f'a record of type {opcode:#x} among the message indexes')
+            offsets[channel_id] = position
+            counts[channel_id] = entries // 16
+            position += 9 + record_length
+        return cls(fd, offset, length, indexes, offsets, counts, start, end, compression, compressed_size,
+                   uncompressed_size)
+
+
 class McapWriter:
     """Writes an MCAP stream; `finish` writes the summary and footer."""
 
@@ -91,7 +126,10 @@ class McapWriter:
         self._chunk = _OpenChunk()
         self._summary_crc: int | None = None  # running CRC of the summary section, once it starts
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='mcap-compress')
-        self._pending: deque[tuple[_OpenChunk, Future[tuple[bytes, int]], int]] = deque()
+        self._pending: deque[tuple[_OpenChunk | CopiedChunk, Future[tuple[bytes, int]] | None, int]] = deque()
+        self._next_schema = 1
+        self._next_channel = 1
+        self._in_kernel = hasattr(os, 'copy_file_range')
         self._stream.write(MAGIC)
         self._offset = len(MAGIC)
         self._record(Header(profile=profile, library=library))
@@ -108,16 +146,29 @@ class McapWriter:
             self._summary_crc = zlib.crc32(data, self._summary_crc)
         return start
 
-    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
-        """Add a schema (written at once, outside chunks); return its id (1-based)."""
-        schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+    def reserve(self, schema_ids: int, channel_ids: int) -> None:
+        """Ids up to these are given explicitly (an input's, kept for copied chunks); new ones start above."""
+        self._next_schema = max(self._next_schema, schema_ids + 1)
+        self._next_channel = max(self._next_channel, channel_ids + 1)
+
+    def register_schema(self, name: str, encoding: str, data: bytes, schema_id: int | None = None) -> int:
+        """Add a schema (written at once, outside chunks); return its id (the next free one unless given)."""
+        if schema_id is None:
+            schema_id = self._next_schema
+            self._next_schema += 1
+        schema = Schema(id=schema_id, name=name, encoding=encoding, data=data)
         self._schemas.append(schema)
         self._record(schema)
         return schema.id
 
-    def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str]) -> int:
-        """Add a channel (written at once, before any chunk that uses it); return its id (1-based)."""
-        channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding=message_encoding,
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str],
+                         channel_id: int | None = None) -> int:
+        """Add a channel (written at once, before any chunk that uses it); return its id (the next free one
+        unless given)."""
+        if channel_id is None:
+            channel_id = self._next_channel
+            self._next_channel += 1
+        channel = Channel(id=channel_id, topic=topic, message_encoding=message_encoding,
                           schema_id=schema_id, metadata=dict(metadata))
         self._channels.append(channel)
         self._record(channel)
@@ -178,12 +229,73 @@ class McapWriter:
         self._pending.append((chunk, future, len(data)))
         self._drain(wait=False)
 
+    def copy_chunk(self, chunk: CopiedChunk) -> None:
+        """Write an input's chunk as it is (after the chunks pending before it); the open chunk stays open."""
+        self._pending.append((chunk, None, 0))
+        self._drain(wait=False)
+
     def _drain(self, *, wait: bool) -> None:
         """Write completed chunks in order; with wait, every pending chunk."""
-        while self._pending and (wait or self._pending[0][1].done() or len(self._pending) > PENDING_CHUNKS):
+        while self._pending and (wait or self._pending[0][1] is None or self._pending[0][1].done()
+                                 or len(self._pending) > PENDING_CHUNKS):
             chunk, future, size = self._pending.popleft()
+            if future is None:
+                assert isinstance(chunk, CopiedChunk)
+                self._write_copied(chunk)
+                continue
+            assert isinstance(chunk, _OpenChunk)
             compressed, crc = future.result()
             self._write_chunk(chunk, compressed, crc, size)
+
+    def _write_copied(self, chunk: CopiedChunk) -> None:
+        """The chunk record and its message indexes byte for byte; the chunk index pointing at them here."""
+        start = self._offset
+        self._copy_range(chunk.fd, chunk.offset, chunk.length)
+        index_start = self._offset
+        self._write_raw(chunk.indexes)
+        offsets = {cid: index_start + relative for cid, relative in sorted(chunk.index_offsets.items())}
+        for channel_id, count in chunk.counts.items():
+            self._counts[channel_id] = self._counts.get(channel_id, 0) + count
+        count = sum(chunk.counts.values())
+        if count:
+            if self._message_count == 0:
+                self._start, self._end = chunk.start, chunk.end
+            else:
+                self._start, self._end = min(self._start, chunk.start), max(self._end, chunk.end)
+        self._message_count += count
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=chunk.start, message_end_time=chunk.end, chunk_start_offset=start,
+            chunk_length=chunk.length, message_index_offsets=offsets, message_index_length=len(chunk.indexes),
+            compression=chunk.compression, compressed_size=chunk.compressed_size,
+            uncompressed_size=chunk.uncompressed_size))
+
+    def _copy_range(self, fd: int, offset: int, length: int) -> None:
+        """Bytes of another file into this one: in the kernel (copy_file_range) when it can, else read and write."""
+        self._stream.flush()
+        out = self._stream.fileno()
+        done = 0
+        if self._in_kernel:
+            try:
+                while done < length:
+                    copied = os.copy_file_range(fd, out, length - done, offset + done)
+                    if copied == 0:
+                        break
+                    done += copied
+            except OSError as exc:
+                if exc.errno not in (errno.EXDEV, errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP, errno.EBADF):
+                    raise  # a full disk, a lost mount: the write failed
+                self._in_kernel = False  # another file system, an old kernel: bytes through user space
+        while done < length:
+            data = os.pread(fd, min(length - done, 1 << 22), offset + done)
+            if not data:
+                raise OSError(f'the input ended {length - done} bytes before the chunk at offset {offset}')
+            self._stream.write(data)
+            done += len(data)
+        self._offset += length
+
+    def _write_raw(self, data: bytes) -> None:
+        self._stream.write(data)
+        self._offset += len(data)
 
     def _write_chunk(self, chunk: _OpenChunk, compressed: bytes, crc: int, size: int) -> None:
         start = self._offset

@@ -54,7 +54,7 @@ def test_fast_and_reference_paths_write_identical_files(
 
     monkeypatch.setattr(base, 'patch_linear', spy)
     loaded = parse_scenario(scenario(kind, case))
-    fast = api.run(loaded, [bags[kind]], tmp_path / 'fast.mcap', seed=3)
+    fast = api.run(loaded, [bags[kind]], tmp_path / 'fast.mcap', seed=3, chunk_copy=False)
     fast_patched = list(patched)
     reference = api.run(loaded, [bags[kind]], tmp_path / 'reference.mcap', seed=3, batch=False)
     assert fast.stats.output_messages == reference.stats.output_messages
@@ -98,7 +98,7 @@ def test_patching_falls_back_when_layouts_differ(tmp_path: Path, monkeypatch: py
     original = base.patch_linear
     monkeypatch.setattr(base, 'patch_linear', lambda *a: patched.append(original(*a)) or patched[-1])
     loaded = parse_scenario(scenario('sensor-heavy', 'b'))
-    api.run(loaded, [bag], tmp_path / 'fast.mcap', seed=5)
+    api.run(loaded, [bag], tmp_path / 'fast.mcap', seed=5, chunk_copy=False)
     api.run(loaded, [bag], tmp_path / 'reference.mcap', seed=5, batch=False)
     assert patched and all(result is None for result in patched)
     assert (tmp_path / 'fast.mcap').read_bytes() == (tmp_path / 'reference.mcap').read_bytes()

@@ -1,0 +1,162 @@
+"""Chunk copy: the chunks of a single MCAP input that nothing can touch go to the output as they are.
+
+A chunk is copied, compressed bytes, message indexes and all, when every
+channel it holds messages of is passed through under its input id (a copied
+topic, or the topic of an in-place injector, whose channel already has what
+the ros2 profile asks: a schema and offered_qos_profiles), no oracle or report needs to
+see that topic, and no fault of that injector is active, holding messages,
+or due to change before the chunk ends (followers of other faults counted).
+Everything else takes the normal path, so the output's message stream is
+the same as without chunk copy (`--no-chunk-copy`); fault events and
+mutated messages are written in chunks of their own.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from bagfault.engine.scheduler import FaultScheduler
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from bagfault.engine.pipeline import InjectorRuntime
+    from bagfault.engine.routing import Routing
+    from bagfault.engine.run import Observer
+    from bagfault.engine.scheduler import Activation
+    from bagfault.io.mcap_sink import McapSink
+    from bagfault.io.mcap_source import ChunkRef, McapSource
+    from bagfault.io.sources import InputSet
+    from bagfault.scenario.model import Scenario
+
+AHEAD_MARGIN = 2_000_000_000  # ns after a fault window in which a chunk is still decompressed ahead (delays)
+
+
+def chunk_copy_for(inputs: InputSet) -> ChunkCopy | None:
+    """A chunk copy plan when the inputs are one indexed MCAP file whose chunks follow each other in time."""
+    from bagfault.io.mcap_source import McapSource  # noqa: PLC0415
+
+    if len(inputs.parts) != 1 or not isinstance(inputs.parts[0], McapSource):
+        return None
+    source = inputs.parts[0]
+    if source.channels != inputs.channels:
+        return None
+    refs = source.chunk_refs()
+    if not refs or not any(ref.index_offsets for ref in refs):
+        return None
+    return ChunkCopy(source, refs)
+
+
+class ChunkCopy:
+    """Which chunks of one MCAP input are copied as they are; built before routing, completed after it."""
+
+    def __init__(self, source: McapSource, refs: list[ChunkRef]) -> None:
+        self.source = source
+        self.refs = refs
+        self._numbers = {cid: source.channel_number(cid) for cid in source.channel_records}
+        self._ids = {number: cid for cid, number in self._numbers.items()}
+        self.kept: set[int] = set()  # input channel numbers registered under their input id
+        self.passthrough: set[int] = set()  # input channel ids whose messages may be copied
+        self.in_place: dict[int, InjectorRuntime] = {}  # input channel id -> its in-place injector
+        self.relevant: dict[int, set[str]] = {}  # input channel id -> faults (and their leaders) of that injector
+        self.windows: dict[str, list[tuple[int, int]]] = {}
+
+    def reserve(self, sink: McapSink) -> None:
+        """New output channels and schemas are numbered above the input's."""
+        sink.reserve(max(self.source.schema_records, default=0), max(self.source.channel_records, default=0))
+
+    def keep(self, sink: McapSink, number: int) -> int | None:
+        """Routing's hook: the input channel `number` goes out under its input id and bytes (None: not here)."""
+        channel_id = self._ids.get(number)
+        if channel_id is None:
+            return None
+        record = self.source.channel_records[channel_id]
+        schema = self.source.schema_records.get(record.schema_id)
+        if schema is None or not schema.data or 'offered_qos_profiles' not in record.metadata:
+            return None  # the normal path completes it (definition, QoS) as the ros2 profile requires
+        self.kept.add(number)
+        return sink.keep_channel(schema, record, self.source.channels[number].msgtype)
+
+    def wire(self, routing: Routing, observers: Sequence[Observer], scenario: Scenario) -> None:
+        """After routing: the channels whose chunks can be copied, and the faults that can touch them."""
+        observed = wanted_topics(observers)
+        if observed is None:
+            return
+        for channel_id, number in self._numbers.items():
+            channel = self.source.channels[number]
+            runtimes = routing.routes.get(number, [])
+            if number not in self.kept or channel.topic in observed:
+                continue
+            if number in routing.copies:
+                if not runtimes:
+                    self.passthrough.add(channel_id)
+                continue
+            if len(runtimes) == 1 and runtimes[0].channel.id == channel_id and \
+                    not runtimes[0].injector.tracks_history:
+                self.passthrough.add(channel_id)
+                self.in_place[channel_id] = runtimes[0]
+                self.relevant[channel_id] = _with_leaders(scenario, {f.id for f in runtimes[0].faults})
+
+    def plan(self, scenario: Scenario, origin: int, seed: int, activations: Sequence[Activation]) -> None:
+        """Every fault's windows from a twin of the scheduler (only to guess which chunks to decompress ahead)."""
+        end = max(ref.end for ref in self.refs)
+        twin = FaultScheduler(scenario, origin, seed, activations)
+        opened: dict[str, int] = {}
+        for event in twin.advance(end):
+            if event.state == 'active':
+                opened[event.fault_id] = event.time
+            elif event.fault_id in opened:
+                self.windows.setdefault(event.fault_id, []).append((opened.pop(event.fault_id), event.time))
+        for fault_id, start in opened.items():
+            self.windows.setdefault(fault_id, []).append((start, end + 1))
+
+    def candidate(self, ref: ChunkRef) -> bool:
+        """Every channel of the chunk passes through (the question that needs no fault state)."""
+        return all(cid in self.passthrough for cid in ref.channel_ids)
+
+    def likely_copied(self, ref: ChunkRef) -> bool:
+        """A guess for reading ahead: a candidate outside every window of the faults that could touch it."""
+        if not self.candidate(ref):
+            return False
+        for cid in ref.channel_ids:
+            for fault_id in self.relevant.get(cid, ()):
+                if any(a <= ref.end and ref.start <= b + AHEAD_MARGIN for a, b in self.windows.get(fault_id, ())):
+                    return False
+        return True
+
+    def quiet(self, ref: ChunkRef, scheduler: FaultScheduler) -> bool:
+        """The exact answer, with every message before the chunk processed: nothing touches it."""
+        for cid in ref.channel_ids:
+            runtime = self.in_place.get(cid)
+            if runtime is None:
+                continue
+            if runtime.active or runtime.injector.busy:
+                return False
+            due = scheduler.next_change_of(self.relevant[cid])
+            if due is not None and due <= ref.end:
+                return False
+        return True
+
+
+def wanted_topics(observers: Sequence[Observer]) -> set[str] | None:
+    """The topics the observers need to see; None when one of them needs every topic."""
+    wanted: set[str] = set()
+    for observer in observers:
+        topics = getattr(observer, 'wanted_topics', None)
+        found = topics() if topics is not None else None
+        if found is None:
+            return None
+        wanted |= found
+    return wanted
+
+
+def _with_leaders(scenario: Scenario, faults: set[str]) -> set[str]:
+    """The faults and, transitively, the faults they follow (`after:`), whose changes schedule theirs."""
+    found, todo = set(faults), list(faults)
+    while todo:
+        fault = scenario.fault(todo.pop())
+        leader = fault.after.fault if fault is not None and fault.after is not None else None
+        if leader is not None and leader not in found:
+            found.add(leader)
+            todo.append(leader)
+    return found

@@ -1,0 +1,225 @@
+"""Chunk copy: untouched chunks of a single MCAP input go out as they are, and nothing else changes.
+
+Every case runs twice, with chunk copy and with the reference path
+(`--no-chunk-copy`, which decompresses and rewrites every chunk), and the
+two outputs must hold the same message stream per topic (log time, publish
+time, bytes), read with the `mcap` library (CRCs checked, log-time order)
+and with rosbags. Which chunks can be copied is worked out here from the
+input's chunk index, independently of the code under test.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from mcap.reader import make_reader
+from mcap.records import Chunk
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+from rosbags.highlevel import AnyReader
+
+from bagfault import api
+from bagfault.cli import main
+from bagfault.io.mcap_sink import DEFAULT_QOS
+from bagfault.scenario import parse_scenario
+from bench.bags import write_bag
+from bench.run import scenario
+
+QOS = {'offered_qos_profiles': DEFAULT_QOS}
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp('copy')
+    paths = {'sensor-heavy': folder / 'sensor.mcap', 'message-heavy': folder / 'message.mcap'}
+    write_bag(paths['sensor-heavy'], 'sensor-heavy', 3.0)
+    write_bag(paths['message-heavy'], 'message-heavy', 3.0)
+    return paths
+
+
+def streams(path: Path) -> dict[str, list[tuple[int, int, bytes]]]:
+    """Per topic (log time, publish time, bytes), read in log-time order with CRCs checked."""
+    out: dict[str, list[tuple[int, int, bytes]]] = {}
+    last = -1
+    with path.open('rb') as stream:
+        for _, channel, message in make_reader(stream, validate_crcs=True).iter_messages(log_time_order=True):
+            assert message.log_time >= last
+            last = message.log_time
+            out.setdefault(channel.topic, []).append((message.log_time, message.publish_time, bytes(message.data)))
+    return out
+
+
+def rosbags_count(path: Path) -> int:
+    """Messages rosbags reads, checking its log-time order too."""
+    count, last = 0, -1
+    with AnyReader([path]) as reader:
+        for _, time, _ in reader.messages():
+            assert time >= last
+            last, count = time, count + 1
+    return count
+
+
+def chunk_records(path: Path) -> list[Chunk]:
+    with path.open('rb') as stream:
+        return [r for r in StreamReader(stream, skip_magic=False, emit_chunks=True).records
+                if isinstance(r, Chunk)]
+
+
+def both(bag: Path, text: str, tmp_path: Path, **options: Any) -> tuple[Any, Any]:
+    loaded = parse_scenario(text)
+    fast = api.run(loaded, [bag], tmp_path / 'copy.mcap', seed=4, **options)
+    reference = api.run(loaded, [bag], tmp_path / 'reference.mcap', seed=4, chunk_copy=False, **options)
+    assert streams(tmp_path / 'copy.mcap') == streams(tmp_path / 'reference.mcap')
+    assert rosbags_count(tmp_path / 'copy.mcap') == reference.stats.output_messages
+    assert fast.stats.output_messages == reference.stats.output_messages
+    assert fast.stats.per_topic_out == reference.stats.per_topic_out
+    assert [(a.id, a.state, a.time) for a in fast.assertions] == [(a.id, a.state, a.time)
+                                                                  for a in reference.assertions]
+    return fast, reference
+
+
+IMU_WINDOW = """
+injectors:
+  - {id: imu, type: imu, input_topic: /imu, output_topic: /imu}
+faults:
+  - {id: bias, injector_id: imu, start: 1.0, duration: 0.5, config: {angular_velocity_z_bias: 0.05,
+     angular_velocity_z_noise_stddev: 0.02}}
+"""
+
+
+@pytest.mark.parametrize(('kind', 'case'), [('sensor-heavy', c) for c in 'abcd'] + [('message-heavy', c)
+                                                                                   for c in 'abd'])
+def test_every_benchmark_kind_writes_the_same_stream(bags: dict[str, Path], tmp_path: Path, kind: str,
+                                                     case: str) -> None:
+    fast, _ = both(bags[kind], scenario(kind, case), tmp_path)
+    # the topics with a fault active all along (a: none; b: the IMUs; c: the point cloud; d: every topic)
+    with bags[kind].open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+    faulted = {'a': set(), 'b': {c.id for c in summary.channels.values() if 'imu' in c.topic},
+               'c': {c.id for c in summary.channels.values() if c.topic == '/points'},
+               'd': set(summary.channels)}[case]
+    untouched = [c for c in summary.chunk_indexes if not faulted & set(c.message_index_offsets)]
+    assert fast.stats.chunks_copied == len(untouched)
+    assert fast.stats.chunks == len(summary.chunk_indexes) == len(chunk_records(bags[kind]))
+
+
+def test_a_fault_window_copies_the_chunks_outside_it_byte_for_byte(bags: dict[str, Path], tmp_path: Path) -> None:
+    bag = bags['sensor-heavy']
+    fast, _ = both(bag, IMU_WINDOW, tmp_path)
+    with bag.open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+        first = summary.statistics.message_start_time
+        imu = next(c.id for c in summary.channels.values() if c.topic == '/imu')
+        window = (first + 1_000_000_000, first + 1_500_000_000)
+        # a chunk with /imu messages whose range meets the window (the fault starts and ends on whole ms)
+        touched = [c for c in summary.chunk_indexes
+                   if imu in c.message_index_offsets and c.message_start_time <= window[1]
+                   and c.message_end_time >= window[0]]
+    assert touched and fast.stats.chunks_copied == len(summary.chunk_indexes) - len(touched)
+    copied = {(c.message_start_time, c.message_end_time, c.data) for c in chunk_records(tmp_path / 'copy.mcap')}
+    originals = chunk_records(bag)
+    kept = [c for c in originals if (c.message_start_time, c.message_end_time, c.data) in copied]
+    assert len(kept) == fast.stats.chunks_copied  # compressed bytes unchanged
+    # the same inputs, scenario and seed give the same bytes
+    again = api.run(parse_scenario(IMU_WINDOW), [bag], tmp_path / 'again.mcap', seed=4)
+    assert again.stats.chunks_copied == fast.stats.chunks_copied
+    assert (tmp_path / 'again.mcap').read_bytes() == (tmp_path / 'copy.mcap').read_bytes()
+
+
+@pytest.mark.parametrize('faults', [
+    # a delay that carries messages past the chunk where the window ends
+    '[{id: late, injector_id: imu, start: 1.0, duration: 0.3, config: {delay_ms: 400}}]',
+    # intermittent, from seeded draws
+    '[{id: flaky, injector_id: imu, start: 0.5, duration: 2.0, probability_per_second: 2.0, hold: 0.1, '
+    'config: {drop_probability: 1.0}}]',
+    # a follower: its window comes from its leader's
+    '[{id: lead, injector_id: imu, start: 0.8, duration: 0.2, config: {angular_velocity_z_bias: 0.1}}, '
+    '{id: follow, injector_id: imu, after: {fault: lead, delay: 1.0}, duration: 0.2, '
+    'config: {drop_probability: 0.5}}]',
+])
+def test_windows_of_every_schedule_kind(bags: dict[str, Path], tmp_path: Path, faults: str) -> None:
+    text = f'injectors:\n  - {{id: imu, type: imu, input_topic: /imu, output_topic: /imu}}\nfaults: {faults}\n'
+    fast, _ = both(bags['sensor-heavy'], text, tmp_path)
+    assert 0 < fast.stats.chunks_copied < fast.stats.chunks
+
+
+def test_what_an_oracle_reads_or_an_injector_republishes_is_not_copied(bags: dict[str, Path],
+                                                                      tmp_path: Path) -> None:
+    bag = bags['sensor-heavy']
+    watched = IMU_WINDOW + """
+assertions:
+  - {id: imu_rate, type: topic_hz, topic: /imu, message_type: sensor_msgs/msg/Imu, min_hz: 100.0, window: 1.0}
+  - {id: scan_count, type: message_count, topic: /scan, min: 1}
+"""
+    fast, _ = both(bag, watched, tmp_path)
+    assert fast.stats.chunks_copied == 0  # every chunk holds /imu or /scan messages
+    out_of_place = """
+injectors:
+  - {id: imu, type: imu, input_topic: /imu, output_topic: /imu_biased}
+faults:
+  - {id: bias, injector_id: imu, start: 1.0, duration: 0.5, config: {angular_velocity_z_bias: 0.05}}
+"""
+    fast, _ = both(bag, out_of_place, tmp_path)
+    assert fast.stats.chunks_copied == 0  # /imu_biased repeats every /imu message
+    assert fast.stats.per_topic_out['/imu_biased'] == fast.stats.per_topic_out['/imu']
+
+
+def test_chunks_that_define_their_own_channels(tmp_path: Path) -> None:
+    """The mcap library's writer puts a channel registered mid-recording inside the chunk being written."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    text, _ = store.generate_msgdef('std_msgs/msg/String', ros_version=2)
+    bag = tmp_path / 'late.mcap'
+    with bag.open('wb') as stream:
+        writer = Writer(stream, chunk_size=2048, compression=CompressionType.LZ4)
+        writer.start(profile='ros2', library='tests')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', text.encode())
+        first = writer.register_channel('/a', 'cdr', schema, QOS)
+        late = None
+        for k in range(400):
+            time = 1_000_000_000 + k * 10_000_000
+            if k == 200:
+                late = writer.register_channel('/b', 'cdr', schema, QOS)
+            data = bytes(store.serialize_cdr(store.types['std_msgs/msg/String'](data=f'message {k}'),
+                                             'std_msgs/msg/String'))
+            writer.add_message(first, time, data, time)
+            if late is not None:
+                writer.add_message(late, time, data, time)
+        writer.finish()
+    inside = 0
+    with bag.open('rb') as stream:
+        from mcap.records import Channel
+        from mcap.stream_reader import breakup_chunk
+        for record in StreamReader(stream, skip_magic=False, emit_chunks=True).records:
+            if isinstance(record, Chunk):
+                inside += sum(isinstance(r, Channel) for r in breakup_chunk(record))
+    assert inside  # the case this test is about
+    text = """
+injectors:
+  - {id: b, type: topic, input_topic: /b, output_topic: /b}
+faults:
+  - {id: gap, injector_id: b, start: 2.5, duration: 0.5, config: {drop_probability: 1.0}}
+"""
+    fast, _ = both(bag, text, tmp_path)
+    assert 0 < fast.stats.chunks_copied < fast.stats.chunks
+
+
+def test_inputs_outside_the_fast_path_take_the_reference_path(bags: dict[str, Path], tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    bag = bags['sensor-heavy']
+    scenario_file = tmp_path / 's.yaml'
+    scenario_file.write_text(scenario('sensor-heavy', 'a'))
+    assert main(['run', str(scenario_file), str(bag), '-o', str(tmp_path / 'one.mcap')]) == 0
+    chunks = len(chunk_records(bag))
+    assert f'; {chunks} of {chunks} chunks copied as they are' in capsys.readouterr().out
+    # two inputs: the reference path (the summary says nothing about chunks)
+    assert main(['run', str(scenario_file), str(bag), str(bags['message-heavy']), '-o',
+                 str(tmp_path / 'two.mcap')]) == 0
+    assert 'chunks copied' not in capsys.readouterr().out
+    # --no-chunk-copy
+    assert main(['run', str(scenario_file), str(bag), '-o', str(tmp_path / 'ref.mcap'), '--no-chunk-copy']) == 0
+    assert 'chunks copied' not in capsys.readouterr().out
+    assert streams(tmp_path / 'one.mcap') == streams(tmp_path / 'ref.mcap')
