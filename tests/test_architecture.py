@@ -54,8 +54,10 @@ def test_importing_engine_and_io_loads_nothing_of_live_or_api() -> None:
     assert [m for m in loaded if m.startswith(OUTSIDE)] == []
 
 
-def test_only_the_command_line_and_the_pytest_plugin_import_the_api() -> None:
+def test_only_the_front_ends_import_the_api() -> None:
+    """The command line, the pytest plugin and a campaign's job (which is `bagfault run` or `test` in a process
+    of its own) use the API; nothing below them does."""
     users = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob('*.py')
              if any(module == 'bagfault.api' for _, module in _imports(p))}
     assert 'cli.py' in users
-    assert users <= {'cli.py', 'pytest_plugin.py'}
+    assert users <= {'cli.py', 'pytest_plugin.py', 'campaign/job.py'}

@@ -13,9 +13,11 @@ mutated messages are written in chunks of their own.
 
 from __future__ import annotations
 
+import struct
 from typing import TYPE_CHECKING
 
-from bagfault.engine.scheduler import FaultScheduler
+from bagfault.errors import InputError, one_line
+from bagfault.io.mcap_writer import CopiedChunk
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -23,14 +25,11 @@ if TYPE_CHECKING:
     from bagfault.engine.pipeline import InjectorRuntime
     from bagfault.engine.routing import Routing
     from bagfault.engine.run import Observer
-    from bagfault.engine.scheduler import Activation
+    from bagfault.engine.scheduler import FaultScheduler
     from bagfault.io.mcap_sink import McapSink
     from bagfault.io.mcap_source import ChunkRef, McapSource
     from bagfault.io.sources import InputSet
     from bagfault.scenario.model import Scenario
-
-AHEAD_MARGIN = 2_000_000_000  # ns after a fault window in which a chunk is still decompressed ahead (delays)
-
 
 def chunk_copy_for(inputs: InputSet) -> ChunkCopy | None:
     """A chunk copy plan when the inputs are one indexed MCAP file whose chunks follow each other in time."""
@@ -59,7 +58,6 @@ class ChunkCopy:
         self.passthrough: set[int] = set()  # input channel ids whose messages may be copied
         self.in_place: dict[int, InjectorRuntime] = {}  # input channel id -> its in-place injector
         self.relevant: dict[int, set[str]] = {}  # input channel id -> faults (and their leaders) of that injector
-        self.windows: dict[str, list[tuple[int, int]]] = {}
 
     def reserve(self, sink: McapSink) -> None:
         """New output channels and schemas are numbered above the input's."""
@@ -97,32 +95,20 @@ class ChunkCopy:
                 self.in_place[channel_id] = runtimes[0]
                 self.relevant[channel_id] = _with_leaders(scenario, {f.id for f in runtimes[0].faults})
 
-    def plan(self, scenario: Scenario, origin: int, seed: int, activations: Sequence[Activation]) -> None:
-        """Every fault's windows from a twin of the scheduler (only to guess which chunks to decompress ahead)."""
-        end = max(ref.end for ref in self.refs)
-        twin = FaultScheduler(scenario, origin, seed, activations)
-        opened: dict[str, int] = {}
-        for event in twin.advance(end):
-            if event.state == 'active':
-                opened[event.fault_id] = event.time
-            elif event.fault_id in opened:
-                self.windows.setdefault(event.fault_id, []).append((opened.pop(event.fault_id), event.time))
-        for fault_id, start in opened.items():
-            self.windows.setdefault(fault_id, []).append((start, end + 1))
-
     def candidate(self, ref: ChunkRef) -> bool:
         """Every channel of the chunk passes through (the question that needs no fault state)."""
         return all(cid in self.passthrough for cid in ref.channel_ids)
 
-    def likely_copied(self, ref: ChunkRef) -> bool:
-        """A guess for reading ahead: a candidate outside every window of the faults that could touch it."""
-        if not self.candidate(ref):
-            return False
-        for cid in ref.channel_ids:
-            for fault_id in self.relevant.get(cid, ()):
-                if any(a <= ref.end and ref.start <= b + AHEAD_MARGIN for a, b in self.windows.get(fault_id, ())):
-                    return False
-        return True
+    def copy_of(self, ref: ChunkRef) -> CopiedChunk:
+        """The chunk to write as it is: where it is, and its message indexes read from the input."""
+        source = self.source
+        indexes = source.read_indexes(ref, source.handle)
+        try:
+            return CopiedChunk.of(source.fileno(), ref.offset, ref.length, indexes, ref.start, ref.end,
+                                  ref.compression, ref.compressed_size, ref.uncompressed_size)
+        except (struct.error, ValueError) as exc:
+            raise InputError(f'{source.path}: corrupt message index after the chunk at offset {ref.offset}: '
+                             f'{one_line(exc)}') from None
 
     def quiet(self, ref: ChunkRef, scheduler: FaultScheduler) -> bool:
         """The exact answer, with every message before the chunk processed: nothing touches it."""

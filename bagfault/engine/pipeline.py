@@ -128,45 +128,37 @@ class Pipeline:
         self.run.emit(self._merge.drain())
 
     def _process_chunks(self, chunks: ChunkCopy) -> None:
-        """The chunk copy path: chunk by chunk, read ahead; quiet chunks written as they are, the others'
-        messages processed as in `process` (the pending batch first, so the fault state is current)."""
-        from bagfault.io.chunk_reader import ChunkReader  # noqa: PLC0415
-
+        """The chunk copy path, chunk by chunk: quiet chunks written as they are, the others' messages processed
+        as in `process` (the pending batch first, so the fault state is current when a chunk is judged)."""
         self._start(next(ref.start for ref in chunks.refs if ref.index_offsets))
         assert self.scheduler is not None
-        chunks.plan(self.scenario, self.scheduler.origin, self.seed, self.activations)
         source = chunks.source
         topic_of = {cid: source.channels[source.channel_number(cid)].topic for cid in chunks.passthrough}
-        reader = ChunkReader(source, chunks.refs, lambda ref: not chunks.likely_copied(ref))
         self.run.stats.chunks = len(chunks.refs)
         batch: list[InputMessage] = []
         order = size = 0
-        try:
-            for raw in reader:
-                ref = raw.ref
-                if chunks.candidate(ref):
-                    if batch:
-                        self._process(batch, order)
-                        order += len(batch)
-                        batch, size = [], 0
-                    if chunks.quiet(ref, self.scheduler) and not self._merge.holds(set(ref.channel_ids), ref.start,
-                                                                                   ref.end):
-                        self.run.read(sum(raw.chunk.counts.values()), ref.end)
-                        self.run.copy_chunk(raw.chunk, topic_of)
-                        self.run.stats.chunks_copied += 1
-                        if self.progress is not None:
-                            self.progress(self.run.stats.input_messages, ref.end)
-                        continue
-                records = raw.records if raw.records is not None else source.records_of(ref, source.read_record(ref))
-                for item in source.messages_of(ref, records):
-                    batch.append(item)
-                    size += len(item[3])
-                    if len(batch) >= BATCH or size >= BATCH_BYTES:
-                        self._process(batch, order)
-                        order += len(batch)
-                        batch, size = [], 0
-        finally:
-            reader.close()
+        for ref in chunks.refs:
+            if chunks.candidate(ref):
+                if batch:
+                    self._process(batch, order)
+                    order += len(batch)
+                    batch, size = [], 0
+                if chunks.quiet(ref, self.scheduler) and not self._merge.holds(set(ref.channel_ids), ref.start,
+                                                                               ref.end):
+                    chunk = chunks.copy_of(ref)
+                    self.run.read(sum(chunk.counts.values()), ref.end)
+                    self.run.copy_chunk(chunk, topic_of)
+                    self.run.stats.chunks_copied += 1
+                    if self.progress is not None:
+                        self.progress(self.run.stats.input_messages, ref.end)
+                    continue
+            for item in source.messages_of(ref, source.records_of(ref, source.read_record(ref))):
+                batch.append(item)
+                size += len(item[3])
+                if len(batch) >= BATCH or size >= BATCH_BYTES:
+                    self._process(batch, order)
+                    order += len(batch)
+                    batch, size = [], 0
         if batch:
             self._process(batch, order)
         self._flush_injectors()

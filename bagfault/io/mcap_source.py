@@ -479,6 +479,11 @@ class McapSource:
                              'its index says')
         return indexes
 
+    @property
+    def handle(self) -> IO[bytes]:
+        """The open input file (positioned anywhere; readers seek)."""
+        return self._file
+
     def fileno(self) -> int:
         """The input file's descriptor (chunk copy copies from it with explicit offsets)."""
         return self._file.fileno()
