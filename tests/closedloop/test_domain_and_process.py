@@ -74,6 +74,9 @@ def running_with(token: str) -> list[int]:
 
 
 SLEEP = f"{sys.executable} -c 'import time; time.sleep(300)'"  # a long sleeper that takes extra arguments
+# the same, saying on stderr when Python runs (a SIGINT before that ends it without a KeyboardInterrupt)
+READY_SLEEP = (f"{sys.executable} -c 'import sys, time; print(\"sleeping\", file=sys.stderr, flush=True); "
+               "time.sleep(300)'")
 
 
 def start(tmp_path: Path, script: str, token: str) -> SystemProcess:
@@ -89,8 +92,8 @@ def wait_for(predicate: object, timeout: float = 10.0) -> None:
 
 def test_sigint_ends_a_well_behaved_group(tmp_path: Path) -> None:
     token = uuid.uuid4().hex
-    process = start(tmp_path, f'echo started; {SLEEP} {token}-a & {SLEEP} {token}-b; wait', token)
-    wait_for(lambda: len(running_with(token)) >= 3)
+    process = start(tmp_path, f'echo started; {READY_SLEEP} {token}-a & {READY_SLEEP} {token}-b; wait', token)
+    wait_for(lambda: len(running_with(token)) >= 3 and process.tail().count('sleeping') == 2)
     assert process.stop(timeout=5.0) == 'SIGINT'
     assert running_with(token) == []
     assert process.leftovers() == set()
