@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from bagfault.fault_manager.model import SEVERITY_NAMES, ClusterInfo, MutedFaultInfo
+from bagfault.fault_manager.model import CORRELATION_SEVERITY_NAMES, ClusterInfo, MutedFaultInfo
 
 Problem = Callable[[tuple[Any, ...], str], None]
 REPRESENTATIVES = ('first', 'most_recent', 'highest_severity')
@@ -238,7 +238,7 @@ class CorrelationEngine:
             if cluster is None:
                 self._cluster_counter += 1
                 info = ClusterInfo(f'{rule.id}_{self._cluster_counter}', rule.id, rule.name, rule.name, code,
-                                   SEVERITY_NAMES[severity], [code], time, time)
+                                   CORRELATION_SEVERITY_NAMES[severity], [code], time, time)
                 self.pending_clusters[rule.id] = _Cluster(info, rule, {code: severity})
                 self.member_of[code] = info.cluster_id
                 return
@@ -252,7 +252,7 @@ class CorrelationEngine:
             if rule.representative == 'most_recent' or (
                 rule.representative == 'highest_severity' and severity > cluster.severities[info.representative_code]
             ):
-                info.representative_code, info.representative_severity = code, SEVERITY_NAMES[severity]
+                info.representative_code, info.representative_severity = code, CORRELATION_SEVERITY_NAMES[severity]
             if len(info.fault_codes) >= rule.min_count:
                 cluster.active = True
                 self.active_clusters[info.cluster_id] = cluster
@@ -323,4 +323,4 @@ def _promote(cluster: _Cluster) -> None:
     elif cluster.rule.representative == 'highest_severity':
         choice = max(codes, key=lambda c: cluster.severities.get(c, 0))
     info.representative_code = choice
-    info.representative_severity = SEVERITY_NAMES[cluster.severities.get(choice, 0)]
+    info.representative_severity = CORRELATION_SEVERITY_NAMES[cluster.severities.get(choice, 0)]

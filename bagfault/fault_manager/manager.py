@@ -25,6 +25,7 @@ from bagfault.fault_manager.model import (
     PASSED,
     PREFAILED,
     PREPASSED,
+    STATUSES,
     Fault,
     FaultManagerEvent,
     ListFaultsResult,
@@ -131,7 +132,7 @@ class FaultManager:
                 if report.description:
                     fault.description = report.description
                 if report.source_id not in fault.reporting_sources:
-                    fault.reporting_sources.append(report.source_id)
+                    fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])
                 fault.status = PREFAILED
             self._set(fault, CONFIRMED if report.severity == CRITICAL else self._status(fault, thresholds), time)
             if fault.status == CONFIRMED and not muted:
@@ -139,11 +140,10 @@ class FaultManager:
             self._arm(fault, thresholds)
             return
         before = fault.status
-        fault.counter = max(thresholds.confirmation_threshold, min(thresholds.healing_threshold, fault.counter))
-        fault.counter -= 1
+        fault.counter = _clamp(_clamp(fault.counter, thresholds) - 1, thresholds)
         fault.last_occurred = time
         if report.source_id not in fault.reporting_sources:
-            fault.reporting_sources.append(report.source_id)
+            fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])  # medkit's std::set
         fault.severity = max(fault.severity, report.severity)
         if report.description:
             fault.description = report.description
@@ -157,8 +157,7 @@ class FaultManager:
 
     def _passed(self, fault: Fault, report: Report, thresholds: Thresholds) -> None:
         before = fault.status
-        fault.counter = max(thresholds.confirmation_threshold, min(thresholds.healing_threshold, fault.counter))
-        fault.counter += 1
+        fault.counter = _clamp(_clamp(fault.counter, thresholds) + 1, thresholds)
         fault.last_passed = report.time
         self._set(fault, self._status(fault, thresholds), report.time)
         muted = self.correlation is not None and self.correlation.is_muted(fault.fault_code)
@@ -215,18 +214,24 @@ class FaultManager:
         include_muted: bool = False,
         include_clusters: bool = False,
     ) -> ListFaultsResult:
-        """ListFaults: empty statuses means CONFIRMED only; muted faults hidden unless asked for."""
-        wanted = set(statuses) or {CONFIRMED}
+        """ListFaults: empty statuses (or only unknown names) means CONFIRMED only; muted faults hidden unless
+        asked for; in fault code order (medkit keeps faults in a std::map)."""
+        wanted = {s for s in statuses if s in STATUSES} or {CONFIRMED}
         muted = self.correlation.muted_faults() if self.correlation else []
         muted_codes = {m.fault_code for m in muted}
         faults = [
-            f.copy() for f in self.faults.values()
+            f.copy() for _, f in sorted(self.faults.items())
             if f.status in wanted and (not filter_by_severity or f.severity == severity)
             and (include_muted or f.fault_code not in muted_codes)
         ]
         clusters = self.correlation.clusters() if self.correlation else []
         return ListFaultsResult(faults, len(muted), muted if include_muted else [], len(clusters),
                                 clusters if include_clusters else [])
+
+
+def _clamp(counter: int, thresholds: Thresholds) -> int:
+    """The debounce counter within [confirmation_threshold, healing_threshold] (medkit's clamp_debounce_counter)."""
+    return max(thresholds.confirmation_threshold, min(thresholds.healing_threshold, counter))
 
 
 __all__ = ['PASSED', 'PREPASSED', 'FaultManager', 'reject_reason']

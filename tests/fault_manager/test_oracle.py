@@ -99,7 +99,7 @@ def test_8_healing_clamps_and_latches():
     assert fm.faults['F'].status == 'HEALED'
     for _ in range(100):
         passed(fm)
-    assert (fm.faults['F'].status, fm.faults['F'].counter) == ('HEALED', 4)
+    assert (fm.faults['F'].status, fm.faults['F'].counter) == ('HEALED', 3)  # clamped after the step too
     for _ in range(3):
         failed(fm)
     assert fm.faults['F'].status == 'HEALED'
@@ -278,3 +278,12 @@ def test_list_faults_filters():
     assert {f.fault_code for f in fm.list_faults(['CONFIRMED', 'PREFAILED']).faults} == {'A', 'B'}
     assert [f.fault_code for f in fm.list_faults(['PREFAILED', 'CONFIRMED'], filter_by_severity=True,
                                                  severity=INFO).faults] == ['A']
+
+
+def test_a_warning_representative_is_written_as_medkit_writes_it():
+    """medkit's correlation severity_to_string (correlation/types.cpp) writes severity 1 as WARNING."""
+    fm = correlated()
+    for offset, code in enumerate(('COMM_A', 'COMM_B', 'COMM_C')):
+        failed(fm, code, offset * 100 * MS, severity=WARN)
+    [cluster] = fm.list_faults(include_clusters=True, include_muted=True).clusters
+    assert cluster.representative_severity == 'WARNING'
