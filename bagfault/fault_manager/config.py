@@ -132,13 +132,13 @@ class FaultManagerConfig:
     reports: list[InjectedReport] = field(default_factory=list)
 
     def thresholds_for(self, source_id: str) -> Thresholds:
-        """Override with the longest '/'-boundary prefix of source_id, else the defaults."""
+        """The override of the longest prefix that source_id starts with at a '/' boundary (the prefix as written,
+        as medkit's EntityThresholdResolver compares it: `/powertrain/` matches only itself, `/` only `/`)."""
         best, best_len = self.thresholds, -1
         for prefix, thresholds in self.overrides:
-            trimmed = prefix.rstrip('/') or '/'
-            matches = source_id == trimmed or source_id.startswith(trimmed if trimmed.endswith('/') else trimmed + '/')
-            if matches and len(trimmed) > best_len:
-                best, best_len = thresholds, len(trimmed)
+            matches = source_id.startswith(prefix) and (len(source_id) == len(prefix) or source_id[len(prefix)] == '/')
+            if matches and len(prefix) > best_len:
+                best, best_len = thresholds, len(prefix)
         return best
 
 
@@ -219,8 +219,9 @@ def parse_report(fault_id: str, injector_id: str, node: object, path: tuple[Any,
     return InjectedReport(fault_id, code, severity, source, float(period) if period else None)
 
 
-def parse_fault_manager(section: dict[str, Any] | None, problem: Problem) -> FaultManagerConfig:
-    """Parse and check the whole section."""
+def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
+                        warn: Problem | None = None) -> FaultManagerConfig:
+    """Parse and check the whole section; `warn` hears what medkit accepts but the user may not mean."""
     config = FaultManagerConfig()
     if not section:
         return config
@@ -260,7 +261,11 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem) -> Fau
         if condition:
             config.conditions.append(condition)
     if 'correlation' in section:
-        config.correlation = parse_correlation(section['correlation'], (*PREFIX, 'correlation'), problem)
+        node = section['correlation']
+        config.correlation = parse_correlation(node, (*PREFIX, 'correlation'), problem)
+        if isinstance(node, dict) and 'enabled' not in node and warn is not None:
+            warn((*PREFIX, 'correlation'), "correlation is off without `enabled: true` (medkit's default); "
+                                            'its rules are checked but not applied')
     if 'snapshots' in section:
         config.snapshots = _snapshots(section['snapshots'], (*PREFIX, 'snapshots'), problem)
     for number, node in enumerate(section.get('clear') or []):

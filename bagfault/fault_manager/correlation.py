@@ -63,7 +63,7 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem) -> 
     if not isinstance(node, dict):
         problem(path, 'must be a mapping {enabled, default_window_ms, patterns, rules}')
         return None
-    config = CorrelationConfig(enabled=bool(node.get('enabled', True)))
+    config = CorrelationConfig(enabled=bool(node.get('enabled', False)))  # medkit: get_bool(..., "enabled", false)
     window = node.get('default_window_ms', 500)
     if isinstance(window, bool) or not isinstance(window, int) or window <= 0:
         problem((*path, 'default_window_ms'), f'{window!r} must be a positive integer (ms)')

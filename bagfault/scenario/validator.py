@@ -161,7 +161,7 @@ def _check_fault_manager(scenario: Scenario, out: _Collector) -> None:
     """Parse the fault_manager section and the faults' report blocks into scenario.fault_manager_config."""
     from bagfault.fault_manager.config import parse_fault_manager, parse_report  # noqa: PLC0415
 
-    config = parse_fault_manager(scenario.fault_manager, out.add)
+    config = parse_fault_manager(scenario.fault_manager, out.add, out.warn)
     for fault in scenario.faults:
         if fault.report is not None:
             report = parse_report(fault.id, fault.injector_id, fault.report, (*fault.path, 'report'), out.add)

@@ -176,6 +176,7 @@ def test_correlation_and_clear_in_a_run(tmp_path, bag):
              report: {code: MOTOR_LATE, report_period: 10}}
         fault_manager:
           correlation:
+            enabled: true
             rules:
               - {id: estop, root_cause: {codes: [ESTOP_001]}, symptoms: [{codes: ['MOTOR_*']}], window_ms: 500}
           clear: [{code: ESTOP_001, at: 5.0}]

@@ -163,6 +163,79 @@ def test_reports_are_validated():
     assert not fm.faults and len(fm.rejected) == 5
 
 
+# medkit test_entity_thresholds.cpp, ResolverTest (global: confirmation -1, healing off, healing threshold 3)
+GLOBAL = {'confirmation_threshold': -1, 'healing_threshold': 3}
+
+
+def resolver(*overrides: dict[str, object]):
+    config = parse_fault_manager({**GLOBAL, 'overrides': list(overrides)}, lambda p, m: pytest.fail(m))
+    return config.thresholds_for
+
+
+def test_ResolverTest_EmptyResolverReturnsGlobal():
+    result = resolver()('/sensors/lidar')
+    assert (result.confirmation_threshold, result.healing_enabled, result.healing_threshold) == (-1, False, 3)
+
+
+def test_ResolverTest_ExactMatch():
+    result = resolver({'source': '/sensors/lidar', 'confirmation_threshold': -1, 'healing_threshold': 1})(
+        '/sensors/lidar')
+    assert (result.confirmation_threshold, result.healing_threshold) == (-1, 1)
+
+
+def test_ResolverTest_PrefixMatch():
+    assert resolver({'source': '/sensors/lidar', 'healing_threshold': 1})('/sensors/lidar/front').healing_threshold == 1
+
+
+def test_ResolverTest_LongestPrefixWins():
+    resolve = resolver({'source': '/sensors', 'confirmation_threshold': -5},
+                       {'source': '/sensors/lidar', 'confirmation_threshold': -1})
+    assert resolve('/sensors/lidar/front').confirmation_threshold == -1
+    assert resolve('/sensors/camera').confirmation_threshold == -5
+
+
+def test_ResolverTest_NoMatchReturnsGlobal():
+    assert resolver({'source': '/sensors/lidar', 'confirmation_threshold': -5})(
+        '/powertrain/motor').confirmation_threshold == -1
+
+
+def test_ResolverTest_PrefixMatchRequiresPathBoundary():
+    resolve = resolver({'source': '/sensors/lid', 'confirmation_threshold': -5})
+    assert resolve('/sensors/lidar').confirmation_threshold == -1
+    assert resolve('/sensors/lid/front').confirmation_threshold == -5
+
+
+def test_ResolverTest_PartialOverrideMergesWithGlobal():
+    result = resolver({'source': '/safety', 'healing_enabled': False})('/safety/estop')
+    assert (result.confirmation_threshold, result.healing_enabled, result.healing_threshold) == (-1, False, 3)
+
+
+def test_prefixes_are_compared_as_written():
+    """From EntityThresholdResolver::resolve: the source must start with the prefix and end there or at '/'."""
+    resolve = resolver({'source': '/powertrain/', 'confirmation_threshold': -5},
+                       {'source': '/', 'confirmation_threshold': -7})
+    assert resolve('/powertrain/motor').confirmation_threshold == -1  # next character 'm': no boundary
+    assert resolve('/powertrain/').confirmation_threshold == -5
+    assert resolve('/').confirmation_threshold == -7
+    assert resolve('/x').confirmation_threshold == -1
+
+
+def test_correlation_is_off_unless_enabled():
+    """config_parser.cpp: enabled = get_bool(node, "enabled", false); the scenario says so as a warning."""
+    section = {k: v for k, v in CORRELATION['correlation'].items() if k != 'enabled'}
+    warnings: list[str] = []
+    config = parse_fault_manager({'correlation': section}, lambda p, m: pytest.fail(m),
+                                 lambda p, m: warnings.append(m))
+    assert config.correlation is not None and not config.correlation.enabled
+    assert warnings == ["correlation is off without `enabled: true` (medkit's default); its rules are checked but "
+                        'not applied']
+    fm = FaultManager(config)
+    failed(fm, 'ESTOP_001', 0, severity=CRITICAL)
+    failed(fm, 'MOTOR_A', 100 * MS)
+    assert fm.list_faults().muted_count == 0 and [f.fault_code for f in fm.list_faults().faults] == [
+        'ESTOP_001', 'MOTOR_A']
+
+
 def test_per_source_overrides_longest_prefix_wins():
     config = parse_fault_manager({'confirmation_threshold': -3, 'overrides': [
         {'source': '/powertrain', 'confirmation_threshold': -1},
@@ -177,6 +250,7 @@ def test_per_source_overrides_longest_prefix_wins():
 
 CORRELATION = {
     'correlation': {
+        'enabled': True,
         'default_window_ms': 500,
         'patterns': {'motor': {'codes': ['MOTOR_*']}, 'comm': {'codes': ['COMM_*']}},
         'rules': [
