@@ -76,8 +76,7 @@ class FaultManager:
             if fault is None or fault.status != PREFAILED:
                 continue
             if due - fault.last_occurred >= wait:  # a later FAILED re-armed the timer
-                self._set(fault, CONFIRMED, due)
-                self._emit(due, EVENT_CONFIRMED, fault)
+                self._set(fault, CONFIRMED, due)  # as medkit's timer: the status only, no FaultEvent, no snapshot
 
     def next_timer(self) -> int | None:
         """Bag time of the next pending time-based confirmation."""

@@ -174,3 +174,20 @@ def test_ClampDebounceCounterBounds() -> None:
     passed(fm)
     failed(fm)
     assert fm.faults['FAULT_1'].counter == 1
+
+
+def test_TimeBasedConfirmationDisabledByDefault() -> None:
+    fm = storage(confirmation_threshold=-3)
+    failed(fm)
+    fm.advance(20 * 1_000_000_000)
+    assert fm.faults['FAULT_1'].status == 'PREFAILED'
+
+
+def test_TimeBasedConfirmationWhenEnabled() -> None:
+    fm = storage(confirmation_threshold=-3, auto_confirm_after_sec=10.0)
+    failed(fm)
+    fm.advance(5 * 1_000_000_000)
+    assert fm.faults['FAULT_1'].status == 'PREFAILED'
+    fm.advance(15 * 1_000_000_000)
+    assert fm.faults['FAULT_1'].status == 'CONFIRMED'
+    assert fm.events == []  # fault_manager_node's timer publishes no FaultEvent for it
