@@ -17,6 +17,12 @@ from bagfault.fault_manager.model import CORRELATION_SEVERITY_NAMES, ClusterInfo
 
 Problem = Callable[[tuple[Any, ...], str], None]
 REPRESENTATIVES = ('first', 'most_recent', 'highest_severity')
+# what medkit's string_to_mode / string_to_representative accept (correlation/types.cpp), in any case
+MODE_ALIASES = {'hierarchical': 'hierarchical', 'auto_cluster': 'auto_cluster', 'autocluster': 'auto_cluster',
+                'cluster': 'auto_cluster'}
+REPRESENTATIVE_ALIASES = {'first': 'first', 'most_recent': 'most_recent', 'mostrecent': 'most_recent',
+                          'recent': 'most_recent', 'highest_severity': 'highest_severity',
+                          'highestseverity': 'highest_severity', 'severity': 'highest_severity'}
 
 
 def wildcard(pattern: str) -> re.Pattern[str]:
@@ -127,9 +133,10 @@ class _References:
 
 def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, refs: _References,
           problem: Problem) -> Rule | None:
-    mode = item.get('mode', 'hierarchical')
-    if mode not in ('hierarchical', 'auto_cluster'):
-        problem((*where, 'mode'), f"{mode!r} is not 'hierarchical' or 'auto_cluster'")
+    written = item.get('mode', 'hierarchical')
+    mode = MODE_ALIASES.get(str(written).lower())
+    if mode is None:
+        problem((*where, 'mode'), f"{written!r} is not 'hierarchical' or 'auto_cluster'")
         return None
     window_ms = item.get('window_ms', default_window_ms)
     if isinstance(window_ms, bool) or not isinstance(window_ms, int) or window_ms <= 0:
@@ -153,9 +160,10 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
     else:
         rule.min_count = min_count
     rule.show_as_single = bool(item.get('show_as_single', True))
-    representative = item.get('representative', 'highest_severity')
-    if representative not in REPRESENTATIVES:
-        problem((*where, 'representative'), f'{representative!r} is not one of {", ".join(REPRESENTATIVES)}')
+    written = item.get('representative', 'highest_severity')
+    representative = REPRESENTATIVE_ALIASES.get(str(written).lower())
+    if representative is None:
+        problem((*where, 'representative'), f'{written!r} is not one of {", ".join(REPRESENTATIVES)}')
     else:
         rule.representative = representative
     return rule

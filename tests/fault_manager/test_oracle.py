@@ -363,3 +363,17 @@ def test_a_warning_representative_is_written_as_medkit_writes_it():
         failed(fm, code, offset * 100 * MS, severity=WARN)
     [cluster] = fm.list_faults(include_clusters=True, include_muted=True).clusters
     assert cluster.representative_severity == 'WARNING'
+
+
+@pytest.mark.parametrize(('mode', 'representative', 'expected'), [
+    ('Cluster', 'Severity', 'highest_severity'), ('AUTOCLUSTER', 'recent', 'most_recent'),
+    ('auto_cluster', 'MostRecent', 'most_recent'), ('cluster', 'FIRST', 'first'),
+])
+def test_rule_names_are_read_as_medkit_reads_them(mode, representative, expected):
+    """correlation/types.cpp string_to_mode and string_to_representative: lower-cased, with aliases."""
+    section = {'correlation': {'enabled': True, 'rules': [
+        {'id': 'storm', 'mode': mode, 'match': [{'codes': ['COMM_*']}], 'min_count': 2,
+         'representative': representative}]}}
+    config = parse_fault_manager(section, lambda p, m: pytest.fail(m))
+    [rule] = config.correlation.rules
+    assert (rule.mode, rule.representative) == ('auto_cluster', expected)
