@@ -14,6 +14,7 @@ import multiprocessing
 import multiprocessing.context
 import os
 import signal
+import socket
 import sys
 import tempfile
 import threading
@@ -209,6 +210,8 @@ class RayEngine:
             raise CampaignError('--ray needs Ray: pip install "bagfault[campaign]"') from None
         self.ray: Any = ray
         self.limit = workers
+        if address:
+            _reachable(address)
         options: dict[str, Any] = {'include_dashboard': False, 'log_to_driver': False,
                                    'configure_logging': False}
         try:
@@ -252,6 +255,17 @@ class RayEngine:
     def close(self) -> None:
         """Disconnect (and stop the local instance if this campaign started it)."""
         self.ray.shutdown()
+
+
+def _reachable(address: str) -> None:
+    """A HOST:PORT head answers a TCP connection within 5 s (Ray itself retries for minutes); CampaignError else."""
+    host, _, port = address.rpartition(':')
+    if not host or not port.isdigit() or '//' in address:
+        return  # ray://, auto and the like: Ray's own resolution
+    try:
+        socket.create_connection((host, int(port)), timeout=5).close()
+    except OSError as exc:
+        raise CampaignError(f'--ray {address}: no Ray head answers there ({exc.strerror or exc})') from None
 
 
 def make_engine(workers: int | None, ray: str | None) -> Engine:

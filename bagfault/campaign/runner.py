@@ -110,14 +110,18 @@ class _Store:
         self.outputs = directory / 'outputs'
         self.results: dict[str, dict[str, Any]] = {}
 
-    def open(self, resume: bool) -> None:
-        """Make the folders; load what is there when resuming, refuse a used folder otherwise."""
+    def check(self, resume: bool) -> None:
+        """A folder, and one without results unless resuming."""
         if self.directory.exists() and not self.directory.is_dir():
             raise CampaignError(f'{self.directory}: not a folder (-o names the campaign folder)')
-        stored = sorted(self.jobs.glob('*.json')) if self.jobs.is_dir() else []
+        stored = list(self.jobs.glob('*.json')) if self.jobs.is_dir() else []
         if stored and not resume:
             raise CampaignError(f'{self.directory}: holds {len(stored)} results of a campaign already; '
                                 f'--resume continues it (reruns only what is missing or changed), or choose another -o')
+
+    def open(self, resume: bool) -> None:
+        """Make the folders; load what is there when resuming."""
+        stored = sorted(self.jobs.glob('*.json')) if resume and self.jobs.is_dir() else []
         try:
             for folder in (self.jobs, self.outputs):
                 folder.mkdir(parents=True, exist_ok=True)
@@ -155,9 +159,14 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     """Every job of the plan (and the search rounds), then the tables and the report in `directory`."""
     plan = make_plan(campaign)
     store = _Store(directory, plan)
-    store.open(resume)
+    store.check(resume)
+    engine = make_engine(workers, ray)  # before any folder is made: an engine that cannot start leaves nothing
+    try:
+        store.open(resume)
+    except BaseException:
+        engine.close()
+        raise
     bar = progress or JobProgress(enabled=False)
-    engine = make_engine(workers, ray)
     ran = 0
     try:
         def run_jobs(jobs: list[Job]) -> dict[str, dict[str, Any]]:

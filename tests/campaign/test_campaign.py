@@ -255,3 +255,18 @@ def test_a_job_past_its_timeout_is_an_error_row(corpus: Path) -> None:
     (row,) = result.table.rows
     assert (row['status'], row['message']) == ('error', 'timed out after 0.001 s (the campaign timeout)')
     assert result.failed and result.counts == {'passed': 0, 'failed': 0, 'error': 1}
+
+
+def test_a_ray_address_where_nothing_answers_is_one_line_and_leaves_nothing(corpus: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    path = campaign_file(corpus, f"""
+        campaign: nowhere
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+    """)
+    assert main(['campaign', str(path), '-o', str(corpus / 'out'), '--ray', f'127.0.0.1:{_free_port()}']) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('bagfault: error: --ray 127.0.0.1:') and 'no Ray head answers there' in err
+    assert len(err.splitlines()) == 1 and 'Traceback' not in err
+    assert not (corpus / 'out').exists()
