@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from bagfault.fault_manager.correlation import CorrelationConfig, parse_correlation
+from bagfault.fault_manager.correlation import CorrelationConfig, no_warning, parse_correlation
 from bagfault.fault_manager.model import severity_value, valid_code
 
 Problem = Callable[[tuple[Any, ...], str], None]
@@ -99,7 +99,7 @@ class Snapshots:
     recapture_cooldown_sec: float = 60.0
 
     def topics_for(self, code: str) -> tuple[str, ...]:
-        """Fault-specific list, then the first matching regex, then the defaults."""
+        """Fault-specific list, then the first matching regex in sorted order, then the defaults."""
         if code in self.fault_specific:
             return self.fault_specific[code]
         for pattern, topics in self.patterns:
@@ -262,10 +262,7 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
             config.conditions.append(condition)
     if 'correlation' in section:
         node = section['correlation']
-        config.correlation = parse_correlation(node, (*PREFIX, 'correlation'), problem)
-        if isinstance(node, dict) and 'enabled' not in node and warn is not None:
-            warn((*PREFIX, 'correlation'), "correlation is off without `enabled: true` (medkit's default); "
-                                            'its rules are checked but not applied')
+        config.correlation = parse_correlation(node, (*PREFIX, 'correlation'), problem, warn or no_warning)
     if 'snapshots' in section:
         config.snapshots = _snapshots(section['snapshots'], (*PREFIX, 'snapshots'), problem)
     for number, node in enumerate(section.get('clear') or []):
@@ -336,19 +333,7 @@ def _snapshots(node: object, path: tuple[Any, ...], problem: Problem) -> Snapsho
         else:
             problem((*path, 'fault_specific'), 'must map fault codes to topic lists')
     if 'patterns' in node:
-        patterns = []
-        for number, item in enumerate(node['patterns'] or []):
-            where = (*path, 'patterns', number)
-            if not isinstance(item, dict) or not isinstance(item.get('match'), str):
-                problem(where, 'must be {match: REGEX, topics: [...]}')
-                continue
-            try:
-                re.compile(item['match'])
-            except re.error as exc:
-                problem((*where, 'match'), f'bad regular expression: {exc}')
-                continue
-            patterns.append((item['match'], _topics(item.get('topics'), (*where, 'topics'), problem)))
-        values['patterns'] = tuple(patterns)
+        values['patterns'] = _snapshot_patterns(node['patterns'] or [], (*path, 'patterns'), problem)
     for key in ('duration_sec', 'duration_after_sec', 'recapture_cooldown_sec'):
         if key in node:
             value = node[key]
@@ -357,3 +342,30 @@ def _snapshots(node: object, path: tuple[Any, ...], problem: Problem) -> Snapsho
             else:
                 values[key] = float(value)
     return Snapshots(**values)
+
+
+def _snapshot_patterns(node: object, path: tuple[Any, ...], problem: Problem,
+                       ) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """medkit's `{REGEX: [topics]}` map or a list of `{match: REGEX, topics: [...]}`; kept sorted by regex, as
+    medkit's std::map holds them, so the lexicographically first matching regex wins."""
+    if isinstance(node, dict):
+        items = [({'match': key, 'topics': value}, (*path, key)) for key, value in node.items()]
+    elif isinstance(node, list):
+        items = [(item, (*path, number)) for number, item in enumerate(node)]
+    else:
+        problem(path, 'must map regular expressions to topic lists')
+        return ()
+    patterns: dict[str, tuple[str, ...]] = {}
+    for item, where in items:
+        if not isinstance(item, dict) or not isinstance(item.get('match'), str):
+            problem(where, 'must be {match: REGEX, topics: [...]}')
+            continue
+        try:
+            re.compile(item['match'])
+        except re.error as exc:
+            problem((*where, 'match'), f'bad regular expression: {exc}')
+            continue
+        if item['match'] in patterns:
+            problem((*where, 'match'), f"duplicate pattern {item['match']!r}")
+        patterns[item['match']] = _topics(item.get('topics'), (*where, 'topics'), problem)
+    return tuple(sorted(patterns.items()))

@@ -57,15 +57,25 @@ class CorrelationConfig:
     rules: list[Rule] = field(default_factory=list)
 
 
-def _codes(value: object, path: tuple[Any, ...], problem: Problem) -> list[re.Pattern[str]]:
+def no_warning(path: tuple[Any, ...], message: str) -> None:
+    """The default `warn`: nobody listens."""
+
+
+def _codes(value: object, path: tuple[Any, ...], problem: Problem, empty: Problem | None = None,
+           ) -> list[re.Pattern[str]]:
+    """A list of codes as patterns; an empty list goes to `empty` when given (a warning in medkit)."""
+    if empty is not None and value == []:
+        empty(path, 'has no codes defined: it matches nothing')
+        return []
     if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
         problem(path, 'must be a non-empty list of codes (* is a wildcard)')
         return []
     return [wildcard(v) for v in value]
 
 
-def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem) -> CorrelationConfig | None:
-    """Parse and check; every problem reported."""
+def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem = no_warning,
+                      ) -> CorrelationConfig | None:
+    """Parse and check; every problem reported, and what medkit's validator only warns about to `warn`."""
     if not isinstance(node, dict):
         problem(path, 'must be a mapping {enabled, default_window_ms, patterns, rules}')
         return None
@@ -75,7 +85,14 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem) -> 
         problem((*path, 'default_window_ms'), f'{window!r} must be a positive integer (ms)')
     else:
         config.default_window_ms = window
-    patterns = _patterns(node.get('patterns') or {}, (*path, 'patterns'), problem)
+    if 'enabled' not in node:
+        warn(path, "correlation is off without `enabled: true` (medkit's default); its rules are checked but "
+                   'not applied')
+    elif config.enabled and not node.get('rules'):
+        warn(path, 'correlation is enabled but no rules are defined')
+    if not config.enabled:
+        problem = warn  # medkit does not validate a disabled block: its mistakes are warnings here
+    patterns = _patterns(node.get('patterns') or {}, (*path, 'patterns'), problem, warn)
     seen: set[str] = set()
     for number, item in enumerate(node.get('rules') or []):
         where = (*path, 'rules', number)
@@ -85,13 +102,14 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem) -> 
         if item['id'] in seen:
             problem((*where, 'id'), f"duplicate rule id {item['id']!r}")
         seen.add(item['id'])
-        rule = _rule(item, where, config.default_window_ms, _References(patterns, problem), problem)
+        rule = _rule(item, where, config.default_window_ms, _References(patterns, problem, warn), problem, warn)
         if rule is not None:
             config.rules.append(rule)
     return config
 
 
-def _patterns(node: object, path: tuple[Any, ...], problem: Problem) -> dict[str, list[re.Pattern[str]]]:
+def _patterns(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem,
+              ) -> dict[str, list[re.Pattern[str]]]:
     """Named code patterns that rules refer to."""
     patterns: dict[str, list[re.Pattern[str]]] = {}
     if not isinstance(node, dict):
@@ -102,7 +120,7 @@ def _patterns(node: object, path: tuple[Any, ...], problem: Problem) -> dict[str
         if not isinstance(pattern, dict) or 'codes' not in pattern:
             problem(where, 'must be {codes: [...]}')
             continue
-        patterns[str(pattern_id)] = _codes(pattern['codes'], (*where, 'codes'), problem)
+        patterns[str(pattern_id)] = _codes(pattern['codes'], (*where, 'codes'), problem, warn)
     return patterns
 
 
@@ -112,10 +130,14 @@ class _References:
 
     patterns: dict[str, list[re.Pattern[str]]]
     problem: Problem
+    warn: Problem
 
-    def __call__(self, items: object, where: tuple[Any, ...]) -> list[re.Pattern[str]]:
+    def __call__(self, items: object, where: tuple[Any, ...], what: str) -> list[re.Pattern[str]]:
         out: list[re.Pattern[str]] = []
-        if not isinstance(items, list) or not items:
+        if items is None or items == []:
+            self.warn(where, f'the rule has no {what} defined: it correlates nothing')
+            return out
+        if not isinstance(items, list):
             self.problem(where, 'must be a non-empty list of {pattern: ID} or {codes: [...]}')
             return out
         for number, item in enumerate(items):
@@ -132,7 +154,7 @@ class _References:
 
 
 def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, refs: _References,
-          problem: Problem) -> Rule | None:
+          problem: Problem, warn: Problem) -> Rule | None:
     written = item.get('mode', 'hierarchical')
     mode = MODE_ALIASES.get(str(written).lower())
     if mode is None:
@@ -142,6 +164,8 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
     if isinstance(window_ms, bool) or not isinstance(window_ms, int) or window_ms <= 0:
         problem((*where, 'window_ms'), f'{window_ms!r} must be a positive integer (ms)')
         window_ms = default_window_ms
+    elif window_ms > 60_000:
+        warn((*where, 'window_ms'), f'{window_ms} ms is over 60 s, which may be too long')
     rule = Rule(item['id'], str(item.get('name', item['id'])), mode, window_ms)
     if mode == 'hierarchical':
         root = item.get('root_cause')
@@ -149,16 +173,18 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
             problem((*where, 'root_cause'), 'must be {codes: [...]}')
         else:
             rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
-        rule.symptom_codes = refs(item.get('symptoms'), (*where, 'symptoms'))
+        rule.symptom_codes = refs(item.get('symptoms'), (*where, 'symptoms'), 'symptoms')
         rule.mute_symptoms = bool(item.get('mute_symptoms', True))
         rule.auto_clear_with_root = bool(item.get('auto_clear_with_root', True))
         return rule
-    rule.match_codes = refs(item.get('match'), (*where, 'match'))
+    rule.match_codes = refs(item.get('match'), (*where, 'match'), 'match patterns')
     min_count = item.get('min_count', 3)
     if isinstance(min_count, bool) or not isinstance(min_count, int) or min_count <= 0:
         problem((*where, 'min_count'), f'{min_count!r} must be a positive integer')
     else:
         rule.min_count = min_count
+        if min_count < 2:
+            warn((*where, 'min_count'), f'{min_count} is under 2, which may cause false clusters')
     rule.show_as_single = bool(item.get('show_as_single', True))
     written = item.get('representative', 'highest_severity')
     representative = REPRESENTATIVE_ALIASES.get(str(written).lower())
@@ -202,30 +228,33 @@ class CorrelationEngine:
         self._cluster_counter = 0
 
     def process_failed(self, code: str, severity: int, time: int) -> bool:
-        """Correlate one FAILED report; return True when the fault is muted."""
+        """Correlate one FAILED report; True when this report is muted (medkit's should_mute)."""
         if not self.config.enabled:
             return False
         self.pending_roots = [r for r in self.pending_roots if (time - r.time) // 1_000_000 <= r.rule.window_ms]
-        if self._as_symptom(code, time) or self._as_root(code, time) is not None:
-            return code in self.muted
-        self._as_cluster(code, severity, time)
-        return code in self.muted or self._hidden_by_cluster(code)
+        symptom = self._as_symptom(code, time)
+        if symptom is not None:
+            return symptom
+        if self._as_root(code, time) is not None:
+            return False
+        return self._as_cluster(code, severity, time)
 
-    def _as_symptom(self, code: str, time: int) -> bool:
+    def _as_symptom(self, code: str, time: int) -> bool | None:
+        """None when no pending root claims the code, else whether its rule mutes it."""
         for root in self.pending_roots:
             rule = root.rule
             if not _matches(code, rule.symptom_codes):
                 continue
             elapsed = (time - root.time) // 1_000_000
-            if elapsed > rule.window_ms or time < root.time:
+            if elapsed > rule.window_ms:
                 continue
             symptoms = self.symptoms.setdefault(root.code, [])
             if code not in symptoms:
                 symptoms.append(code)
             if rule.mute_symptoms:
                 self.muted[code] = MutedFaultInfo(code, root.code, rule.id, int(elapsed))
-            return True
-        return False
+            return rule.mute_symptoms
+        return None
 
     def _as_root(self, code: str, time: int) -> Rule | None:
         for rule in self.config.rules:
@@ -235,7 +264,9 @@ class CorrelationEngine:
                 return rule
         return None
 
-    def _as_cluster(self, code: str, severity: int, time: int) -> None:
+    def _as_cluster(self, code: str, severity: int, time: int) -> bool:
+        """Add to the first matching rule's pending cluster; True when this report is hidden behind the
+        representative (show_as_single, cluster at min_count)."""
         for rule in self.config.rules:
             if rule.mode != 'auto_cluster' or not _matches(code, rule.match_codes):
                 continue
@@ -249,44 +280,29 @@ class CorrelationEngine:
                                    CORRELATION_SEVERITY_NAMES[severity], [code], time, time)
                 self.pending_clusters[rule.id] = _Cluster(info, rule, {code: severity})
                 self.member_of[code] = info.cluster_id
-                return
+                return False
             info = cluster.info
-            if code in info.fault_codes:
-                return
-            info.fault_codes.append(code)
-            info.last_at = time
-            cluster.severities[code] = severity
-            self.member_of[code] = info.cluster_id
-            if rule.representative == 'most_recent' or (
-                rule.representative == 'highest_severity' and severity > cluster.severities[info.representative_code]
-            ):
-                info.representative_code, info.representative_severity = code, CORRELATION_SEVERITY_NAMES[severity]
-            if len(info.fault_codes) >= rule.min_count:
-                cluster.active = True
-                self.active_clusters[info.cluster_id] = cluster
-            return
-
-    def _hidden_by_cluster(self, code: str) -> bool:
-        cluster_id = self.member_of.get(code)
-        cluster = self.active_clusters.get(cluster_id) if cluster_id else None
-        return (cluster is not None and cluster.rule.show_as_single and code != cluster.info.representative_code
-                and code in cluster.info.fault_codes)
-
-    def is_muted(self, code: str) -> bool:
-        """Symptom muted by a rule, or hidden member of an active cluster."""
-        return code in self.muted or self._hidden_by_cluster(code)
+            if code not in info.fault_codes:
+                info.fault_codes.append(code)
+                info.last_at = time
+                cluster.severities[code] = severity
+                self.member_of[code] = info.cluster_id
+                if rule.representative == 'most_recent' or (
+                    rule.representative == 'highest_severity'
+                    and severity > cluster.severities[info.representative_code]
+                ):
+                    info.representative_code = code
+                    info.representative_severity = CORRELATION_SEVERITY_NAMES[severity]
+                if len(info.fault_codes) >= rule.min_count:
+                    cluster.active = True
+                    self.active_clusters[info.cluster_id] = cluster
+            return (rule.show_as_single and code != info.representative_code
+                    and len(info.fault_codes) >= rule.min_count)
+        return False
 
     def muted_faults(self) -> list[MutedFaultInfo]:
-        """Muted symptoms and hidden cluster members."""
-        out = dict(self.muted)
-        for cluster in self.active_clusters.values():
-            if not cluster.rule.show_as_single:
-                continue
-            info = cluster.info
-            for code in info.fault_codes:
-                if code != info.representative_code and code not in out:
-                    out[code] = MutedFaultInfo(code, info.representative_code, cluster.rule.id, 0)
-        return sorted(out.values(), key=lambda m: m.fault_code)
+        """Muted symptoms of hierarchical rules (cluster members are never listed as muted), by code."""
+        return sorted(self.muted.values(), key=lambda m: m.fault_code)
 
     def process_clear(self, code: str) -> list[str]:
         """Forget a cleared fault; return the symptoms to clear with it (auto_clear_with_root)."""

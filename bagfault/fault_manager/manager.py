@@ -63,6 +63,7 @@ class FaultManager:
         self.rejected: list[tuple[Report, str]] = []
         self.listeners: list[Callable[[FaultManagerEvent], None]] = []
         self.status_listeners: list[Callable[[str, str, int], None]] = []
+        self.confirm_listeners: list[Callable[[str, int], None]] = []  # a report confirmed a fault, muted or not
         self._timers: list[tuple[int, int, str, int]] = []
         self._counter = 0
 
@@ -134,8 +135,8 @@ class FaultManager:
                     fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])
                 fault.status = PREFAILED
             self._set(fault, CONFIRMED if report.severity == CRITICAL else self._status(fault, thresholds), time)
-            if fault.status == CONFIRMED and not muted:
-                self._emit(time, EVENT_CONFIRMED, fault)
+            if fault.status == CONFIRMED:
+                self._confirmed(fault, time, muted)
             self._arm(fault, thresholds)
             return
         before = fault.status
@@ -147,22 +148,27 @@ class FaultManager:
         if report.description:
             fault.description = report.description
         self._set(fault, CONFIRMED if report.severity == CRITICAL else self._status(fault, thresholds), time)
-        if not muted:
-            if fault.status == CONFIRMED and before != CONFIRMED:
-                self._emit(time, EVENT_CONFIRMED, fault)
-            elif fault.status == CONFIRMED:
-                self._emit(time, EVENT_UPDATED, fault)
+        if fault.status == CONFIRMED and before != CONFIRMED:
+            self._confirmed(fault, time, muted)
+        elif fault.status == CONFIRMED and not muted:
+            self._emit(time, EVENT_UPDATED, fault)
         self._arm(fault, thresholds)
+
+    def _confirmed(self, fault: Fault, time: int, muted: bool) -> None:
+        """A report confirmed the fault: the event unless this report was muted, the capture either way (medkit)."""
+        if not muted:
+            self._emit(time, EVENT_CONFIRMED, fault)
+        for listener in self.confirm_listeners:
+            listener(fault.fault_code, time)
 
     def _passed(self, fault: Fault, report: Report, thresholds: Thresholds) -> None:
         before = fault.status
         fault.counter = _clamp(_clamp(fault.counter, thresholds) + 1, thresholds)
         fault.last_passed = report.time
         self._set(fault, self._status(fault, thresholds), report.time)
-        muted = self.correlation is not None and self.correlation.is_muted(fault.fault_code)
         if fault.status == HEALED and before != HEALED:
             self._emit(report.time, EVENT_CLEARED, fault)
-        elif before == CONFIRMED and fault.status == CONFIRMED and not muted:
+        elif before == CONFIRMED and fault.status == CONFIRMED:  # muting applies to FAILED reports only (medkit)
             self._emit(report.time, EVENT_UPDATED, fault)
 
     def _arm(self, fault: Fault, thresholds: Thresholds) -> None:
@@ -178,10 +184,8 @@ class FaultManager:
         if fault is None:
             return False
         cleared: list[str] = []
-        if self.correlation is not None:
-            symptoms = self.correlation.process_clear(code)
-            if not skip_correlation_auto_clear:
-                cleared = [s for s in symptoms if s in self.faults]
+        if self.correlation is not None and not skip_correlation_auto_clear:  # skipped: symptoms stay muted
+            cleared = [s for s in self.correlation.process_clear(code) if s in self.faults]
         self._set(fault, CLEARED, time)
         for symptom in cleared:
             self._set(self.faults[symptom], CLEARED, time)
@@ -213,8 +217,8 @@ class FaultManager:
         include_muted: bool = False,
         include_clusters: bool = False,
     ) -> ListFaultsResult:
-        """ListFaults: empty statuses (or only unknown names) means CONFIRMED only; muted faults hidden unless
-        asked for; in fault code order (medkit keeps faults in a std::map)."""
+        """ListFaults: empty statuses (or only unknown names) means CONFIRMED only; muted symptoms hidden unless
+        asked for (cluster members never are); in fault code order (medkit keeps faults in a std::map)."""
         wanted = {s for s in statuses if s in STATUSES} or {CONFIRMED}
         muted = self.correlation.muted_faults() if self.correlation else []
         muted_codes = {m.fault_code for m in muted}

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import FaultManagerError, FieldPathError
 from bagfault.fault_manager.manager import FaultManager
-from bagfault.fault_manager.model import CONFIRMED, EVENT_CONFIRMED, FaultManagerEvent
+from bagfault.fault_manager.model import CLEARED, EVENT_CLEARED, FaultManagerEvent
 from bagfault.fault_manager.reporters import InjectedReports, condition_report, diagnostics_reports
 from bagfault.fault_manager.snapshots import SnapshotRecorder
 from bagfault.faults.fieldpath import FieldPath
@@ -48,6 +48,7 @@ class FaultManagerObserver:
         self.catalog = catalog
         self.origin = 0
         self.manager.listeners.append(self._on_fault_manager_event)
+        self.manager.confirm_listeners.append(self._on_confirmed)
         self.event_listeners: list[Callable[[FaultManagerEvent], None]] = []
         self.status_listeners = self.manager.status_listeners
         types = {topic: entry[0] for topic, entry in channels.items()}
@@ -146,10 +147,13 @@ class FaultManagerObserver:
 
     def _on_fault_manager_event(self, event: FaultManagerEvent) -> None:
         self.emit(event)
-        if event.event_type == EVENT_CONFIRMED and event.fault.status == CONFIRMED:
-            self.snapshots.on_confirmed(event.fault.fault_code, event.time)
+        if event.event_type == EVENT_CLEARED and event.fault.status == CLEARED:  # ClearFault, not a heal
+            self.snapshots.forget((event.fault.fault_code, *event.auto_cleared_codes))
         for listener in self.event_listeners:
             listener(event)
+
+    def _on_confirmed(self, code: str, time: int) -> None:
+        self.snapshots.on_confirmed(code, time)
 
     # -- results ------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:

@@ -121,6 +121,11 @@ class SnapshotRecorder:
         self.captures.append(capture)
         self.open.append(capture)
 
+    def forget(self, codes: tuple[str, ...]) -> None:
+        """ClearFault: these codes may be captured again at once (medkit evicts their cooldown)."""
+        for code in codes:
+            self._last_capture.pop(code, None)
+
     def _close_before(self, time: int) -> None:
         done = [c for c in self.open if c.end < time]
         for capture in done:
