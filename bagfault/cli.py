@@ -455,7 +455,8 @@ def _cmd_latency(args: argparse.Namespace) -> int:
             raise LatencyError('usage: bagfault latency validate ARCH.yaml')
         architecture = load_architecture(items[1])
         print(render_validation(architecture))
-        return EXIT_OK if all(p.usable for p in architecture.paths.values()) else EXIT_ERROR
+        usable = all(p.usable for p in architecture.paths.values()) and not architecture.dropped
+        return EXIT_OK if usable else EXIT_ERROR
     if len(items) < 2:
         raise LatencyError('usage: bagfault latency ARCH.yaml BAG... (or: bagfault latency validate ARCH.yaml)')
     bags = [Path(item) for item in items[1:]]

@@ -5,8 +5,16 @@ list is fine); a missing or null required key is an error naming the key.
 `UNDEFINED` or a missing publish/subscribe topic means none. A problem
 inside one node skips that node with a warning, and a path through a
 skipped (or missing) node is reported as unusable rather than dropped.
-caret_analyze reads `callback_type`; `type:` (as in CARET's documentation
-sample) is accepted as an alias with a warning naming the node.
+As caret_analyze: an unknown `context_type` drops that context only (a
+warning), an `UNDEFINED` one is no context; a node's input/output pair
+without a context gets a `callback_chain` when its callbacks and
+`variable_passings` lead from the subscription to the publisher; callbacks
+other than timer and subscription callbacks are ignored; a duplicate path
+name keeps the first; a path over a topic its node does not publish or
+subscribe is dropped with a warning; a one-node path runs from the node's
+subscription to its publication. caret_analyze reads `callback_type`;
+`type:` (as in CARET's documentation sample) is accepted as an alias with a
+warning naming the node.
 """
 
 from __future__ import annotations
@@ -21,7 +29,7 @@ import yaml
 from bagfault.errors import LatencyError, one_line
 
 UNDEFINED = 'UNDEFINED'
-CONTEXT_TYPES = ('use_latest_message', 'inherit_unique_stamp', 'callback_chain', 'tilde', UNDEFINED)
+CONTEXT_TYPES = ('use_latest_message', 'inherit_unique_stamp', 'callback_chain', 'tilde')
 CALLBACK_TYPES = ('timer_callback', 'subscription_callback')
 
 
@@ -43,11 +51,28 @@ class Node:
     publishes: list[str] = field(default_factory=list)
     subscribes: list[str] = field(default_factory=list)
     contexts: list[MessageContext] = field(default_factory=list)
+    publishers: dict[str, list[str]] = field(default_factory=dict)  # topic -> callbacks that publish it
+    passings: list[tuple[str, str]] = field(default_factory=list)   # (callback_name_write, callback_name_read)
 
     def context(self, subscription: str | None, publisher: str | None) -> MessageContext | None:
-        """The message context for one input/output topic pair."""
-        return next((c for c in self.contexts
-                     if c.subscription_topic == subscription and c.publisher_topic == publisher), None)
+        """The message context for one input/output topic pair: a declared one, else a callback chain when
+        the callbacks lead from the subscription to the publisher, else None (caret has no records then)."""
+        declared = next((c for c in self.contexts
+                         if c.subscription_topic == subscription and c.publisher_topic == publisher), None)
+        if declared is not None or subscription is None or publisher is None:
+            return declared
+        reached = [str(c['callback_name']) for c in self.callbacks
+                   if c['callback_type'] == 'subscription_callback' and c.get('topic_name') == subscription]
+        seen = set(reached)
+        while reached:
+            callback = reached.pop()
+            if callback in self.publishers.get(publisher, ()):
+                return MessageContext('callback_chain', subscription, publisher)
+            for write, read in self.passings:
+                if write == callback and read not in seen:
+                    seen.add(read)
+                    reached.append(read)
+        return None
 
 
 @dataclass(frozen=True)
@@ -69,7 +94,10 @@ class NamedPath:
 
     @property
     def topics(self) -> list[str]:
-        """The path's topics in order (publish topic of each node but the last)."""
+        """The path's topics in order: publish topic of each node but the last (a one-node path: its
+        subscribe and publish topics)."""
+        if len(self.chain) == 1:
+            return [t for t in (self.chain[0].subscribe_topic, self.chain[0].publish_topic) if t]
         return [n.publish_topic for n in self.chain[:-1] if n.publish_topic]
 
     @property
@@ -87,11 +115,12 @@ class Architecture:
     nodes: dict[str, Node]
     executors: list[dict[str, Any]]
     warnings: list[str] = field(default_factory=list)
+    dropped: dict[str, str] = field(default_factory=dict)  # path name -> why caret_analyze would not load it
 
     def hops(self, path: NamedPath) -> list[tuple[str, str, str, MessageContext | None]]:
         """(node, input topic, output topic, context) for each node between two path topics."""
         out = []
-        for element in path.chain[1:-1]:
+        for element in path.chain if len(path.chain) == 1 else path.chain[1:-1]:
             node = self.nodes.get(element.node_name)
             context = node.context(element.subscribe_topic, element.publish_topic) if node else None
             out.append((element.node_name, element.subscribe_topic or '', element.publish_topic or '', context))
@@ -123,7 +152,7 @@ def _node(raw: dict[str, Any], warnings: list[str]) -> Node:
             callback = {**callback, 'callback_type': callback['type']}
         kind = _required(callback, 'callback_type', cb_where)
         if kind not in CALLBACK_TYPES:
-            raise LatencyError(f'{cb_where}: callback_type {kind!r} is not one of {", ".join(CALLBACK_TYPES)}')
+            continue  # caret_analyze reads timer and subscription callbacks only (service callbacks are ignored)
         _required(callback, 'callback_name', cb_where)
         _required(callback, 'symbol', cb_where)
         _required(callback, 'period_ns' if kind == 'timer_callback' else 'topic_name', cb_where)
@@ -132,19 +161,27 @@ def _node(raw: dict[str, Any], warnings: list[str]) -> Node:
         for key in ('callback_group_type', 'callback_group_name', 'callback_names'):
             _required(group, key, f'{where}: callback_groups[{number}]')
     for number, passing in enumerate(raw.get('variable_passings') or []):
-        for key in ('callback_name_write', 'callback_name_read'):
-            _required(passing, key, f'{where}: variable_passings[{number}]')
+        write, read = (str(_required(passing, key, f'{where}: variable_passings[{number}]'))
+                       for key in ('callback_name_write', 'callback_name_read'))
+        if UNDEFINED not in (write, read):
+            node.passings.append((write, read))
     for number, publish in enumerate(raw.get('publishes') or []):
-        node.publishes.append(str(_required(publish, 'topic_name', f'{where}: publishes[{number}]')))
-        _required(publish, 'callback_names', f'{where}: publishes[{number}]')
+        topic = str(_required(publish, 'topic_name', f'{where}: publishes[{number}]'))
+        node.publishes.append(topic)
+        names = _required(publish, 'callback_names', f'{where}: publishes[{number}]')
+        node.publishers.setdefault(topic, []).extend(str(n) for n in names or [])
     for number, subscribe in enumerate(raw.get('subscribes') or []):
         node.subscribes.append(str(_required(subscribe, 'topic_name', f'{where}: subscribes[{number}]')))
         _required(subscribe, 'callback_name', f'{where}: subscribes[{number}]')
     for number, context in enumerate(raw.get('message_contexts') or []):
         ctx_where = f'{where}: message_contexts[{number}]'
         kind = _required(context, 'context_type', ctx_where)
+        if kind == UNDEFINED:
+            continue  # no context: a callback chain may take its place
         if kind not in CONTEXT_TYPES:
-            raise LatencyError(f'{ctx_where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)})')
+            warnings.append(f'{ctx_where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)}); '
+                            'context dropped')
+            continue
         node.contexts.append(MessageContext(kind, _topic(_required(context, 'subscription_topic_name', ctx_where)),
                                             _topic(_required(context, 'publisher_topic_name', ctx_where))))
     return node
@@ -187,6 +224,7 @@ def load_architecture(path: str | Path) -> Architecture:
             continue
         nodes[node.name] = node
     paths: dict[str, NamedPath] = {}
+    dropped: dict[str, str] = {}
     for number, raw in enumerate(named_paths):
         try:
             name = str(_required(raw, 'path_name', f'named_paths[{number}]'))
@@ -195,17 +233,47 @@ def load_architecture(path: str | Path) -> Architecture:
                      for i, e in enumerate(_required(raw, 'node_chain', f'path {name}'))]
         except LatencyError as exc:
             raise LatencyError(f'{file}: {one_line(exc)}') from None
-        named = NamedPath(name, chain)
-        for element in chain:
-            if element.node_name in skipped:
-                named.problems.append(f'node {element.node_name} was skipped ({skipped[element.node_name]})')
-            elif element.node_name not in nodes:
-                named.problems.append(f'path goes through node {element.node_name}, which is not in nodes')
-        if len(chain) < 2:
-            named.problems.append('a path needs at least two nodes')
-        for before, after in itertools.pairwise(chain):
-            if before.publish_topic is None or before.publish_topic != after.subscribe_topic:
-                named.problems.append(f'{before.node_name} publishes {before.publish_topic} but {after.node_name} '
-                                      f'subscribes {after.subscribe_topic}')
-        paths[name] = named
-    return Architecture(file, paths, nodes, list(executors), warnings)
+        if name in paths:
+            warnings.append(f'path {name} is defined more than once; the first is used')
+            continue
+        foreign = _foreign_topic(chain, nodes)
+        if foreign:
+            warnings.append(f'path {name}: {foreign}; path dropped')
+            dropped[name] = foreign
+            continue
+        paths[name] = NamedPath(name, chain, _problems(chain, nodes, skipped))
+    return Architecture(file, paths, nodes, list(executors), warnings, dropped)
+
+
+def _foreign_topic(chain: list[PathNode], nodes: dict[str, Node]) -> str | None:
+    """A topic the chain puts on a known node that the node does not publish or subscribe (caret drops the
+    path), or None."""
+    for element in chain:
+        node = nodes.get(element.node_name)
+        if node is None:
+            continue
+        if element.publish_topic is not None and element.publish_topic not in node.publishes:
+            return f'node {node.name} does not publish {element.publish_topic}'
+        if element.subscribe_topic is not None and element.subscribe_topic not in node.subscribes:
+            return f'node {node.name} does not subscribe {element.subscribe_topic}'
+    return None
+
+
+def _problems(chain: list[PathNode], nodes: dict[str, Node], skipped: dict[str, str]) -> list[str]:
+    """Why a path cannot be measured: skipped or missing nodes, broken links, a one-node path without both
+    topics."""
+    problems = []
+    for element in chain:
+        if element.node_name in skipped:
+            problems.append(f'node {element.node_name} was skipped ({skipped[element.node_name]})')
+        elif element.node_name not in nodes:
+            problems.append(f'path goes through node {element.node_name}, which is not in nodes')
+    if not chain:
+        problems.append('a path needs at least one node')
+    elif len(chain) == 1 and (chain[0].subscribe_topic is None or chain[0].publish_topic is None):
+        problems.append('a one-node path needs its subscribe and publish topics')
+    for before, after in itertools.pairwise(chain):
+        if before.publish_topic is None or before.publish_topic != after.subscribe_topic:
+            problems.append(f'{before.node_name} publishes {before.publish_topic} but {after.node_name} '
+                            f'subscribes {after.subscribe_topic}')
+    return problems

@@ -6,17 +6,18 @@ traced back hop by hop to a first-topic message:
 - `inherit_unique_stamp`: the input with the same header.stamp, the latest
   one received before the output when stamps repeat;
 - `use_latest_message` and `callback_chain` (which bag data cannot tell
-  apart), and `tilde`/`UNDEFINED` as a fallback: the latest input received
-  at or before the output.
-Latency = output log_time - matched first-topic log_time (or its
-header.stamp with stamp_origin). CARET's response-time cases follow: best
-(first output per input), worst (first output minus the previous answered
-input) and all (every input to the first output that reflects it or a
-later input).
+  apart), and `tilde` (with a note): the latest input received at or before
+  the output.
+A hop with no message context ends the measurement at that node's input, as
+caret's record merge stops there. Latency = output log_time - matched
+first-topic log_time (or its header.stamp with stamp_origin). CARET's
+response-time cases (all, best, worst, worst-with-external-latency) follow
+caret_analyze's ResponseMapAll on the same (input, output) records.
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -25,7 +26,7 @@ import numpy as np
 from bagfault.errors import LatencyError
 
 if TYPE_CHECKING:
-    from bagfault.latency.architecture import Architecture, NamedPath
+    from bagfault.latency.architecture import Architecture, MessageContext, NamedPath
 
 STAMP_CONTEXTS = {'inherit_unique_stamp'}
 NS_PER_MS = 1_000_000
@@ -55,9 +56,7 @@ class PathResult:
     latency_ms: np.ndarray
     dropped: int
     inputs: int
-    best: tuple[np.ndarray, np.ndarray]
-    worst: tuple[np.ndarray, np.ndarray]
-    all_cases: tuple[np.ndarray, np.ndarray]
+    cases: dict[str, tuple[np.ndarray, np.ndarray]]  # CASES -> (start times ns, response times ms)
     notes: list[str] = field(default_factory=list)
 
 
@@ -86,28 +85,61 @@ def _latest_same_stamp(in_times: np.ndarray, in_stamps: np.ndarray, out_times: n
 
 
 Case = tuple[np.ndarray, np.ndarray]  # start times (ns), latencies (ms)
+CASES = ('all', 'best', 'worst', 'worst-with-external-latency')
 
 
-def _cases(input_times: np.ndarray, sample_times: np.ndarray, matched: np.ndarray,
-           first_times: np.ndarray) -> tuple[Case, Case, Case]:
-    """best, worst and all response-time cases as (start time, latency ms) arrays."""
-    if matched.size == 0:
-        empty = (np.zeros(0, dtype=np.int64), np.zeros(0))
-        return empty, empty, empty
-    order = np.lexsort((sample_times, matched))
-    inputs_sorted, outputs_sorted = matched[order], sample_times[order]
-    first = np.ones(inputs_sorted.size, dtype=bool)
-    first[1:] = inputs_sorted[1:] != inputs_sorted[:-1]
-    answered = inputs_sorted[first]               # distinct first-topic indexes, ascending
-    first_out = outputs_sorted[first]             # their first output
-    starts = first_times[answered]
-    best = (starts, (first_out - starts) / NS_PER_MS)
-    worst = (starts[1:], (first_out[1:] - starts[:-1]) / NS_PER_MS)
-    position = np.searchsorted(starts, input_times, side='left')
-    reached = position < starts.size
-    all_starts = input_times[reached]
-    all_cases = (all_starts, (first_out[position[reached]] - all_starts) / NS_PER_MS)
-    return best, worst, all_cases
+def response_cases(starts: np.ndarray, matched: np.ndarray, ends: np.ndarray) -> dict[str, Case]:
+    """caret_analyze's ResponseMapAll over path records: one per (input, output) pair, and one without an end
+    per input no output reflects. `starts` holds every input's start time (receive time or stamp), `matched`
+    the input index of each output at time `ends`."""
+    outputs: dict[int, list[int | None]] = {}
+    for index, end in zip(matched.tolist(), ends.tolist(), strict=True):
+        outputs.setdefault(index, []).append(end)
+    records = sorted(((start, end) for index, start in enumerate(starts.tolist())
+                      for end in outputs.get(index, [None])), key=lambda r: (r[0], r[1] is None, r[1] or 0))
+    # reversed walk: a record without an end takes the earliest end after it; one end per start (the least)
+    by_start: dict[int, int] = {}
+    least: int | None = None
+    for start, maybe_end in reversed(records):
+        if maybe_end is None:
+            if least is None:
+                continue
+            end = least
+        elif start > maybe_end:
+            continue  # reversed timestamps: caret ignores the record
+        else:
+            end = maybe_end
+        if start not in by_start or end < by_start[start]:
+            by_start[start] = end
+        least = end if least is None else min(least, end)
+    pairs = sorted((s, e) for s, e in by_start.items() if e != least)  # the earliest output may miss inputs
+    best: dict[int, int] = {}
+    worst: dict[int, int] = {}
+    external: dict[int, tuple[int, int]] = {}
+    for (previous, _), (start, end) in itertools.pairwise(pairs):
+        if end not in external or start < external[end][0]:
+            external[end] = (start, previous)
+    for start, end in pairs:
+        best[end] = max(best.get(end, start), start)
+        worst[end] = min(worst.get(end, start), start)
+    cases = {'all': [(s, e - s) for s, e in pairs],
+             'best': sorted((s, e - s) for e, s in best.items()),
+             'worst': sorted((s, e - s) for e, s in worst.items()),
+             'worst-with-external-latency': sorted((p, e - p) for e, (_, p) in external.items())}
+    return {name: (np.array([s for s, _ in rows], dtype=np.int64), np.array([r for _, r in rows]) / NS_PER_MS)
+            for name, rows in cases.items()}
+
+
+def measured_hops(architecture: Architecture, path: NamedPath, notes: list[str],
+                  ) -> tuple[list[str], list[tuple[str, str, str, MessageContext | None]]]:
+    """The topics and hops measured: up to the input of the first node without a message context."""
+    topics, hops = path.topics, architecture.hops(path)
+    for number, (node, in_topic, out_topic, context) in enumerate(hops):
+        if context is None:
+            notes.append(f'node {node} has no message context for {in_topic} -> {out_topic} (and no callback '
+                         f'chain); measurement ends at its input {in_topic}, as caret_analyze does')
+            return topics[:number + 1], hops[:number]
+    return topics, hops
 
 
 def path_latency(
@@ -120,21 +152,20 @@ def path_latency(
     """Compute every end-to-end sample of a path from per-topic series."""
     if not path.usable:
         raise LatencyError(f'path {path.name} cannot be measured: {"; ".join(path.problems)}')
-    topics = path.topics
     notes: list[str] = []
+    topics, hops = measured_hops(architecture, path, notes)
     for topic in topics:
         if topic not in series or series[topic].times.size == 0:
             notes.append(f'topic {topic} has no messages')
     last = series.get(topics[-1], TopicSeries.empty())
     index = np.arange(last.times.size)
-    valid = np.ones(last.times.size, dtype=bool)
-    hops = architecture.hops(path)
+    valid = np.full(last.times.size, len(topics) > 1)  # a path cut at its first topic measures nothing
     for node, in_topic, out_topic, context in reversed(hops):
         source = series.get(in_topic, TopicSeries.empty())
         target = series.get(out_topic, TopicSeries.empty())
-        kind = context.context_type if context else 'UNDEFINED'
-        if kind in ('tilde', 'UNDEFINED'):
-            notes.append(f'node {node}: context {kind} cannot be followed on bag data; using the latest message')
+        kind = context.context_type if context else ''
+        if kind == 'tilde':
+            notes.append(f'node {node}: context tilde cannot be followed on bag data; using the latest message')
         safe = np.clip(index, 0, None)
         if kind in STAMP_CONTEXTS:
             if source.stamps is None or target.stamps is None:
@@ -148,17 +179,15 @@ def path_latency(
     first = series.get(topics[0], TopicSeries.empty())
     matched = index[valid]
     sample_times = last.times[valid]
+    starts = first.times
     if stamp_origin:
         if first.stamps is None:
             raise LatencyError(f'stamp origin needs header stamps on {topics[0]}')
-        origin = first.stamps[matched]
-    else:
-        origin = first.times[matched]
-    latency = (sample_times - origin) / NS_PER_MS
+        starts = first.stamps
+    latency = (sample_times - starts[matched]) / NS_PER_MS
     dropped = int(first.times.size - np.unique(matched).size)
-    best, worst, all_cases = _cases(first.times, sample_times, matched, first.times)
     return PathResult(path.name, topics, sample_times, first.times[matched], latency, dropped,
-                      int(first.times.size), best, worst, all_cases, notes)
+                      int(first.times.size), response_cases(starts, matched, sample_times), notes)
 
 
 STATISTICS = ('min', 'mean', 'p50', 'p95', 'p99', 'max')

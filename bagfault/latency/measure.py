@@ -41,8 +41,7 @@ class LatencyReport:
                 'inputs': r.inputs,
                 'dropped_inputs': r.dropped,
                 'latency_ms': statistics(r.latency_ms),
-                'response_time_ms': {'all': statistics(r.all_cases[1]), 'best': statistics(r.best[1]),
-                                     'worst': statistics(r.worst[1])},
+                'response_time_ms': {case: statistics(values) for case, (_, values) in r.cases.items()},
                 'by_fault': by_fault(r, self.windows),
                 'samples': [[round((t - self.origin) / NS, 9), round(v, 6)]
                             for t, v in zip(r.sample_times.tolist(), r.latency_ms.tolist(), strict=True)],
@@ -57,6 +56,8 @@ def measure(arch_file: str | Path, bags: Sequence[str | Path], *, path: str | No
     from pathlib import Path as _Path  # noqa: PLC0415
 
     architecture = load_architecture(arch_file)
+    if path is not None and path in architecture.dropped:
+        raise LatencyError(f'{arch_file}: path {path} was dropped: {architecture.dropped[path]}')
     if path is not None and path not in architecture.paths:
         raise LatencyError(f'{arch_file}: no path {path!r} (paths: {", ".join(architecture.paths)})')
     wanted = [architecture.paths[path]] if path else list(architecture.paths.values())

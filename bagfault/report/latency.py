@@ -22,6 +22,9 @@ def _row(name: str, stats: dict[str, Any]) -> str:
                                                               ('min', 'mean', 'p50', 'p95', 'p99', 'max')))
 
 
+LABELS = {'worst-with-external-latency': 'worst+ext'}  # the table's 10-character column
+
+
 def render_text(report: LatencyReport) -> str:
     """One table per path."""
     lines = [f'architecture {report.architecture.source}']
@@ -33,8 +36,7 @@ def render_text(report: LatencyReport) -> str:
     for result in report.results:
         lines += ['', f'path {result.name}: {" -> ".join(result.topics)}  ({result.inputs} inputs, '
                       f'{result.dropped} dropped)', header, _row('latency', statistics(result.latency_ms)),
-                  _row('all', statistics(result.all_cases[1])), _row('best', statistics(result.best[1])),
-                  _row('worst', statistics(result.worst[1]))]
+                  *(_row(LABELS.get(case, case), statistics(values)) for case, (_, values) in result.cases.items())]
         for fault_id, windows in by_fault(result, report.windows).items():
             for part in ('before', 'during', 'after'):
                 lines.append(_row(f'{part[:6]}:{fault_id}'[:10], windows[part]))
@@ -71,7 +73,7 @@ def render_validation(architecture: Architecture) -> str:
         for element in path.chain:
             lines.append(f'  {element.node_name}: {element.subscribe_topic or "-"} -> {element.publish_topic or "-"}')
         for node, source, target, context in architecture.hops(path):
-            kind = context.context_type if context else 'no message context'
+            kind = context.context_type if context else 'no message context: measurement ends here'
             lines.append(f'  hop {node}: {source} -> {target} [{kind}]')
         lines += [f'  problem: {p}' for p in path.problems]
     return '\n'.join(lines)

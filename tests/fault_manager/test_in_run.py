@@ -1,4 +1,5 @@
-"""The fault manager inside runs: report sources, /fault_manager/events, snapshots, assertions."""
+"""The fault manager inside runs: report sources, /fault_manager/events, snapshots, assertions (medkit semantics
+as selfpatch/ros2_medkit has them at commit 505bc2d5)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The oracle cases of design/fault_manager.md, with their exact statuses, counts and events."""
+"""The oracle cases of design/fault_manager.md, with their exact statuses, counts and events; where the design
+page and medkit's code differ these follow the code, selfpatch/ros2_medkit at commit 505bc2d5."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""CARET architecture files and end-to-end path latency on bags."""
+"""CARET architecture files and end-to-end path latency on bags; loading and response times follow
+tier4/caret_analyze at commit 679f1ec9 (architecture_reader_yaml.py, architecture_loaded.py, response_time.py)."""
 
 from __future__ import annotations
 
@@ -76,12 +77,15 @@ def test_seed_sample_with_type_warns_naming_the_node_and_loads(tmp_path, capsys)
     architecture = load_architecture(seed_sample(tmp_path))
     assert "node /ping_node: callback 'subscription_callback_0' says 'type:'" in architecture.warnings[0]
     assert '/ping_node' in architecture.nodes
-    path = architecture.paths['target_path']
-    assert not path.usable
-    assert path.problems == ['path goes through node /pong_node, which is not in nodes']
+    # /ping_node publishes /ping, not /chatter: caret_analyze's find_node_path fails and the path is not loaded
+    assert architecture.paths == {}
+    assert architecture.dropped == {'target_path': 'node /ping_node does not publish /chatter'}
     assert main(['latency', 'validate', str(tmp_path / 'seed_sample.yaml')]) == 2
     out = capsys.readouterr().out
-    assert 'path target_path: UNUSABLE' in out and 'warning: node /ping_node' in out
+    assert 'warning: path target_path: node /ping_node does not publish /chatter; path dropped' in out
+    assert 'warning: node /ping_node' in out
+    with pytest.raises(LatencyError, match='path target_path was dropped: node /ping_node does not publish'):
+        measure(tmp_path / 'seed_sample.yaml', [], path='target_path')
 
 
 MALFORMED = {
@@ -103,7 +107,9 @@ def test_malformed_files_give_the_documented_message(tmp_path, case, capsys):
     assert capsys.readouterr().err.startswith(f'bagfault: error: {path}')
 
 
-def test_unknown_context_type_and_missing_node(tmp_path, caret_file):
+def test_unknown_context_type_drops_that_context_and_a_callback_chain_takes_its_place(tmp_path, caret_file):
+    """caret_analyze's MessageContextsLoaded: an unknown type is a warning and that context only is dropped; the
+    node's callbacks (subscription -> variable passing -> timer that publishes) give a callback_chain."""
     text = caret_file.read_text().replace('context_type: use_latest_message\n    subscription_topic_name: /topic3',
                                           'context_type: newest_wins\n    subscription_topic_name: /topic3', 1)
     text = text.replace('- node_name: /actuator_dummy_node\n  callback_groups', '- node_name: /renamed_node\n'
@@ -112,12 +118,63 @@ def test_unknown_context_type_and_missing_node(tmp_path, caret_file):
     path.write_text(text)
     architecture = load_architecture(path)
     assert any("node /timer_driven_node: message_contexts[0]: unknown context_type 'newest_wins'" in w
-               for w in architecture.warnings)
-    problems = architecture.paths['target'].problems
-    assert any(p.startswith('node /timer_driven_node was skipped') for p in problems)
-    assert 'path goes through node /actuator_dummy_node, which is not in nodes' in problems
+               and 'context dropped' in w for w in architecture.warnings)
+    hops = {node: context.context_type for node, _, _, context in architecture.hops(architecture.paths['target'])}
+    assert hops['/timer_driven_node'] == 'callback_chain'
+    assert architecture.paths['target'].problems == ['path goes through node /actuator_dummy_node, which is not '
+                                                     'in nodes']
     with pytest.raises(LatencyError, match='path target cannot be measured'):
         measure(path, [], path='target')
+
+
+def test_a_hop_without_context_ends_the_measurement_at_its_input(caret_file, target_bag, tmp_path):
+    """UNDEFINED context and no callback chain (the subscription callback publishes nothing): caret's record
+    merge stops at that node, so the path is measured /topic1 -> /topic3 with a note."""
+    text = caret_file.read_text().replace(
+        'context_type: use_latest_message\n    subscription_topic_name: /topic3',
+        'context_type: UNDEFINED\n    subscription_topic_name: /topic3', 1).replace(
+        '  variable_passings:\n  - callback_name_write: /timer_driven_node/callback_1\n'
+        '    callback_name_read: /timer_driven_node/callback_0\n', '')
+    arch = tmp_path / 'undefined.yaml'
+    arch.write_text(text)
+    bag, _ = target_bag
+    [result] = measure(arch, [bag]).results
+    assert result.topics == ['/topic1', '/topic2', '/topic3']
+    assert np.allclose(result.latency_ms, 30.0, atol=1.0)  # synthetic delays: 10 ms filter + 20 ms message-driven
+    assert any('/timer_driven_node has no message context' in n and 'ends at its input /topic3' in n
+               for n in result.notes)
+
+
+def test_architecture_loading_leniency(tmp_path, caret_file, target_bag):
+    """As caret_analyze: a service callback is ignored, a duplicate path name keeps the first, a path over a
+    topic its node does not publish is dropped with a warning, a one-node path is measured inside the node."""
+    text = caret_file.read_text().replace('  callbacks:\n  - callback_name: /filter_node/callback_0',
+                                          '  callbacks:\n  - {callback_name: /filter_node/srv, callback_type: '
+                                          'service_callback, service_name: /srv, symbol: srv}\n'
+                                          '  - callback_name: /filter_node/callback_0', 1)
+    text = text.replace('named_paths:\n', """named_paths:
+- path_name: inside_filter
+  node_chain:
+  - {node_name: /filter_node, subscribe_topic_name: /topic1, publish_topic_name: /topic2}
+- path_name: inside_filter
+  node_chain:
+  - {node_name: /message_driven_node, subscribe_topic_name: /topic2, publish_topic_name: /topic3}
+- path_name: wrong_topic
+  node_chain:
+  - {node_name: /sensor_dummy_node, publish_topic_name: /topic9}
+  - {node_name: /filter_node, subscribe_topic_name: /topic9}
+""", 1)
+    arch = tmp_path / 'lenient.yaml'
+    arch.write_text(text)
+    architecture = load_architecture(arch)
+    assert list(architecture.paths) == ['inside_filter', 'target']
+    assert 'path inside_filter is defined more than once; the first is used' in architecture.warnings
+    assert 'path wrong_topic: node /sensor_dummy_node does not publish /topic9; path dropped' in \
+        architecture.warnings
+    assert [c['callback_name'] for c in architecture.nodes['/filter_node'].callbacks] == ['/filter_node/callback_0']
+    bag, _ = target_bag
+    inside = measure(arch, [bag], path='inside_filter').results[0]
+    assert inside.topics == ['/topic1', '/topic2'] and np.allclose(inside.latency_ms, 10.0, atol=1.0)  # the filter's 10 ms
 
 
 def test_fixed_delays_give_60_ms_for_every_sample(caret_file, target_bag, tmp_path, capsys):
@@ -127,7 +184,8 @@ def test_fixed_delays_give_60_ms_for_every_sample(caret_file, target_bag, tmp_pa
     assert result.latency_ms.size == 200 == len(truth)
     assert np.all(np.abs(result.latency_ms - 60.0) <= 1.0)
     assert result.dropped == 0
-    assert np.allclose(result.best[1], 60.0) and np.allclose(result.worst[1], 160.0)
+    assert np.allclose(result.cases['best'][1], 60.0) and np.allclose(result.cases['worst'][1], 60.0)
+    assert np.allclose(result.cases['worst-with-external-latency'][1], 160.0)  # one 100 ms input period more
     assert main(['latency', str(caret_file), str(bag), '--json', str(tmp_path / 'l.json'), '--html',
                  str(tmp_path / 'l.html')]) == 0
     out = capsys.readouterr().out
@@ -178,32 +236,32 @@ def test_response_time_cases_follow_caret(tmp_path):
               '/b': TopicSeries(np.array([1, 11, 32, 43]) * tenth)}
     result = path_latency(architecture, architecture.paths['p'], series)
     assert result.latency_ms.tolist() == pytest.approx([100, 100, 200, 300])
-    assert result.best[1].tolist() == pytest.approx([100, 100, 200, 300])
-    assert result.worst[1].tolist() == pytest.approx([1100, 2200, 1300])   # first output - previous answered input
-    assert result.all_cases[1].tolist() == pytest.approx([100, 100, 1200, 200, 300])  # input 2.0 was dropped
+    # caret's ResponseMapAll by hand: records (0,0.1) (1,1.1) (2,-) (3,3.2) (4,4.3); the dropped input takes the
+    # next end (3.2); entries ending at the earliest end (0.1) go
+    cases = {name: values.tolist() for name, (_, values) in result.cases.items()}
+    assert cases['all'] == pytest.approx([100, 1200, 200, 300])
+    assert cases['best'] == pytest.approx([100, 200, 300])           # latest input per output
+    assert cases['worst'] == pytest.approx([100, 1200, 300])         # earliest input per output
+    assert cases['worst-with-external-latency'] == pytest.approx([2200, 1300])  # output - input before the earliest
     assert result.dropped == 1
 
 
-HOP = """
-named_paths:
-  - path_name: p
-    node_chain:
-      - {node_name: /src, publish_topic_name: /a, subscribe_topic_name: UNDEFINED}
-      - {node_name: /mid, publish_topic_name: /b, subscribe_topic_name: /a}
-      - {node_name: /dst, subscribe_topic_name: /b}
-executors: []
-nodes:
-  - {node_name: /src}
-  - node_name: /mid
-    message_contexts: [{context_type: CONTEXT, subscription_topic_name: /a, publisher_topic_name: /b}]
-  - {node_name: /dst}
-"""
+def test_stamp_origin_applies_to_the_response_time_cases(tmp_path):
+    architecture = hop_architecture(tmp_path, 'use_latest_message')
+    ms = 1_000_000  # inputs received at 10, 20, 30 ms with stamps 5 ms earlier; outputs at 12, 24, 35 ms
+    series = {'/a': TopicSeries(np.array([10, 20, 30]) * ms, np.array([5, 15, 25]) * ms),
+              '/b': TopicSeries(np.array([12, 24, 35]) * ms)}
+    received = path_latency(architecture, architecture.paths['p'], series)
+    stamped = path_latency(architecture, architecture.paths['p'], series, stamp_origin=True)
+    assert stamped.latency_ms.tolist() == [7.0, 9.0, 10.0] and received.latency_ms.tolist() == [2.0, 4.0, 5.0]
+    assert received.cases['best'][1].tolist() == [4.0, 5.0] and stamped.cases['best'][1].tolist() == [9.0, 10.0]
+    assert stamped.cases['worst-with-external-latency'][1].tolist() == [20.0]  # 35 - 15
 
 
 def hop_architecture(folder, context):
     """Three nodes, one hop /a -> /b with the given context."""
     path = folder / 'arch.yaml'
-    path.write_text(HOP.replace('CONTEXT', context))
+    path.write_text((FIXTURES / 'caret' / 'one_hop.yaml').read_text().replace('CONTEXT', context))
     return load_architecture(path)
 
 
