@@ -7,6 +7,7 @@ import contextlib
 import os
 import signal
 import sys
+import time
 import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -511,6 +512,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if ros_args and args.command not in ROS_COMMANDS:
         print(f'bagfault: error: --ros-args: only {", ".join(ROS_COMMANDS)} make a ROS node', file=sys.stderr)
         return EXIT_ERROR
+    began = time.monotonic()
     try:
         with _terminating_signals():
             return COMMANDS[args.command](args)
@@ -519,6 +521,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         for line in str(exc).splitlines() or [type(exc).__name__]:
             print(f'bagfault: error: {line}', file=sys.stderr)
+        _junit_error(args, str(exc).splitlines()[0] if str(exc) else type(exc).__name__, began)
         tail = getattr(exc, 'tail', None)
         if tail:
             print('bagfault: the last lines of the system under test:', file=sys.stderr)
@@ -529,6 +532,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.debug:
             traceback.print_exc()
         print('bagfault: interrupted; nothing was written under the requested names', file=sys.stderr)
+        _junit_error(args, 'interrupted', began)
         return EXIT_ERROR
     except BrokenPipeError:  # `bagfault schema | head`: the reader left, nothing is wrong
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -538,7 +542,29 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         print(f'bagfault: internal error: {type(exc).__name__}: {exc} (a bug in bagfault; --debug shows where)',
               file=sys.stderr)
+        _junit_error(args, f'internal error: {type(exc).__name__}: {exc}', began)
         return EXIT_ERROR
+
+
+def _junit_error(args: argparse.Namespace, reason: str, began: float) -> None:
+    """Exit 2 with --junit: the file says why (CI shows the reason, not "no report"), unless that path is itself
+    the problem or names anything else given on the command line."""
+    path = getattr(args, 'junit', None)
+    if not isinstance(path, Path):
+        return
+    named: list[tuple[str, Path]] = []
+    for key, value in vars(args).items():
+        values = value if isinstance(value, list) else [value]
+        named += [(key, v) for v in values if isinstance(v, Path) and key != 'junit']
+    from bagfault.io.outputs import write_atomic  # noqa: PLC0415
+    from bagfault.report.junit import render_error  # noqa: PLC0415
+
+    scenario = getattr(args, 'scenario', None)
+    try:
+        check_output(path, '--junit report', named)
+        write_atomic(path, render_error(str(scenario or args.command), reason, time.monotonic() - began))
+    except BagfaultError:
+        return
 
 
 @contextlib.contextmanager

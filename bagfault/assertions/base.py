@@ -35,6 +35,7 @@ class AssertionResult:
     message: str = ''
     value: float | None = None  # what was measured, in the assertion's own unit (see `unit`)
     unit: str = ''
+    wall_ns: int = 0  # wall time spent evaluating it (JUnit's testcase time)
 
 
 class AssertionType:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+from time import perf_counter_ns
 from typing import TYPE_CHECKING, Any
 
 from bagfault.assertions.base import FAILED, PASSED, PENDING, AssertionType
@@ -148,7 +149,9 @@ class AssertionRunner:
                 return
         for check in listeners:
             if check.pending:
+                began = perf_counter_ns()
                 check.on_message(topic, time, message)
+                check.result.wall_ns += perf_counter_ns() - began
 
     def decided(self, check: AssertionType) -> None:
         """Called by an assertion when it passes or fails."""

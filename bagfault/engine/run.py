@@ -13,6 +13,7 @@ event channels and the sink, so all modes judge and count the same way.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from time import monotonic
 from typing import TYPE_CHECKING, Protocol
 
 from bagfault.engine.merge import EVENT_RANK
@@ -109,6 +110,7 @@ class Run:
         self.scenario = scenario
         self.sink = sink
         self.catalog = catalog
+        self.wall_start = monotonic()
         self.stats = RunStats()
         self.notes: list[str] = []
         self.warnings: list[str] = []
@@ -253,7 +255,8 @@ class Run:
             notes.append(f'{count} message{"s" if count != 1 else ""} on {topic} could not take a fault and followed '
                          f'on_malformed (first at {seconds:.3f} s: {reason})')
         result = RunResult(self.scenario, list(inputs), output, seed, stats, notes,
-                           [*self.scenario.warnings, *self.warnings], mode=mode)
+                           [*self.scenario.warnings, *self.warnings], mode=mode,
+                           wall_seconds=monotonic() - self.wall_start)
         self.oracles.fill(result)
         return result
 

@@ -49,6 +49,9 @@ class FaultManagerObserver:
         self.origin = 0
         self.manager.listeners.append(self._on_fault_manager_event)
         self.manager.confirm_listeners.append(self._on_confirmed)
+        self.status_changes: list[tuple[int, str, str]] = []  # (time, code, status): the report's state timeline
+        self.manager.status_listeners.append(lambda code, status, time: self.status_changes.append((time, code,
+                                                                                                      status)))
         self.event_listeners: list[Callable[[FaultManagerEvent], None]] = []
         self.status_listeners = self.manager.status_listeners
         types = {topic: entry[0] for topic, entry in channels.items()}
@@ -177,6 +180,8 @@ class FaultManagerObserver:
                         'status': e.fault.status, 'auto_cleared_codes': list(e.auto_cleared_codes)}
                        for e in self.manager.events],
             'rejected_reports': [{'fault_code': r.fault_code, 'reason': why} for r, why in self.manager.rejected],
+            'status_changes': [{'t_s': seconds(t), 'fault_code': code, 'status': status}
+                               for t, code, status in self.status_changes],
             'snapshots': [{'fault_code': c.code, 't_s': seconds(c.time), 'topics': list(c.topics),
                            'freeze_frame': c.freeze_frame, 'black_box': str(c.path) if c.path else None,
                            'black_box_messages': len(c.messages)} for c in self.snapshots.captures],

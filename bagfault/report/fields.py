@@ -1,10 +1,20 @@
-"""Before/after values of mutated fields, read back from the input and the output after a run."""
+"""Before/after values of mutated fields, read back from the input and the output after a run.
+
+Fields are shown as they are: a scalar field as its value per message (the
+report adds after - before); an array field (LaserScan ranges, joint
+velocities) as an element x time image, each time column the minimum of its
+messages with any `inf` / `nan` kept in masks of their own, so a blind sector
+shows as what it is. Faulted PointCloud2 topics get their point counts and a
+bird's-eye view at the fault start, Image topics a thumbnail before and after
+the fault start. Memory stays bounded: scalars are strided to MAX_POINTS,
+images have at most COLUMNS x ROWS cells.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,7 +31,22 @@ if TYPE_CHECKING:
     from bagfault.engine.result import RunResult
 
 MAX_POINTS = 1500
+COLUMNS, ROWS = 300, 360
+CLOUD_POINTS, THUMB_WIDTH = 4000, 160
 NS = 1_000_000_000
+CLOUD, IMAGE = 'sensor_msgs/msg/PointCloud2', 'sensor_msgs/msg/Image'
+
+
+@dataclass
+class ArrayImage:
+    """An array field over time: per time column (s) and element bin the minimum finite value, and where any
+    message in the cell held inf or nan."""
+
+    times: np.ndarray
+    elements: np.ndarray
+    values: np.ndarray   # (ROWS, COLUMNS), nan where no finite value
+    inf: np.ndarray      # bool, same shape
+    nan: np.ndarray      # bool, same shape
 
 
 @dataclass
@@ -35,31 +60,93 @@ class FieldPlot:
     before: tuple[list[float], list[float]] = dataclasses.field(default_factory=lambda: ([], []))
     after: tuple[list[float], list[float]] = dataclasses.field(default_factory=lambda: ([], []))
     faults: list[str] = dataclasses.field(default_factory=list)
+    before_image: ArrayImage | None = None
+    after_image: ArrayImage | None = None
+    element_axis: str = 'element'
 
 
-def plan(result: RunResult) -> list[FieldPlot]:
-    """Fields touched by faults that were active during the run."""
-    activated = {e.fault_id for e in result.stats.events if e.state == 'active'}
-    plots = []
+@dataclass
+class MediaPlot:
+    """A faulted PointCloud2 or Image topic: point counts, and what it looked like at the fault start."""
+
+    injector_id: str
+    msgtype: str
+    input_topic: str
+    output_topic: str
+    faults: list[str]
+    start_s: float
+    counts_before: tuple[list[float], list[float]] = dataclasses.field(default_factory=lambda: ([], []))
+    counts_after: tuple[list[float], list[float]] = dataclasses.field(default_factory=lambda: ([], []))
+    snapshot_before: Any = None   # cloud: (x, y) arrays; image: (H, W, 3) uint8
+    snapshot_after: Any = None
+
+
+def plan(result: RunResult) -> tuple[list[FieldPlot], list[MediaPlot]]:
+    """Fields touched by faults that were active during the run, and faulted cloud/image topics."""
+    activated: dict[str, int] = {}
+    for event in result.stats.events:
+        if event.state == 'active':
+            activated.setdefault(event.fault_id, event.time)
+    origin = result.stats.origin or 0
+    plots, media = [], []
     for spec in result.scenario.injectors:
         cls = get_injector_type(spec.type)
         if cls is None or not issubclass(cls, Injector) or not spec.input_topic or not spec.output_topic:
             continue
         fields: dict[str, list[str]] = {}
-        for fault in result.scenario.faults_of(spec.id):
-            if fault.id not in activated:
-                continue
+        active = [f for f in result.scenario.faults_of(spec.id) if f.id in activated]
+        for fault in active:
             for key in fault.config:
                 for path in cls.plot_fields(key, fault.config):
                     fields.setdefault(path, []).append(fault.id)
         plots += [FieldPlot(spec.id, spec.input_topic, spec.output_topic, path, faults=sorted(set(faults)))
                   for path, faults in fields.items()]
-    return plots
+        kinds = set(cls.message_types) & {CLOUD, IMAGE}
+        if active and len(kinds) == 1:
+            start = min(activated[f.id] for f in active)
+            media.append(MediaPlot(spec.id, kinds.pop(), spec.input_topic, spec.output_topic,
+                                   sorted(f.id for f in active), (start - origin) / NS))
+    return plots, media
 
 
-def _series(paths: list[Path], topic: str, fields: list[str], origin: int,
-            expected: int) -> dict[str, tuple[list[float], list[float]]]:
-    out: dict[str, tuple[list[float], list[float]]] = {f: ([], []) for f in fields}
+class _ImageBuilder:
+    """Accumulates an array field into a COLUMNS x ROWS image of minima and inf/nan masks."""
+
+    def __init__(self, duration: float) -> None:
+        self.duration = max(duration, 1e-9)
+        self.values = np.full((ROWS, COLUMNS), np.inf)
+        self.inf = np.zeros((ROWS, COLUMNS), dtype=bool)
+        self.nan = np.zeros((ROWS, COLUMNS), dtype=bool)
+        self.seen = np.zeros(COLUMNS, dtype=bool)
+        self.size = 0
+
+    def add(self, seconds: float, values: np.ndarray) -> None:
+        values = np.asarray(values, dtype=float).ravel()
+        if values.size == 0:
+            return
+        self.size = max(self.size, values.size)
+        column = min(COLUMNS - 1, max(0, int(seconds / self.duration * COLUMNS)))
+        rows = np.minimum((np.arange(values.size) * ROWS) // max(values.size, 1), ROWS - 1)
+        finite = np.isfinite(values)
+        np.minimum.at(self.values[:, column], rows[finite], values[finite])
+        self.inf[rows[np.isinf(values)], column] = True
+        self.nan[rows[np.isnan(values)], column] = True
+        self.seen[column] = True
+
+    def image(self, first: float, step: float) -> ArrayImage:
+        used = min(ROWS, self.size) if self.size else 0
+        values = np.where(np.isinf(self.values), np.nan, self.values)[:used]
+        columns = np.flatnonzero(self.seen)
+        times = (columns + 0.5) * self.duration / COLUMNS
+        elements = first + np.arange(used) * step * max(self.size, 1) / max(used, 1)
+        return ArrayImage(times, elements, values[:, columns], self.inf[:used, columns],
+                          self.nan[:used, columns])
+
+
+def _read(paths: list[Path], topic: str, fields: list[str], origin: int, expected: int,
+          duration: float) -> dict[str, tuple[list[float], list[float]] | _ImageBuilder]:
+    """Scalar series or array images of `fields` on one topic."""
+    out: dict[str, tuple[list[float], list[float]] | _ImageBuilder] = {}
     inputs = InputSet(paths)
     try:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
@@ -76,31 +163,132 @@ def _series(paths: list[Path], topic: str, fields: list[str], origin: int,
                 resolved[text] = FieldPath.parse(text).resolve(msgtype, codec.store)
             except FieldPathError:
                 continue
+        arrays = {text for text in resolved if '[*]' in text}
+        for text in resolved:
+            out[text] = _ImageBuilder(duration) if text in arrays else ([], [])
         stride = max(1, expected // MAX_POINTS)
         number = 0
         for channel, time, _, data in inputs.messages():
             if channel not in channels:
                 continue
             number += 1
-            if (number - 1) % stride:
+            scalar_turn = not (number - 1) % stride
+            if not scalar_turn and not arrays:
                 continue
             message = codec.decode(data)
+            seconds = (time - origin) / NS
             for text, path in resolved.items():
-                values = path.read(message)
-                finite = values[np.isfinite(values)]
-                out[text][0].append((time - origin) / NS)
-                out[text][1].append(float(finite.mean()) if finite.size else float('nan'))
+                target = out[text]
+                if isinstance(target, _ImageBuilder):
+                    target.add(seconds, path.read(message))
+                elif scalar_turn:
+                    values = path.read(message)
+                    finite = values[np.isfinite(values)]
+                    target[0].append(seconds)
+                    target[1].append(float(finite.mean()) if finite.size else float('nan'))
     finally:
         inputs.close()
     return out
 
 
-def collect(result: RunResult) -> list[FieldPlot]:
-    """Fill before/after series of every planned field plot."""
-    plots = plan(result)
-    if not plots or result.output is None or result.stats.origin is None:
-        return plots
+def _scan_axis(paths: list[Path], topic: str) -> tuple[float, float] | None:
+    """(angle_min, angle_increment) in degrees of the first LaserScan on a topic, or None."""
+    inputs = InputSet(paths)
+    try:
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
+        channels = {i: c for i, c in enumerate(inputs.channels)
+                    if c.topic == topic and c.msgtype == 'sensor_msgs/msg/LaserScan'}
+        if not channels:
+            return None
+        codec = catalog.codec('sensor_msgs/msg/LaserScan')
+        for channel, _, _, data in inputs.messages():
+            if channel in channels and codec is not None:
+                scan = codec.decode(data)
+                return float(np.degrees(scan.angle_min)), float(np.degrees(scan.angle_increment))
+    finally:
+        inputs.close()
+    return None
+
+
+def cloud_xy(message: Any) -> tuple[np.ndarray, np.ndarray]:
+    """x and y of up to CLOUD_POINTS points of a PointCloud2 with FLOAT32 x and y."""
+    offsets = {f.name: f.offset for f in message.fields if f.datatype == 7}
+    if 'x' not in offsets or 'y' not in offsets or not message.point_step:
+        return np.zeros(0), np.zeros(0)
+    raw = np.asarray(message.data, dtype=np.uint8)
+    count = raw.size // message.point_step
+    points = raw[: count * message.point_step].reshape(count, message.point_step)
+    points = points[:: max(1, count // CLOUD_POINTS)]
+    order = '>f4' if message.is_bigendian else '<f4'
+    x = np.ascontiguousarray(points[:, offsets['x']:offsets['x'] + 4]).view(order).ravel()
+    y = np.ascontiguousarray(points[:, offsets['y']:offsets['y'] + 4]).view(order).ravel()
+    keep = np.isfinite(x) & np.isfinite(y)
+    return x[keep].astype(float), y[keep].astype(float)
+
+
+def thumbnail(message: Any) -> np.ndarray | None:
+    """An Image as an RGB uint8 array at most THUMB_WIDTH wide, or None for an encoding not shown."""
+    encoding = str(message.encoding).lower()
+    channels = {'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4, 'mono8': 1, '8uc1': 1, 'mono16': 1, '16uc1': 1,
+                '32fc1': 1}.get(encoding)
+    if channels is None or not message.width or not message.height:
+        return None
+    dtype = {'mono16': 'u2', '16uc1': 'u2', '32fc1': 'f4'}.get(encoding, 'u1')
+    dtype = ('>' if message.is_bigendian else '<') + dtype
+    item = np.dtype(dtype).itemsize
+    raw = np.asarray(message.data, dtype=np.uint8)
+    rows = raw[: message.height * message.step].reshape(message.height, message.step)
+    pixels = np.ascontiguousarray(rows[:, : message.width * channels * item]).view(dtype)
+    pixels = pixels.reshape(message.height, message.width, channels)
+    step = max(1, -(-message.width // THUMB_WIDTH))
+    pixels = pixels[::step, ::step].astype(float)
+    if item > 1:
+        finite = pixels[np.isfinite(pixels)]
+        high = float(finite.max()) if finite.size else 1.0
+        pixels = np.nan_to_num(pixels / (high or 1.0) * 255.0)
+    if encoding.startswith('bgr'):
+        pixels = pixels[:, :, [2, 1, 0]]
+    rgb = np.repeat(pixels, 3, axis=2) if channels == 1 else pixels[:, :, :3]
+    return np.asarray(np.clip(rgb, 0, 255), dtype=np.uint8)
+
+
+def _media(plot: MediaPlot, paths: list[Path], topic: str, origin: int,
+           ) -> tuple[tuple[list[float], list[float]], Any]:
+    """Point counts over time and the first message at or after the fault start, as a snapshot."""
+    counts: tuple[list[float], list[float]] = ([], [])
+    snapshot: Any = None
+    inputs = InputSet(paths)
+    try:
+        catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
+        channels = {i for i, c in enumerate(inputs.channels) if c.topic == topic and c.msgtype == plot.msgtype}
+        codec = catalog.codec(plot.msgtype)
+        if not channels or codec is None:
+            return counts, None
+        for channel, time, _, data in inputs.messages():
+            if channel not in channels:
+                continue
+            seconds = (time - origin) / NS
+            if plot.msgtype == CLOUD:
+                message = codec.decode(data)
+                counts[0].append(seconds)
+                counts[1].append(float(message.width * message.height))
+                if snapshot is None and seconds >= plot.start_s:
+                    snapshot = cloud_xy(message)
+            elif snapshot is None and seconds >= plot.start_s:
+                snapshot = thumbnail(codec.decode(data))
+                break
+    finally:
+        inputs.close()
+    return counts, snapshot
+
+
+def collect(result: RunResult) -> tuple[list[FieldPlot], list[MediaPlot]]:
+    """Fill before/after series and images of every planned plot."""
+    plots, media = plan(result)
+    if (not plots and not media) or result.output is None or result.stats.origin is None:
+        return plots, media
     origin = result.stats.origin
+    duration = ((result.stats.last_time or origin) - origin) / NS
     counts = result.stats.per_topic_out
     by_topic: dict[tuple[str, str], list[FieldPlot]] = {}
     for plot in plots:
@@ -108,8 +296,19 @@ def collect(result: RunResult) -> list[FieldPlot]:
     for (input_topic, output_topic), group in by_topic.items():
         fields = [p.field for p in group]
         expected = counts.get(output_topic, 0)
-        before = _series(list(result.inputs), input_topic, fields, origin, expected)
-        after = _series([result.output], output_topic, fields, origin, expected)
+        before = _read(list(result.inputs), input_topic, fields, origin, expected, duration)
+        after = _read([result.output], output_topic, fields, origin, expected, duration)
+        axis = _scan_axis(list(result.inputs), input_topic)
         for plot in group:
-            plot.before, plot.after = before[plot.field], after[plot.field]
-    return plots
+            for side, data in (('before', before.get(plot.field)), ('after', after.get(plot.field))):
+                if isinstance(data, _ImageBuilder):
+                    first, step = axis if axis and plot.field == 'ranges[*]' else (0.0, 1.0)
+                    setattr(plot, f'{side}_image', data.image(first, step))
+                elif data is not None:
+                    setattr(plot, side, data)
+            if axis and plot.field == 'ranges[*]':
+                plot.element_axis = 'angle (deg)'
+    for item in media:
+        item.counts_before, item.snapshot_before = _media(item, list(result.inputs), item.input_topic, origin)
+        item.counts_after, item.snapshot_after = _media(item, [result.output], item.output_topic, origin)
+    return plots, media

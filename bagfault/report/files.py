@@ -58,4 +58,5 @@ class ReportPaths:
             write_atomic(self.junit, junit.render(report))
         if self.html is not None:
             rates: RateTracker | None = next((c for c in collectors if isinstance(c, RateTracker)), None)
-            write_atomic(self.html, html.render(report, rates, collect(result)))
+            plots, media = collect(result)
+            write_atomic(self.html, html.render(report, rates, plots, media=media))

@@ -1,7 +1,7 @@
-"""Self-contained HTML report: fault timeline, assertions, topic rates, before/after fields.
+"""Self-contained interactive HTML report: timeline, assertions, fault manager states, fields, media, rates.
 
-One file, inline SVG and CSS, a few lines of script only to flag render
-errors (the test renders the page in headless Chromium and reads them).
+Every time plot shares one bag-time axis (zoom one, all follow); clicking an
+assertion row zooms them all to where it was decided. Built on report.page.
 """
 
 from __future__ import annotations
@@ -10,30 +10,19 @@ import json
 from html import escape
 from typing import TYPE_CHECKING, Any
 
-from bagfault.report import svg
+import numpy as np
+
+from bagfault.report.page import Page, envelope, shade
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.report.fields import FieldPlot
+    from bagfault.report.fields import ArrayImage, FieldPlot, MediaPlot
     from bagfault.report.rates import RateTracker
 
-STYLE = """
-body{font-family:system-ui,sans-serif;margin:24px;color:#222;max-width:820px}
-h1{font-size:20px} h2{font-size:16px;margin-top:28px;border-bottom:1px solid #ddd}
-table{border-collapse:collapse;font-size:12px;width:100%} td,th{border:1px solid #ddd;padding:3px 6px;text-align:left}
-.pass{color:#2a7d2a;font-weight:bold} .fail{color:#c62828;font-weight:bold} .verdict{font-size:18px}
-svg.plot{display:block;margin:8px 0} code{font-size:11px}
-"""
-
-SCRIPT = """
-window.bagfaultErrors = [];
-window.addEventListener('error', function (e) { window.bagfaultErrors.push(String(e.message)); });
-window.addEventListener('load', function () {
-  document.body.dataset.plots = document.querySelectorAll('svg.plot').length;
-  document.body.dataset.errors = window.bagfaultErrors.length;
-});
-"""
+STATE_COLORS = {'PREFAILED': '#f4b400', 'PREPASSED': '#9ccc65', 'CONFIRMED': '#d62728', 'HEALED': '#2ca02c',
+                'CLEARED': '#9e9e9e'}
+ROW_PX = 90
 
 
 def _windows(report: dict[str, Any], faults: set[str] | None = None) -> list[tuple[float, float, str]]:
@@ -43,76 +32,237 @@ def _windows(report: dict[str, Any], faults: set[str] | None = None) -> list[tup
             for w in report['fault_windows'] if faults is None or w['fault_id'] in faults]
 
 
-def _faults_on(report: dict[str, Any], topic: str) -> set[str]:
-    """Faults of the injectors that read or write a topic."""
-    return {f for i in report.get('injectors', []) if topic in (i['input_topic'], i['output_topic'])
-            for f in i['faults']}
+def _duration(report: dict[str, Any]) -> float:
+    return float(report['time']['duration_s'] or 1.0)
 
 
-def _timeline(report: dict[str, Any]) -> str:
-    rows: dict[str, list[tuple[float, float | None]]] = {}
-    for window in report['fault_windows']:
-        rows.setdefault(window['fault_id'], []).append((window['start_s'], window['end_s']))
-    if not rows:
-        return '<p>No fault changed state during the bag.</p>'
-    return svg.timeline(list(rows.items()), title='Fault timeline', end=report['time']['duration_s'] or 1.0)
+def _timeline(page: Page, report: dict[str, Any], rates: RateTracker | None) -> None:
+    """Fault windows as bars, assertion decisions and event-topic messages as markers, one row each."""
+    data: list[dict[str, Any]] = []
+    for start, end, fault in _windows(report):
+        data.append({'type': 'scatter', 'mode': 'lines', 'x': [start, end], 'y': [fault, fault],
+                     'line': {'width': 14, 'color': 'rgba(214,39,40,0.6)'}, 'name': fault, 'showlegend': False,
+                     'hovertemplate': f'{fault}: %{{x:.3f}} s<extra></extra>'})
+    for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828')):
+        decided = [a for a in report['assertions'] if a['state'] == state and a['t_s'] is not None]
+        if decided:
+            data.append({'type': 'scatter', 'mode': 'markers', 'x': [a['t_s'] for a in decided],
+                         'y': ['assertions'] * len(decided), 'text': [a['id'] for a in decided],
+                         'marker': {'symbol': 'diamond', 'size': 11, 'color': color}, 'name': f'{state}',
+                         'hovertemplate': '%{text} ' + state + ' at %{x:.3f} s<extra></extra>'})
+    if rates is not None:
+        for topic in sorted(rates.times):
+            if rates.is_event_topic(topic):
+                times = rates.seconds(topic)
+                data.append({'type': 'scatter', 'mode': 'markers', 'x': times, 'y': [topic] * times.size,
+                             'marker': {'symbol': 'line-ns-open', 'size': 12}, 'name': topic, 'showlegend': False,
+                             'hovertemplate': f'{topic} at %{{x:.3f}} s<extra></extra>'})
+    if not data:
+        page.html('<p>No fault changed state and no assertion was decided.</p>')
+        return
+    rows = len({str(d['y'][0]) for d in data if len(d['y'])})
+    page.figure(data, {'height': 90 + 28 * rows, 'xaxis': {'title': {'text': 'bag time (s)'},
+                                                            'range': [0, _duration(report)]},
+                       'yaxis': {'type': 'category', 'automargin': True}, 'showlegend': True,
+                       'legend': {'orientation': 'h', 'y': 1.15}},
+                timed=True, name='timeline')
 
 
-def _assertions(report: dict[str, Any]) -> str:
+def _assertions(page: Page, report: dict[str, Any]) -> None:
     if not report['assertions']:
-        return '<p>No assertions in this scenario.</p>'
+        page.html('<p>No assertions in this scenario.</p>')
+        return
+    span = max(1.0, 0.05 * _duration(report))
     rows = []
     for a in report['assertions']:
         css = 'pass' if a['state'] == 'passed' else 'fail'
         t = '' if a['t_s'] is None else f'{a["t_s"]:.3f}'
-        rows.append(f'<tr><td class="{css}">{escape(a["state"].upper())}</td><td>{escape(a["id"])}</td>'
+        zoom = '' if a['t_s'] is None else f' data-zoom="{a["t_s"] - span:.3f},{a["t_s"] + span:.3f}"'
+        rows.append(f'<tr{zoom}><td class="{css}">{escape(a["state"].upper())}</td><td>{escape(a["id"])}</td>'
                     f'<td>{escape(a["type"])}</td><td>{t}</td><td>{escape(a["message"])}</td></tr>')
-    return ('<table><tr><th>result</th><th>assertion</th><th>type</th><th>t (s)</th><th>message</th></tr>'
-            + ''.join(rows) + '</table>')
+    page.html('<p class="muted">Click a row to zoom every time plot to where it was decided.</p>'
+              '<table><tr><th>result</th><th>assertion</th><th>type</th><th>t (s)</th><th>message</th></tr>'
+              + ''.join(rows) + '</table>')
 
 
-def _rates(report: dict[str, Any], rates: RateTracker | None, topics: Sequence[str]) -> str:
-    if rates is None:
-        return '<p>Rates were not collected.</p>'
-    charts = []
-    for topic in topics:
-        xs, ys = rates.series(topic)
-        charts.append(svg.line_chart([(topic, xs, ys)], title=f'{topic} rate', ylabel='Hz',
-                                     shaded=_windows(report, _faults_on(report, topic)), step=True,
-                                     from_zero=True))
-    return ''.join(charts)
-
-
-def _fields(report: dict[str, Any], plots: Sequence[FieldPlot]) -> str:
-    if not plots:
-        return '<p>No field was changed by an active fault.</p>'
-    charts = []
-    for plot in plots:
-        title = f'{plot.field} on {plot.output_topic} ({", ".join(plot.faults)})'
-        charts.append(svg.line_chart(
-            [(f'before: {plot.input_topic}', *plot.before), (f'after: {plot.output_topic}', *plot.after)],
-            title=title, ylabel=plot.field, shaded=_windows(report, set(plot.faults))))
-    return ''.join(charts)
-
-
-def fault_manager_section(summary: dict[str, Any]) -> str:
-    """The fault manager's final table, events and snapshots."""
+def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) -> None:
+    """Per-code state bands over bag time with confirmations marked; events folded into counts."""
+    end = _duration(report)
+    codes = sorted({c['fault_code'] for c in summary.get('status_changes', [])})
+    data: list[dict[str, Any]] = []
+    for code in codes:
+        changes = [c for c in summary['status_changes'] if c['fault_code'] == code]
+        for number, change in enumerate(changes):
+            until = changes[number + 1]['t_s'] if number + 1 < len(changes) else end
+            data.append({'type': 'scatter', 'mode': 'lines', 'x': [change['t_s'], until], 'y': [code, code],
+                         'line': {'width': 16, 'color': STATE_COLORS.get(change['status'], '#607d8b')},
+                         'name': change['status'], 'legendgroup': change['status'], 'showlegend': False,
+                         'hovertemplate': f'{code} {change["status"]} %{{x:.3f}} s<extra></extra>'})
+    shown = {d['name'] for d in data}
+    for status, color in STATE_COLORS.items():  # legend entries, one per state that occurs
+        if status in shown:
+            data.append({'type': 'scatter', 'mode': 'lines', 'x': [None], 'y': [None], 'name': status,
+                         'line': {'width': 10, 'color': color}, 'legendgroup': status})
+    confirmed = [e for e in summary['events'] if e['event_type'] == 'fault_confirmed']
+    if confirmed:
+        data.append({'type': 'scatter', 'mode': 'markers', 'x': [e['t_s'] for e in confirmed],
+                     'y': [e['fault_code'] for e in confirmed], 'name': 'confirmed (FaultEvent)',
+                     'marker': {'symbol': 'star', 'size': 13, 'color': '#000'},
+                     'hovertemplate': '%{y} confirmed at %{x:.3f} s<extra></extra>'})
+    if codes:
+        page.figure(data, {'height': 110 + 34 * len(codes), 'xaxis': {'title': {'text': 'bag time (s)'},
+                                                                       'range': [0, end]},
+                           'yaxis': {'type': 'category', 'automargin': True},
+                           'legend': {'orientation': 'h', 'y': 1.2}}, timed=True, name='fault_manager_states')
+    counts: dict[str, dict[str, int]] = {}
+    for event in summary['events']:
+        counts.setdefault(event['fault_code'], {}).setdefault(event['event_type'], 0)
+        counts[event['fault_code']][event['event_type']] += 1
+    kinds = ('fault_confirmed', 'fault_updated', 'fault_cleared')
     rows = ''.join(
         f'<tr><td>{escape(f["fault_code"])}</td><td>{escape(f["severity"])}</td><td>{escape(f["status"])}</td>'
-        f'<td>{f["occurrence_count"]}</td><td>{f["first_occurred_s"]:.3f}</td><td>{f["last_occurred_s"]:.3f}</td></tr>'
+        f'<td>{f["occurrence_count"]}</td><td>{f["first_occurred_s"]:.3f}</td><td>{f["last_occurred_s"]:.3f}</td>'
+        + ''.join(f'<td>{counts.get(f["fault_code"], {}).get(k, 0)}</td>' for k in kinds) + '</tr>'
         for f in summary['faults'])
-    events = ''.join(f'<tr><td>{e["t_s"]:.3f}</td><td>{escape(e["event_type"])}</td><td>{escape(e["fault_code"])}'
-                     f'</td><td>{escape(e["status"])}</td></tr>' for e in summary['events'][:200])
     snapshots = ''.join(
-        f'<p>Snapshot of {escape(s["fault_code"])} at {s["t_s"]:.3f} s'
-        f'{", black box " + escape(s["black_box"]) if s["black_box"] else ""}</p>'
-        f'<pre>{escape(json.dumps(s["freeze_frame"], indent=1, sort_keys=True)[:4000])}</pre>'
+        f'<details><summary>Snapshot of {escape(s["fault_code"])} at {s["t_s"]:.3f} s'
+        f'{", black box " + escape(s["black_box"]) if s["black_box"] else ""}</summary>'
+        f'<pre>{escape(json.dumps(s["freeze_frame"], indent=1, sort_keys=True)[:4000])}</pre></details>'
         for s in summary['snapshots'])
-    return (f'<p>{len(summary["confirmed"])} confirmed; {summary["muted_count"]} muted; '
-            f'{summary["cluster_count"]} clusters.</p>'
-            '<table><tr><th>code</th><th>severity</th><th>status</th><th>occurrences</th><th>first (s)</th>'
-            f'<th>last (s)</th></tr>{rows}</table>'
-            f'<table><tr><th>t (s)</th><th>event</th><th>code</th><th>status</th></tr>{events}</table>{snapshots}')
+    page.html(f'<p>{len(summary["confirmed"])} confirmed; {summary["muted_count"]} muted; '
+              f'{summary["cluster_count"]} clusters.</p>'
+              '<table><tr><th>code</th><th>severity</th><th>status</th><th>occurrences</th><th>first (s)</th>'
+              '<th>last (s)</th><th>confirmed</th><th>updated</th><th>cleared</th></tr>'
+              f'{rows}</table>{snapshots}')
+
+
+def _heatmap(image: ArrayImage, title: str, axis: str, windows: list[tuple[float, float, str]],
+             scale: tuple[float, float]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """An array field as element x time, inf cells magenta and nan cells black on top."""
+    data: list[dict[str, Any]] = [
+        {'type': 'heatmap', 'x': image.times, 'y': image.elements, 'z': image.values, 'name': 'value',
+         'colorscale': 'Viridis', 'zmin': scale[0], 'zmax': scale[1], 'colorbar': {'len': 0.8},
+         'hovertemplate': 't %{x:.2f} s, %{y:.1f}: %{z:.3f}<extra></extra>'}]
+    for mask, label, color in ((image.inf, 'inf', '#ff00ff'), (image.nan, 'nan', '#000000')):
+        data.append({'type': 'heatmap', 'x': image.times, 'y': image.elements, 'name': label,
+                     'z': np.where(mask, 1.0, np.nan), 'zmin': 0, 'zmax': 1, 'showscale': False,
+                     'colorscale': [[0, color], [1, color]],
+                     'hovertemplate': f't %{{x:.2f}} s, %{{y:.1f}}: {label}<extra></extra>'})
+    layout = {'title': {'text': title, 'font': {'size': 13}}, 'height': 300,
+              'xaxis': {'title': {'text': 'bag time (s)'}}, 'yaxis': {'title': {'text': axis}},
+              'shapes': shade(windows)}
+    return data, layout
+
+
+def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> None:
+    if not plots:
+        page.html('<p>No field was changed by an active fault.</p>')
+        return
+    for plot in plots:
+        windows = _windows(report, set(plot.faults))
+        title = f'{plot.field} on {plot.output_topic} ({", ".join(plot.faults)})'
+        if plot.before_image is not None or plot.after_image is not None:
+            images = [i for i in (plot.before_image, plot.after_image) if i is not None and i.values.size]
+            finite = [i.values[np.isfinite(i.values)] for i in images]
+            values = np.concatenate(finite) if finite else np.zeros(0)
+            scale = (float(values.min()), float(values.max())) if values.size else (0.0, 1.0)
+            for side, image, topic in (('before', plot.before_image, plot.input_topic),
+                                       ('after', plot.after_image, plot.output_topic)):
+                if image is not None:
+                    page.figure(*_heatmap(image, f'{title}: {side} ({topic}); inf magenta, nan black',
+                                          plot.element_axis, windows, scale), timed=True,
+                                name=f'image:{side}:{plot.output_topic}:{plot.field}')
+            continue
+        bx, by = (np.asarray(v, dtype=float) for v in plot.before)
+        ax, ay = (np.asarray(v, dtype=float) for v in plot.after)
+        data = [{'type': 'scatter', 'mode': 'lines', 'x': bx, 'y': by, 'name': f'before: {plot.input_topic}'},
+                {'type': 'scatter', 'mode': 'lines', 'x': ax, 'y': ay, 'name': f'after: {plot.output_topic}'}]
+        difference = ay - np.interp(ax, bx, by) if bx.size and ax.size else np.zeros(0)
+        data.append({'type': 'scatter', 'mode': 'lines', 'x': ax[: difference.size], 'y': difference,
+                     'name': 'after - before', 'xaxis': 'x', 'yaxis': 'y2', 'line': {'color': '#7f7f7f'}})
+        page.figure(data, {'title': {'text': title, 'font': {'size': 13}}, 'height': 380,
+                           'xaxis': {'title': {'text': 'bag time (s)'}, 'anchor': 'y2'},
+                           'yaxis': {'domain': [0.38, 1], 'title': {'text': plot.field}},
+                           'yaxis2': {'domain': [0, 0.28], 'title': {'text': 'after - before'}},
+                           'shapes': shade(windows), 'legend': {'orientation': 'h', 'y': 1.12}},
+                    timed=True, name=f'field:{plot.output_topic}:{plot.field}')
+
+
+def _media(page: Page, report: dict[str, Any], media: Sequence[MediaPlot]) -> None:
+    for item in media:
+        windows = _windows(report, set(item.faults))
+        title = f'{item.output_topic} at the fault start ({item.start_s:.3f} s, {", ".join(item.faults)})'
+        if item.msgtype.endswith('PointCloud2'):
+            page.figure([{'type': 'scatter', 'mode': 'lines', 'x': item.counts_before[0],
+                          'y': item.counts_before[1], 'name': f'before: {item.input_topic}'},
+                         {'type': 'scatter', 'mode': 'lines', 'x': item.counts_after[0], 'y': item.counts_after[1],
+                          'name': f'after: {item.output_topic}'}],
+                        {'title': {'text': f'{item.output_topic} points per cloud', 'font': {'size': 13}},
+                         'height': 260, 'xaxis': {'title': {'text': 'bag time (s)'}},
+                         'yaxis': {'title': {'text': 'points'}}, 'shapes': shade(windows)},
+                        timed=True, name=f'cloud_counts:{item.output_topic}')
+            data = []
+            for number, (side, snap) in enumerate((('before', item.snapshot_before), ('after', item.snapshot_after))):
+                if snap is not None:
+                    suffix = '' if number == 0 else '2'
+                    data.append({'type': 'scattergl', 'mode': 'markers', 'x': snap[0], 'y': snap[1], 'name': side,
+                                 'marker': {'size': 2}, 'xaxis': f'x{suffix}', 'yaxis': f'y{suffix}'})
+            page.figure(data, {'title': {'text': f"bird's-eye view of {title}", 'font': {'size': 13}},
+                               'height': 380, 'grid': {'rows': 1, 'columns': 2, 'pattern': 'independent'},
+                               'yaxis': {'scaleanchor': 'x'}, 'yaxis2': {'scaleanchor': 'x2'}},
+                        name=f'cloud_birdseye:{item.output_topic}')
+        else:
+            data = []
+            for number, (side, snap) in enumerate((('before', item.snapshot_before), ('after', item.snapshot_after))):
+                if snap is not None:
+                    suffix = '' if number == 0 else '2'
+                    data.append({'type': 'image', 'z': snap, 'name': side, 'xaxis': f'x{suffix}',
+                                 'yaxis': f'y{suffix}'})
+            if data:
+                page.figure(data, {'title': {'text': f'{title}: before | after', 'font': {'size': 13}},
+                                   'height': 300, 'grid': {'rows': 1, 'columns': 2, 'pattern': 'independent'}},
+                            name=f'thumbnails:{item.output_topic}')
+
+
+def _rates(page: Page, report: dict[str, Any], rates: RateTracker | None, topics: Sequence[str]) -> None:
+    """Small multiples on one shared time axis: each topic's rate over a window matched to its nominal rate,
+    fault windows shaded, gaps marked."""
+    if rates is None:
+        page.html('<p>Rates were not collected.</p>')
+        return
+    shown = [t for t in topics if t in rates.times and not rates.is_event_topic(t)]
+    if not shown:
+        page.html('<p>No topic has enough messages for a rate.</p>')
+        return
+    rows = len(shown)
+    gap = 0.3 / rows
+    data: list[dict[str, Any]] = []
+    layout: dict[str, Any] = {'height': 60 + ROW_PX * rows, 'showlegend': False, 'annotations': [],
+                              'shapes': shade(_windows(report)), 'margin': {'l': 60, 'r': 20, 't': 24, 'b': 36}}
+    for number, topic in enumerate(shown, start=1):
+        series = rates.series(topic)
+        x, y = envelope(series.times, series.rates)
+        top = 1 - (number - 1) / rows
+        axis = '' if number == 1 else str(number)
+        layout[f'yaxis{axis}'] = {'domain': [max(0.0, top - 1 / rows + gap), top], 'rangemode': 'tozero',
+                                  'tickfont': {'size': 9}}
+        layout[f'xaxis{axis}'] = {'anchor': f'y{axis}', 'showticklabels': number == rows,
+                                  **({'range': [0, _duration(report)]} if number == 1 else {'matches': 'x'}),
+                                  **({'title': {'text': 'bag time (s)'}} if number == rows else {})}
+        data.append({'type': 'scatter', 'mode': 'lines', 'x': x, 'y': y, 'name': topic, 'xaxis': f'x{axis}',
+                     'yaxis': f'y{axis}', 'line': {'width': 1.2},
+                     'hovertemplate': f'{topic} %{{y:.2f}} Hz at %{{x:.3f}} s<extra></extra>'})
+        if series.gaps:
+            data.append({'type': 'scatter', 'mode': 'markers', 'x': [a for a, _ in series.gaps],
+                         'y': [0.0] * len(series.gaps), 'name': f'{topic} gaps', 'xaxis': f'x{axis}',
+                         'yaxis': f'y{axis}', 'marker': {'symbol': 'x', 'color': '#c62828', 'size': 8},
+                         'customdata': [b - a for a, b in series.gaps],
+                         'hovertemplate': 'gap of %{customdata:.3f} s from %{x:.3f} s<extra></extra>'})
+        layout['annotations'].append({'text': f'{topic}  ~{series.nominal_hz:.3g} Hz, window {series.window} msg',
+                                      'xref': 'paper', 'yref': f'y{axis} domain', 'x': 0, 'y': 1.02,
+                                      'xanchor': 'left', 'yanchor': 'bottom', 'showarrow': False,
+                                      'font': {'size': 11}})
+    page.figure(data, layout, timed=True, name='rates')
 
 
 def render(
@@ -120,35 +270,40 @@ def render(
     rates: RateTracker | None = None,
     plots: Sequence[FieldPlot] = (),
     extra_sections: Sequence[tuple[str, str]] = (),
+    media: Sequence[MediaPlot] = (),
 ) -> str:
     """Whole HTML document."""
     counts = report['assertion_counts']
     verdict_css = 'fail' if report['verdict'] == 'failed' else 'pass'
-    topics = sorted(report['messages']['per_topic_written'])
-    rate_topics = [t for t in topics if not t.startswith('/fault_injection/')]
-    counts_table = ''.join(f'<tr><td>{escape(t)}</td><td>{n}</td></tr>'
-                           for t, n in report['messages']['per_topic_written'].items())
+    name = report['scenario']['name']
+    page = Page(f'bagfault report: {name}')
     inputs = ', '.join(f'<code>{escape(p)}</code>' for p in report['inputs'])
+    page.html(f'<h1>bagfault report: {escape(name)}</h1>'
+              f'<p class="verdict {verdict_css}">{escape(report["verdict"].upper())}: {counts["passed"]} passed, '
+              f'{counts["failed"]} failed</p><p>mode {escape(report["mode"])}; inputs {inputs}; output '
+              f'<code>{escape(str(report["output"]))}</code>; seed {report["seed"]}; bag duration '
+              f'{report["time"]["duration_s"]} s; bagfault {escape(report["tool"]["version"])}</p>')
+    page.section('Timeline')
+    _timeline(page, report, rates)
+    page.section('Assertions')
+    _assertions(page, report)
     if 'fault_manager' in report:
-        extra_sections = [('Fault manager', fault_manager_section(report['fault_manager'])), *extra_sections]
-    sections = ''.join(f'<h2>{escape(title)}</h2>{body}' for title, body in extra_sections)
-    notes = ''.join(f'<li>{escape(n)}</li>' for n in report['notes'])
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
-<title>bagfault report: {escape(report['scenario']['name'])}</title>
-<style>{STYLE}</style><script>{SCRIPT}</script></head>
-<body>
-<h1>bagfault report: {escape(report['scenario']['name'])}</h1>
-<p class="verdict {verdict_css}">{escape(report['verdict'].upper())}: \
-{counts['passed']} passed, {counts['failed']} failed</p>
-<p>mode {escape(report['mode'])}; inputs {inputs}; output <code>{escape(str(report['output']))}</code>;
-seed {report['seed']}; bag duration {report['time']['duration_s']} s; bagfault {escape(report['tool']['version'])}</p>
-<h2>Fault timeline</h2>{_timeline(report)}
-<h2>Assertions</h2>{_assertions(report)}
-<h2>Before and after</h2>{_fields(report, plots)}
-<h2>Topic rates</h2>{_rates(report, rates, rate_topics)}
-{sections}
-<h2>Messages written</h2><table><tr><th>topic</th><th>messages</th></tr>{counts_table}</table>
-{f'<h2>Notes</h2><ul>{notes}</ul>' if notes else ''}
-</body></html>
-"""
+        page.section('Fault manager')
+        _fault_manager(page, report, report['fault_manager'])
+    page.section('Before and after')
+    _fields(page, report, plots)
+    _media(page, report, media)
+    topics = sorted(report['messages']['per_topic_written'])
+    page.section('Topic rates')
+    _rates(page, report, rates, topics)
+    for title, body in extra_sections:
+        page.section(title)
+        page.html(body)
+    page.section('Messages written')
+    page.html('<table><tr><th>topic</th><th>messages</th></tr>' + ''.join(
+        f'<tr><td>{escape(t)}</td><td>{n}</td></tr>' for t, n in report['messages']['per_topic_written'].items())
+        + '</table>')
+    if report['notes']:
+        page.section('Notes')
+        page.html('<ul>' + ''.join(f'<li>{escape(n)}</li>' for n in report['notes']) + '</ul>')
+    return page.render()

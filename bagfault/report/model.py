@@ -44,9 +44,11 @@ def build(result: RunResult) -> dict[str, Any]:
     """Plain, JSON-ready dictionary with stable keys."""
     stats = result.stats
     origin = stats.origin
+    lines = {spec.id: int(result.scenario.located.where(spec.path).split(':')[0]) if spec.path else None
+             for spec in result.scenario.assertions}
     assertions = [
         {'id': r.id, 'type': r.type, 'state': r.state, 't_s': seconds(r.time, origin), 'stamp_ns': r.time,
-         'message': r.message}
+         'message': r.message, 'line': lines.get(r.id), 'wall_s': round(r.wall_ns / NS, 6)}
         for r in result.assertions
     ]
     counts = {state: sum(a['state'] == state for a in assertions) for state in ('passed', 'failed', 'pending')}
@@ -72,6 +74,7 @@ def build(result: RunResult) -> dict[str, Any]:
             'first_ns': stats.first_time,
             'last_ns': stats.last_time,
             'duration_s': seconds(stats.last_time, stats.first_time),
+            'wall_s': None if result.wall_seconds is None else round(result.wall_seconds, 3),
         },
         'messages': {'read': stats.input_messages, 'written': stats.output_messages,
                      'per_topic_written': dict(sorted(stats.per_topic_out.items())),

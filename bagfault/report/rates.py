@@ -1,46 +1,52 @@
-"""Per-topic message rate over bag time, collected while the output is written."""
+"""Per-topic message times, collected while the output is written, and the rates they give.
+
+A rate over fixed bins draws a 2 Hz topic as a comb between 0 and 10 Hz.
+Here each topic gets a window matched to its nominal rate: k messages
+spanning about one second (k = 1 for topics under 1 Hz), and the rate at a
+message is k divided by the time the last k intervals took. Gaps (an
+interval over three nominal periods) are listed so plots can mark them.
+"""
 
 from __future__ import annotations
 
+from array import array
+from dataclasses import dataclass
+
+import numpy as np
+
 NS = 1_000_000_000
+EVENT_TOPIC_PREFIXES = ('/fault_injection/', '/fault_manager/')
+FEW = 10  # topics with fewer messages are drawn as events, not rates
+
+
+@dataclass
+class RateSeries:
+    """One topic's rate at each message (s, Hz), its nominal rate and its gaps (start s, end s)."""
+
+    times: np.ndarray
+    rates: np.ndarray
+    nominal_hz: float
+    window: int
+    gaps: list[tuple[float, float]]
 
 
 class RateTracker:
-    """Observer counting messages per topic in time bins; bins widen to stay under `max_bins`."""
+    """Observer keeping every message time per topic (8 bytes a message)."""
 
-    def __init__(self, bin_s: float = 0.1, max_bins: int = 2000) -> None:
-        self.width = round(bin_s * NS)
-        self.max_bins = max_bins
+    def __init__(self) -> None:
         self.origin = 0
-        self.bins: dict[str, dict[int, int]] = {}
-        self._high = 0
+        self.times: dict[str, array[int]] = {}
 
     def start(self, origin: int) -> None:
         """Bag time zero."""
         self.origin = origin
 
     def on_message(self, topic: str, time: int, data: object) -> None:
-        """Count one message."""
-        index = (time - self.origin) // self.width
-        if index >= self.max_bins:
-            self._coarsen(index)
-            index = (time - self.origin) // self.width
-        self._high = max(self._high, index)
-        counts = self.bins.get(topic)
-        if counts is None:
-            counts = self.bins[topic] = {}
-        counts[index] = counts.get(index, 0) + 1
-
-    def _coarsen(self, index: int) -> None:
-        while index >= self.max_bins:
-            self.width *= 2
-            index //= 2
-            for topic, counts in self.bins.items():
-                merged: dict[int, int] = {}
-                for key, value in counts.items():
-                    merged[key // 2] = merged.get(key // 2, 0) + value
-                self.bins[topic] = merged
-            self._high //= 2
+        """Note one message."""
+        times = self.times.get(topic)
+        if times is None:
+            times = self.times[topic] = array('q')
+        times.append(time)
 
     def on_event(self, event: object) -> None:
         """Events are not counted."""
@@ -48,9 +54,33 @@ class RateTracker:
     def finish(self, time: int) -> None:
         """Nothing to close."""
 
-    def series(self, topic: str) -> tuple[list[float], list[float]]:
-        """(bin start s, rate Hz) for every bin from zero to the last one, zeros included."""
-        counts = self.bins.get(topic, {})
-        seconds = self.width / NS
-        indexes = range(min(counts, default=0), self._high + 1)
-        return [i * seconds for i in indexes], [counts.get(i, 0) / seconds for i in indexes]
+    def seconds(self, topic: str) -> np.ndarray:
+        """Message times of a topic in seconds from time zero, sorted."""
+        raw = np.frombuffer(self.times.get(topic, array('q')), dtype=np.int64)
+        return np.sort((raw - self.origin) / NS)
+
+    def is_event_topic(self, topic: str) -> bool:
+        """bagfault's event channels and topics with a handful of messages: markers, not rates."""
+        return topic.startswith(EVENT_TOPIC_PREFIXES) or len(self.times.get(topic, ())) < FEW
+
+    def series(self, topic: str) -> RateSeries:
+        """The topic's rate at each message over a window matched to its nominal rate."""
+        return rate_series(self.seconds(topic))
+
+
+def rate_series(times: np.ndarray) -> RateSeries:
+    """Rate at each message from the k previous intervals, k spanning about one second."""
+    if times.size < 2:
+        return RateSeries(times, np.full(times.size, np.nan), 0.0, 1, [])
+    intervals = np.diff(times)
+    positive = intervals[intervals > 0]
+    period = float(np.median(positive)) if positive.size else 0.0
+    nominal = 1.0 / period if period > 0 else 0.0
+    window = max(1, min(round(nominal), times.size - 1))
+    rates = np.full(times.size, np.nan)
+    spans = times[window:] - times[:-window]
+    with np.errstate(divide='ignore'):
+        rates[window:] = np.where(spans > 0, window / spans, np.nan)
+    long = np.flatnonzero(intervals > 3 * period) if period > 0 else np.zeros(0, dtype=int)
+    gaps = [(float(times[i]), float(times[i + 1])) for i in long]
+    return RateSeries(times, rates, nominal, window, gaps)
