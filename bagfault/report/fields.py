@@ -6,8 +6,8 @@ velocities) as an element x time image, each time column the minimum of its
 messages with any `inf` / `nan` kept in masks of their own, so a blind sector
 shows as what it is. Faulted PointCloud2 topics get their point counts and a
 bird's-eye view at the fault start, Image topics a thumbnail before and after
-the fault start. Memory stays bounded: scalars are strided to MAX_POINTS,
-images have at most COLUMNS x ROWS cells.
+the fault start. Scalars keep every message (the page decimates them to
+min/max envelopes); images have at most COLUMNS x ROWS cells.
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ if TYPE_CHECKING:
 
     from bagfault.engine.result import RunResult
 
-MAX_POINTS = 1500
 COLUMNS, ROWS = 300, 360
 CLOUD_POINTS, THUMB_WIDTH = 4000, 160
 NS = 1_000_000_000
@@ -143,8 +142,8 @@ class _ImageBuilder:
                           self.nan[:used, columns])
 
 
-def _read(paths: list[Path], topic: str, fields: list[str], origin: int, expected: int,
-          duration: float) -> dict[str, tuple[list[float], list[float]] | _ImageBuilder]:
+def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duration: float,
+          ) -> dict[str, tuple[list[float], list[float]] | _ImageBuilder]:
     """Scalar series or array images of `fields` on one topic."""
     out: dict[str, tuple[list[float], list[float]] | _ImageBuilder] = {}
     inputs = InputSet(paths)
@@ -166,14 +165,8 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, expecte
         arrays = {text for text in resolved if '[*]' in text}
         for text in resolved:
             out[text] = _ImageBuilder(duration) if text in arrays else ([], [])
-        stride = max(1, expected // MAX_POINTS)
-        number = 0
         for channel, time, _, data in inputs.messages():
             if channel not in channels:
-                continue
-            number += 1
-            scalar_turn = not (number - 1) % stride
-            if not scalar_turn and not arrays:
                 continue
             message = codec.decode(data)
             seconds = (time - origin) / NS
@@ -181,7 +174,7 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, expecte
                 target = out[text]
                 if isinstance(target, _ImageBuilder):
                     target.add(seconds, path.read(message))
-                elif scalar_turn:
+                else:
                     values = path.read(message)
                     finite = values[np.isfinite(values)]
                     target[0].append(seconds)
@@ -289,15 +282,13 @@ def collect(result: RunResult) -> tuple[list[FieldPlot], list[MediaPlot]]:
         return plots, media
     origin = result.stats.origin
     duration = ((result.stats.last_time or origin) - origin) / NS
-    counts = result.stats.per_topic_out
     by_topic: dict[tuple[str, str], list[FieldPlot]] = {}
     for plot in plots:
         by_topic.setdefault((plot.input_topic, plot.output_topic), []).append(plot)
     for (input_topic, output_topic), group in by_topic.items():
         fields = [p.field for p in group]
-        expected = counts.get(output_topic, 0)
-        before = _read(list(result.inputs), input_topic, fields, origin, expected, duration)
-        after = _read([result.output], output_topic, fields, origin, expected, duration)
+        before = _read(list(result.inputs), input_topic, fields, origin, duration)
+        after = _read([result.output], output_topic, fields, origin, duration)
         axis = _scan_axis(list(result.inputs), input_topic)
         for plot in group:
             for side, data in (('before', before.get(plot.field)), ('after', after.get(plot.field))):

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bagfault.report.page import Page, envelope, shade
+from bagfault.report.page import LEGEND, Page, envelope, shade, title
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -50,13 +50,16 @@ def _timeline(page: Page, report: dict[str, Any], rates: RateTracker | None) -> 
                          'y': ['assertions'] * len(decided), 'text': [a['id'] for a in decided],
                          'marker': {'symbol': 'diamond', 'size': 11, 'color': color}, 'name': f'{state}',
                          'hovertemplate': '%{text} ' + state + ' at %{x:.3f} s<extra></extra>'})
+    markers = [('/fault_injection/events', [e['t_s'] for e in report['fault_events']]),
+               ('/fault_manager/events', [e['t_s'] for e in report.get('fault_manager', {}).get('events', [])])]
     if rates is not None:
-        for topic in sorted(rates.times):
-            if rates.is_event_topic(topic):
-                times = rates.seconds(topic)
-                data.append({'type': 'scatter', 'mode': 'markers', 'x': times, 'y': [topic] * times.size,
-                             'marker': {'symbol': 'line-ns-open', 'size': 12}, 'name': topic, 'showlegend': False,
-                             'hovertemplate': f'{topic} at %{{x:.3f}} s<extra></extra>'})
+        markers += [(topic, rates.seconds(topic).tolist()) for topic in sorted(rates.times)
+                    if rates.is_event_topic(topic)]
+    for topic, times in markers:
+        if times:
+            data.append({'type': 'scatter', 'mode': 'markers', 'x': times, 'y': [topic] * len(times),
+                         'marker': {'symbol': 'line-ns-open', 'size': 12}, 'name': topic, 'showlegend': False,
+                         'hovertemplate': f'{topic} at %{{x:.3f}} s<extra></extra>'})
     if not data:
         page.html('<p>No fault changed state and no assertion was decided.</p>')
         return
@@ -64,7 +67,7 @@ def _timeline(page: Page, report: dict[str, Any], rates: RateTracker | None) -> 
     page.figure(data, {'height': 90 + 28 * rows, 'xaxis': {'title': {'text': 'bag time (s)'},
                                                             'range': [0, _duration(report)]},
                        'yaxis': {'type': 'category', 'automargin': True}, 'showlegend': True,
-                       'legend': {'orientation': 'h', 'y': 1.15}},
+                       'legend': LEGEND},
                 timed=True, name='timeline')
 
 
@@ -113,7 +116,7 @@ def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) 
         page.figure(data, {'height': 110 + 34 * len(codes), 'xaxis': {'title': {'text': 'bag time (s)'},
                                                                        'range': [0, end]},
                            'yaxis': {'type': 'category', 'automargin': True},
-                           'legend': {'orientation': 'h', 'y': 1.2}}, timed=True, name='fault_manager_states')
+                           'legend': LEGEND}, timed=True, name='fault_manager_states')
     counts: dict[str, dict[str, int]] = {}
     for event in summary['events']:
         counts.setdefault(event['fault_code'], {}).setdefault(event['event_type'], 0)
@@ -136,7 +139,7 @@ def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) 
               f'{rows}</table>{snapshots}')
 
 
-def _heatmap(image: ArrayImage, title: str, axis: str, windows: list[tuple[float, float, str]],
+def _heatmap(image: ArrayImage, text: str, axis: str, windows: list[tuple[float, float, str]],
              scale: tuple[float, float]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """An array field as element x time, inf cells magenta and nan cells black on top."""
     data: list[dict[str, Any]] = [
@@ -148,9 +151,9 @@ def _heatmap(image: ArrayImage, title: str, axis: str, windows: list[tuple[float
                      'z': np.where(mask, 1.0, np.nan), 'zmin': 0, 'zmax': 1, 'showscale': False,
                      'colorscale': [[0, color], [1, color]],
                      'hovertemplate': f't %{{x:.2f}} s, %{{y:.1f}}: {label}<extra></extra>'})
-    layout = {'title': {'text': title, 'font': {'size': 13}}, 'height': 300,
+    layout = {'title': title(text), 'height': 300,
               'xaxis': {'title': {'text': 'bag time (s)'}}, 'yaxis': {'title': {'text': axis}},
-              'shapes': shade(windows)}
+              'shapes': shade(windows, outline=True), 'margin': {'t': 48}}
     return data, layout
 
 
@@ -160,7 +163,7 @@ def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> N
         return
     for plot in plots:
         windows = _windows(report, set(plot.faults))
-        title = f'{plot.field} on {plot.output_topic} ({", ".join(plot.faults)})'
+        heading = f'{plot.field} on {plot.output_topic} ({", ".join(plot.faults)})'
         if plot.before_image is not None or plot.after_image is not None:
             images = [i for i in (plot.before_image, plot.after_image) if i is not None and i.values.size]
             finite = [i.values[np.isfinite(i.values)] for i in images]
@@ -169,35 +172,59 @@ def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> N
             for side, image, topic in (('before', plot.before_image, plot.input_topic),
                                        ('after', plot.after_image, plot.output_topic)):
                 if image is not None:
-                    page.figure(*_heatmap(image, f'{title}: {side} ({topic}); inf magenta, nan black',
+                    page.figure(*_heatmap(image, f'{heading}: {side} ({topic}); inf magenta, nan black',
                                           plot.element_axis, windows, scale), timed=True,
                                 name=f'image:{side}:{plot.output_topic}:{plot.field}')
             continue
         bx, by = (np.asarray(v, dtype=float) for v in plot.before)
         ax, ay = (np.asarray(v, dtype=float) for v in plot.after)
-        data = [{'type': 'scatter', 'mode': 'lines', 'x': bx, 'y': by, 'name': f'before: {plot.input_topic}'},
-                {'type': 'scatter', 'mode': 'lines', 'x': ax, 'y': ay, 'name': f'after: {plot.output_topic}'}]
-        difference = ay - np.interp(ax, bx, by) if bx.size and ax.size else np.zeros(0)
-        data.append({'type': 'scatter', 'mode': 'lines', 'x': ax[: difference.size], 'y': difference,
-                     'name': 'after - before', 'xaxis': 'x', 'yaxis': 'y2', 'line': {'color': '#7f7f7f'}})
-        page.figure(data, {'title': {'text': title, 'font': {'size': 13}}, 'height': 380,
+        difference = ay - _aligned(bx, by, ax) if bx.size and ax.size else np.zeros(0)
+        data = [{'type': 'scatter', 'mode': 'lines', 'name': name, **xy, **extra}
+                for name, xy, extra in (
+                    (f'before: {plot.input_topic}', _xy(bx, by), {}),
+                    (f'after: {plot.output_topic}', _xy(ax, ay), {}),
+                    ('after - before', _xy(ax[: difference.size], difference),
+                     {'xaxis': 'x', 'yaxis': 'y2', 'line': {'color': '#7f7f7f'}}))]
+        page.figure(data, {'title': title(heading), 'height': 380, 'margin': {'t': 56},
                            'xaxis': {'title': {'text': 'bag time (s)'}, 'anchor': 'y2'},
                            'yaxis': {'domain': [0.38, 1], 'title': {'text': plot.field}},
                            'yaxis2': {'domain': [0, 0.28], 'title': {'text': 'after - before'}},
-                           'shapes': shade(windows), 'legend': {'orientation': 'h', 'y': 1.12}},
+                           'shapes': shade(windows), 'legend': LEGEND},
                     timed=True, name=f'field:{plot.output_topic}:{plot.field}')
+
+
+def _xy(x: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
+    """A series decimated to min/max envelopes, as trace keys."""
+    ex, ey = envelope(x, y)
+    return {'x': ex, 'y': ey}
+
+
+def _aligned(bx: np.ndarray, by: np.ndarray, ax: np.ndarray) -> np.ndarray:
+    """The before value of each after message: the k-th before message with the same time for the k-th after
+    message at that time (bags repeat receive times), else interpolated (a delayed message)."""
+    same: dict[tuple[float, int], float] = {}
+    seen: dict[float, int] = {}
+    for t, v in zip(bx.tolist(), by.tolist(), strict=True):
+        seen[t] = seen.get(t, -1) + 1
+        same[(t, seen[t])] = v
+    seen.clear()
+    out = np.asarray(np.interp(ax, bx, by), dtype=float)
+    for number, t in enumerate(ax.tolist()):
+        seen[t] = seen.get(t, -1) + 1
+        out[number] = same.get((t, seen[t]), out[number])
+    return out
 
 
 def _media(page: Page, report: dict[str, Any], media: Sequence[MediaPlot]) -> None:
     for item in media:
         windows = _windows(report, set(item.faults))
-        title = f'{item.output_topic} at the fault start ({item.start_s:.3f} s, {", ".join(item.faults)})'
+        heading = f'{item.output_topic} at the fault start ({item.start_s:.3f} s, {", ".join(item.faults)})'
         if item.msgtype.endswith('PointCloud2'):
             page.figure([{'type': 'scatter', 'mode': 'lines', 'x': item.counts_before[0],
                           'y': item.counts_before[1], 'name': f'before: {item.input_topic}'},
                          {'type': 'scatter', 'mode': 'lines', 'x': item.counts_after[0], 'y': item.counts_after[1],
                           'name': f'after: {item.output_topic}'}],
-                        {'title': {'text': f'{item.output_topic} points per cloud', 'font': {'size': 13}},
+                        {'title': title(f'{item.output_topic} points per cloud'), 'legend': LEGEND,
                          'height': 260, 'xaxis': {'title': {'text': 'bag time (s)'}},
                          'yaxis': {'title': {'text': 'points'}}, 'shapes': shade(windows)},
                         timed=True, name=f'cloud_counts:{item.output_topic}')
@@ -207,7 +234,7 @@ def _media(page: Page, report: dict[str, Any], media: Sequence[MediaPlot]) -> No
                     suffix = '' if number == 0 else '2'
                     data.append({'type': 'scattergl', 'mode': 'markers', 'x': snap[0], 'y': snap[1], 'name': side,
                                  'marker': {'size': 2}, 'xaxis': f'x{suffix}', 'yaxis': f'y{suffix}'})
-            page.figure(data, {'title': {'text': f"bird's-eye view of {title}", 'font': {'size': 13}},
+            page.figure(data, {'title': title(f"bird's-eye view of {heading}"),
                                'height': 380, 'grid': {'rows': 1, 'columns': 2, 'pattern': 'independent'},
                                'yaxis': {'scaleanchor': 'x'}, 'yaxis2': {'scaleanchor': 'x2'}},
                         name=f'cloud_birdseye:{item.output_topic}')
@@ -219,7 +246,7 @@ def _media(page: Page, report: dict[str, Any], media: Sequence[MediaPlot]) -> No
                     data.append({'type': 'image', 'z': snap, 'name': side, 'xaxis': f'x{suffix}',
                                  'yaxis': f'y{suffix}'})
             if data:
-                page.figure(data, {'title': {'text': f'{title}: before | after', 'font': {'size': 13}},
+                page.figure(data, {'title': title(f'{heading}: before | after'),
                                    'height': 300, 'grid': {'rows': 1, 'columns': 2, 'pattern': 'independent'}},
                             name=f'thumbnails:{item.output_topic}')
 
@@ -296,8 +323,8 @@ def render(
     topics = sorted(report['messages']['per_topic_written'])
     page.section('Topic rates')
     _rates(page, report, rates, topics)
-    for title, body in extra_sections:
-        page.section(title)
+    for heading, body in extra_sections:
+        page.section(heading)
         page.html(body)
     page.section('Messages written')
     page.html('<table><tr><th>topic</th><th>messages</th></tr>' + ''.join(

@@ -129,11 +129,21 @@ class Page:
                 + '\n'.join(self.parts) + '\n</body></html>\n')
 
 
-def shade(windows: list[tuple[float, float, str]]) -> list[dict[str, Any]]:
-    """Layout shapes shading fault windows over the whole plot height."""
+def shade(windows: list[tuple[float, float, str]], *, outline: bool = False) -> list[dict[str, Any]]:
+    """Layout shapes marking fault windows over the whole plot height: shaded below the data, or outlined
+    above it (over an image, where a shade would be hidden)."""
+    look = ({'fillcolor': 'rgba(0,0,0,0)', 'line': {'width': 2, 'dash': 'dash', 'color': '#d62728'}, 'layer': 'above'}
+            if outline else {'fillcolor': SHADE, 'line': {'width': 0}, 'layer': 'below'})
     return [{'type': 'rect', 'xref': 'x', 'yref': 'paper', 'x0': start, 'x1': end, 'y0': 0, 'y1': 1,
-             'fillcolor': SHADE, 'line': {'width': 0}, 'layer': 'below', 'name': fault}
-            for start, end, fault in windows]
+             'name': fault, **look} for start, end, fault in windows]
+
+
+def title(text: str) -> dict[str, Any]:
+    """A figure title at the top left (legends go top right)."""
+    return {'text': text, 'font': {'size': 13}, 'x': 0.01, 'xanchor': 'left'}
+
+
+LEGEND = {'orientation': 'h', 'x': 1, 'xanchor': 'right', 'y': 1.0, 'yanchor': 'bottom'}
 
 
 def envelope(x: np.ndarray, y: np.ndarray, buckets: int = 800) -> tuple[np.ndarray, np.ndarray]:

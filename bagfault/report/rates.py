@@ -2,8 +2,8 @@
 
 A rate over fixed bins draws a 2 Hz topic as a comb between 0 and 10 Hz.
 Here each topic gets a window matched to its nominal rate: k messages
-spanning about one second (k = 1 for topics under 1 Hz), and the rate at a
-message is k divided by the time the last k intervals took. Gaps (an
+spanning about two seconds (k = 1 for topics under 0.5 Hz), and the rate at
+a message is k divided by the time the last k intervals took. Gaps (an
 interval over three nominal periods) are listed so plots can mark them.
 """
 
@@ -60,8 +60,14 @@ class RateTracker:
         return np.sort((raw - self.origin) / NS)
 
     def is_event_topic(self, topic: str) -> bool:
-        """bagfault's event channels and topics with a handful of messages: markers, not rates."""
-        return topic.startswith(EVENT_TOPIC_PREFIXES) or len(self.times.get(topic, ())) < FEW
+        """bagfault's event channels, topics with a handful of messages and bursts (all messages within a
+        quarter of the bag, as /rosout at start-up): markers, not rates."""
+        times = self.times.get(topic, ())
+        if topic.startswith(EVENT_TOPIC_PREFIXES) or len(times) < FEW:
+            return True
+        ends = [(min(t), max(t)) for t in self.times.values() if t]
+        whole = max(e for _, e in ends) - min(s for s, _ in ends)
+        return max(times) - min(times) < 0.25 * whole
 
     def series(self, topic: str) -> RateSeries:
         """The topic's rate at each message over a window matched to its nominal rate."""
@@ -69,14 +75,14 @@ class RateTracker:
 
 
 def rate_series(times: np.ndarray) -> RateSeries:
-    """Rate at each message from the k previous intervals, k spanning about one second."""
+    """Rate at each message from the k previous intervals, k spanning about two seconds."""
     if times.size < 2:
         return RateSeries(times, np.full(times.size, np.nan), 0.0, 1, [])
     intervals = np.diff(times)
     positive = intervals[intervals > 0]
     period = float(np.median(positive)) if positive.size else 0.0
     nominal = 1.0 / period if period > 0 else 0.0
-    window = max(1, min(round(nominal), times.size - 1))
+    window = max(1, min(round(2 * nominal), times.size - 1))
     rates = np.full(times.size, np.nan)
     spans = times[window:] - times[:-window]
     with np.errstate(divide='ignore'):
