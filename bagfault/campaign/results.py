@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import CampaignError
 from bagfault.io.outputs import write_atomic
+from bagfault.report.page import LEGEND, Page, title
 
 if TYPE_CHECKING:
     from bagfault.campaign.plan import Job, Plan
@@ -137,9 +138,7 @@ def _csv(value: Any) -> str:
 # -- report.html --------------------------------------------------------------------------------------
 
 STYLE = """
-body{font-family:system-ui,sans-serif;margin:2em;color:#222}h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em}
-table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right}
-th{background:#f4f4f4}td.l,th.l{text-align:left}.muted{color:#777}code{background:#f4f4f4;padding:0 .2em}
+td.l,th.l{text-align:left} td,th{text-align:right} th{background:#f4f4f4} table{width:auto;margin:.5em 0}
 """
 
 
@@ -165,14 +164,13 @@ def _order(values: list[Any]) -> list[Any]:
 
 
 def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine: str) -> str:
-    """A one-file HTML page: pass rates per parameter value, a heatmap of two parameters, breaking points,
-    failed jobs with links to their kept outputs."""
+    """A one-file HTML page: pass rates per parameter value (table and plot), a heatmap of two parameters,
+    breaking points with the search's jobs, failed jobs with links to their kept outputs."""
     c = plan.campaign
     rows = table.sweep_rows()
     counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}
-    parts = [f'<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(c.name)}: bagfault campaign'
-             f'</title><style>{STYLE}</style></head><body>',
-             f'<h1>Campaign {html.escape(c.name)}</h1>',
+    page = Page(f'{c.name}: bagfault campaign')
+    parts = [f'<style>{STYLE}</style><h1>Campaign {html.escape(c.name)}</h1>',
              f'<p>scenario <code>{html.escape(str(c.scenario))}</code>, mode <code>{c.mode}</code>, '
              f'{len(plan.bags)} bag(s), {len(rows)} sweep job(s): <b>{counts["passed"]} passed</b>, '
              f'{counts["failed"]} failed, {counts["error"]} error; ran on {html.escape(engine)}.</p>']
@@ -192,6 +190,8 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
                 cells.append(_rate_cell(sum(r[a] == 'passed' for r in decided), len(decided)))
             parts.append(f'<tr><td class="l">{_label(value)}</td>{"".join(cells)}</tr>')
         parts.append('</table>')
+        _flush(page, parts)
+        _pass_rate_figure(page, parameter, values, rows, table.assertions)
     swept = list(c.sweep)
     if len(swept) >= 2:
         first, second = swept[0], swept[1]
@@ -206,6 +206,14 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
                 cells.append(_rate_cell(sum(r['status'] == 'passed' for r in group), len(group)))
             parts.append(f'<tr><td class="l">{_label(y)}</td>{"".join(cells)}</tr>')
         parts.append('</table>')
+        _flush(page, parts)
+        rates = [[_rate([r for r in rows if r[first] == y and r[second] == x]) for x in xs] for y in ys]
+        page.figure([{'type': 'heatmap', 'x': [_label(x) for x in xs], 'y': [_label(y) for y in ys], 'z': rates,
+                      'zmin': 0, 'zmax': 100, 'colorscale': 'RdYlGn', 'colorbar': {'title': {'text': '% passed'}},
+                      'hovertemplate': f'{second} %{{x}}, {first} %{{y}}: %{{z:.0f}}% passed<extra></extra>'}],
+                    {'title': title(f'jobs passed: {first} against {second}'), 'height': 320,
+                     'xaxis': {'type': 'category', 'title': {'text': second}},
+                     'yaxis': {'type': 'category', 'title': {'text': first}}}, name=f'heatmap:{first}:{second}')
     if points:
         assert c.search is not None
         parts.append(f'<h2>Breaking point of <code>{html.escape(c.search.parameter)}</code> '
@@ -218,6 +226,8 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
                          f'<td>{"-" if p.below is None else _label(p.below)}</td><td>{p.jobs}</td>'
                          f'<td class="l">{html.escape(p.note)}</td></tr>')
         parts.append('</table>')
+        _flush(page, parts)
+        _search_figure(page, c.search.parameter, [r for r in table.rows if r['kind'] == 'search'], points, plan)
     bad = [r for r in rows if r['status'] != 'passed']
     if bad:
         parts.append('<h2>Jobs that did not pass</h2><table><tr><th>job</th><th class="l">bag</th>'
@@ -232,6 +242,50 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
                          f'<td class="l" style="min-width:28em">{html.escape(r["message"] or "")}</td>'
                          f'<td class="l">{link}</td></tr>')
         parts.append('</table>')
-    parts.append('</body></html>\n')
-    return '\n'.join(parts)
+    _flush(page, parts)
+    return page.render()
+
+
+def _flush(page: Page, parts: list[str]) -> None:
+    """Move the HTML written so far onto the page (figures go between tables)."""
+    page.html('\n'.join(parts))
+    parts.clear()
+
+
+def _rate(group: list[dict[str, Any]], column: str = 'status') -> float | None:
+    decided = [r for r in group if r[column] is not None]
+    return 100.0 * sum(r[column] == 'passed' for r in decided) / len(decided) if decided else None
+
+
+def _pass_rate_figure(page: Page, parameter: str, values: list[Any], rows: list[dict[str, Any]],
+                      assertions: list[str]) -> None:
+    """Share of passed jobs (and of each assertion) at each value of one swept parameter."""
+    numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+    x = values if numeric else [_label(v) for v in values]
+    data = [{'type': 'scatter', 'mode': 'lines+markers', 'x': x, 'name': name,
+             'y': [_rate([r for r in rows if r[parameter] == v], column) for v in values]}
+            for name, column in (('job passed', 'status'), *((a, a) for a in assertions))]
+    page.figure(data, {'title': title(f'pass rate against {parameter}'), 'height': 320, 'legend': LEGEND,
+                       'xaxis': {'title': {'text': parameter}, **({} if numeric else {'type': 'category'})},
+                       'yaxis': {'title': {'text': '% passed'}, 'range': [-5, 105]}}, name=f'pass_rate:{parameter}')
+
+
+def _search_figure(page: Page, parameter: str, search: list[dict[str, Any]], points: list[BreakingPoint],
+                   plan: Plan) -> None:
+    """Every search job at its parameter value, passed or not, and each bag's breaking point."""
+    data = []
+    for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828'), ('error', '#616161')):
+        chosen = [r for r in search if r['status'] == state]
+        if chosen:
+            data.append({'type': 'scatter', 'mode': 'markers', 'x': [r[parameter] for r in chosen],
+                         'y': [r['bag'] for r in chosen], 'name': state,
+                         'marker': {'size': 10, 'color': color}, 'text': [f'job {r["job"]}' for r in chosen]})
+    found = [p for p in points if p.value is not None]
+    if found:
+        data.append({'type': 'scatter', 'mode': 'markers', 'x': [p.value for p in found], 'name': 'breaking point',
+                     'y': [bag_name(plan, p.bag) for p in found],
+                     'marker': {'symbol': 'line-ns-open', 'size': 26, 'line': {'width': 3}, 'color': '#000'}})
+    page.figure(data, {'title': title(f'search of {parameter}'), 'height': 160 + 40 * len(points),
+                       'legend': LEGEND, 'xaxis': {'title': {'text': parameter}},
+                       'yaxis': {'type': 'category', 'automargin': True}}, name=f'search:{parameter}')
 

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.latency.compute import by_fault, statistics
 from bagfault.latency.measure import LatencyReport
-from bagfault.report import svg
+from bagfault.report.page import Page, envelope, shade, title
 
 if TYPE_CHECKING:
     from bagfault.latency.architecture import Architecture
@@ -45,23 +45,28 @@ def render_text(report: LatencyReport) -> str:
 
 
 def render_html(report: LatencyReport) -> str:
-    """Time series with fault windows shaded, and a histogram, per path."""
-    shaded = [((s - report.origin) / NS, ((e if e is not None else s) - report.origin) / NS, fault)
-              for fault, spans in report.windows.items() for s, e in spans]
-    parts = []
+    """Per path: latency samples over bag time with fault windows shaded (linked zoom) and a histogram."""
+    windows = [((s - report.origin) / NS, ((e if e is not None else s) - report.origin) / NS, fault)
+               for fault, spans in report.windows.items() for s, e in spans]
+    page = Page('bagfault latency')
+    page.html(f'<h1>Path latency</h1><p>{escape(str(report.architecture.source))} on '
+              f'{escape(", ".join(report.inputs))}</p>')
     for result in report.results:
-        xs = [(t - report.origin) / NS for t in result.sample_times.tolist()]
-        parts.append(f'<h2>{escape(result.name)}: {escape(" -> ".join(result.topics))}</h2>')
-        parts.append(svg.line_chart([('latency', xs, result.latency_ms.tolist())], title=f'{result.name} latency',
-                                    ylabel='ms', shaded=shaded))
-        parts.append(svg.histogram(result.latency_ms.tolist(), title=f'{result.name} latency histogram',
-                                   xlabel='latency (ms)'))
-        parts.append('<pre>' + escape(render_text(LatencyReport(report.architecture, report.inputs, report.origin,
-                                                                [result], report.windows))) + '</pre>')
-    return ('<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>bagfault latency</title>'
-            '<style>body{font-family:system-ui,sans-serif;margin:24px;max-width:820px}</style></head><body>'
-            f'<h1>Path latency</h1><p>{escape(str(report.architecture.source))} on '
-            f'{escape(", ".join(report.inputs))}</p>{"".join(parts)}</body></html>\n')
+        page.section(f'{result.name}: {" -> ".join(result.topics)}')
+        seconds = (result.sample_times - report.origin) / NS
+        x, y = envelope(seconds, result.latency_ms)
+        page.figure([{'type': 'scatter', 'mode': 'lines+markers', 'x': x, 'y': y, 'name': 'latency',
+                      'marker': {'size': 3}, 'hovertemplate': '%{y:.3f} ms at %{x:.3f} s<extra></extra>'}],
+                    {'title': title(f'{result.name} latency per sample'), 'height': 320,
+                     'xaxis': {'title': {'text': 'bag time (s)'}}, 'yaxis': {'title': {'text': 'ms'}},
+                     'shapes': shade(windows)}, timed=True, name=f'latency:{result.name}')
+        page.figure([{'type': 'histogram', 'x': result.latency_ms, 'name': 'samples', 'nbinsx': 50}],
+                    {'title': title(f'{result.name} latency histogram'), 'height': 280,
+                     'xaxis': {'title': {'text': 'latency (ms)'}}, 'yaxis': {'title': {'text': 'samples'}}},
+                    name=f'histogram:{result.name}')
+        page.html('<pre>' + escape(render_text(LatencyReport(report.architecture, report.inputs, report.origin,
+                                                             [result], report.windows))) + '</pre>')
+    return page.render()
 
 
 def render_validation(architecture: Architecture) -> str:

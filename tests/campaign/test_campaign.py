@@ -18,6 +18,7 @@ from typing import Any
 
 import pytest
 from corpus import SCENARIO, campaign_file, write_imu_bag
+from html_check import figures, rendered
 
 from bagfault import api
 from bagfault.cli import main
@@ -75,6 +76,15 @@ def test_twelve_rows_match_twelve_separate_runs(sweep: Path, tmp_path: Path) -> 
         result = api.run(scenario, [sweep / row['bag']], tmp_path / f'{row["job"]}.mcap', seed=row['seed'])
         (by_hand,) = result.assertions
         assert (by_hand.state, by_hand.value) == (row['drift_detected'], row['drift_detected.value'])
+
+
+def test_the_report_plots_the_pass_rate_known_from_the_thresholds(sweep: Path, tmp_path: Path) -> None:
+    """detected iff base z + bias > 0.1: bias 0.05 passes on no bag, 0.09 on a (0.02 + 0.09) only, 0.2 on both."""
+    drawn = figures(sweep / 'one' / 'report.html')
+    passed = next(t for t in drawn[f'pass_rate:{BIAS}']['data'] if t['name'] == 'job passed')
+    assert (passed['x'], passed['y']) == ([0.05, 0.09, 0.2], [0.0, 50.0, 100.0])
+    body = rendered(sweep / 'one' / 'report.html', tmp_path / 'profile')
+    assert body['errors'] == '0' and int(body['figures']) == len(drawn)
 
 
 def test_a_job_writes_what_bagfault_run_writes_by_hand(sweep: Path, tmp_path: Path) -> None:
@@ -158,6 +168,9 @@ def test_search_finds_the_breaking_point_known_from_the_thresholds(corpus: Path)
     assert not list((corpus / 'out' / 'outputs').iterdir())  # keep: none
     html = (corpus / 'out' / 'report.html').read_text()
     assert 'Breaking point of' in html and f'{point.value:g}' in html
+    drawn = {t['name']: t for t in figures(corpus / 'out' / 'report.html')[f'search:{BIAS}']['data']}
+    assert sorted(drawn['passed']['x'] + drawn['failed']['x']) == sorted(r[BIAS] for r in search)
+    assert all(0.02 + x > 0.1 for x in drawn['passed']['x']) and drawn['breaking point']['x'] == [point.value]
 
 
 def test_a_corrupt_bag_is_an_error_row_and_the_others_complete(corpus: Path) -> None:

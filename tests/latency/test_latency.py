@@ -10,6 +10,7 @@ import textwrap
 import numpy as np
 import pytest
 from helpers import CARET, FIXTURES, NS, SHARED, need
+from html_check import figures
 
 from bagfault import api
 from bagfault.cli import main
@@ -193,8 +194,10 @@ def test_fixed_delays_give_60_ms_for_every_sample(caret_file, target_bag, tmp_pa
     assert re.search(r'latency\s+200\s+60\.000\s+60\.000\s+60\.000\s+60\.000\s+60\.000\s+60\.000', out)
     data = json.loads((tmp_path / 'l.json').read_text())
     assert data['paths'][0]['latency_ms']['p95'] == pytest.approx(60.0)
-    html = (tmp_path / 'l.html').read_text()
-    assert html.count('data-kind="line"') == 1 and html.count('data-kind="histogram"') == 1
+    drawn = figures(tmp_path / 'l.html')
+    assert set(drawn) == {'latency:target', 'histogram:target'}
+    assert np.allclose(drawn['latency:target']['data'][0]['y'], 60.0, atol=1.0)
+    assert len(drawn['histogram:target']['data'][0]['x']) == 200
 
 
 def test_random_delays_match_the_generators_truth(caret_file, tmp_path):

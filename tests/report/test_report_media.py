@@ -35,7 +35,7 @@ def test_cloud_and_image_at_the_fault_start(tmp_path):
     outside = [n for t, n in zip(after['x'], after['y'], strict=True) if t < 2.0 or t >= 4.0]
     assert len(inside) == 10 and all(800 < n < 1200 for n in inside) and set(outside) == {2000.0}
     # the first cloud at or after 2.0 s is the one at 2.0 s: its points as the generator makes them
-    view = {t['name']: t for t in drawn["cloud_birdseye:/cloud_out"]['data']}
+    view = {t['name']: t for t in drawn['cloud_birdseye:/cloud_out']['data']}
     points = synthetic.cloud_points(2.0, 2000)
     assert np.allclose(view['before']['x'], points[:, 0].astype(np.float32), atol=1e-6)
     assert np.allclose(view['before']['y'], points[:, 1].astype(np.float32), atol=1e-6)

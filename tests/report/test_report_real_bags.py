@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import FIXTURES, SHARED, need
-from html_check import figures, rendered
+from html_check import click_first_assertion, figures, rendered
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
@@ -113,3 +113,13 @@ def test_scalar_fields_show_after_minus_before(nav2):
     x, y = np.array(difference['x'], dtype=float), np.array(difference['y'], dtype=float)
     assert np.allclose(y[(x > 30.5) & (x < 44.5)], 0.5) and np.allclose(y[x < 29.5], 0.0)
 
+
+
+def test_clicking_an_assertion_zooms_every_time_plot_to_it(turtlebot, tmp_path):
+    """blind_confirmed was decided at 10.5 s; its row zooms all timed figures to 10.5 s +- max(1 s, 5% of the
+    27.8 s bag)."""
+    clicked, ranges = click_first_assertion(turtlebot, tmp_path / 'profile')
+    span = max(1.0, 0.05 * 27.782512332)
+    assert clicked == pytest.approx([10.5 - span, 10.5 + span], abs=1e-3)
+    assert len(ranges) == turtlebot.read_text().count('data-timed="1"') >= 5
+    assert ranges and all(r == pytest.approx(clicked, abs=1e-3) for r in ranges)

@@ -48,3 +48,30 @@ def screenshot(page: Path, target: Path, profile: Path, size: str = '1200,2400')
     subprocess.run([*browser_args(profile), '--virtual-time-budget=20000', '--hide-scrollbars',
                     f'--window-size={size}', f'--screenshot={target}', page.as_uri()],
                    capture_output=True, timeout=180, check=True)
+
+
+CLICK = """<script>
+window.addEventListener('load', function () {
+  setTimeout(function () {
+    var row = document.querySelector('tr[data-zoom]');
+    row.click();
+    setTimeout(function () {
+      var ranges = [];
+      document.querySelectorAll('script[data-timed="1"]').forEach(function (block) {
+        ranges.push(document.getElementById(block.dataset.figure).layout.xaxis.range);
+      });
+      document.body.dataset.clicked = row.dataset.zoom;
+      document.body.dataset.ranges = JSON.stringify(ranges);
+    }, 1000);
+  }, 200);
+});
+</script>"""
+
+
+def click_first_assertion(page: Path, profile: Path) -> tuple[list[float], list[list[float]]]:
+    """Open a copy of the page, click the first assertion row; (its zoom, every timed figure's x range)."""
+    copy = profile.parent / f'clicked-{page.name}'
+    copy.write_text(page.read_text().replace('</body>', CLICK + '</body>'))
+    body = rendered(copy, profile)
+    clicked = [float(v) for v in body['clicked'].split(',')]
+    return clicked, json.loads(body['ranges'].replace('&quot;', '"'))
