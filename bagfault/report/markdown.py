@@ -70,13 +70,21 @@ def fault_manager_section(summary: dict[str, Any]) -> list[str]:
                      f'{fault["occurrence_count"]} | {fault["first_occurred_s"]:.3f} | '
                      f'{fault["last_occurred_s"]:.3f} | '
                      f'{", ".join(fault["reporting_sources"])} |')
-    if summary['events']:
+    changes = [e for e in summary['events'] if e['event_type'] != 'fault_updated']
+    if changes:
         lines += ['', '| t (s) | event | code | status | auto-cleared |', '|---:|---|---|---|---|']
-        shown = summary['events'][:200]
+        shown = changes[:200]
         lines += [f'| {e["t_s"]:.3f} | {e["event_type"]} | {e["fault_code"]} | {e["status"]} | '
                   f'{", ".join(e["auto_cleared_codes"])} |' for e in shown]
-        if len(summary['events']) > len(shown):
-            lines.append(f'| | ... {len(summary["events"]) - len(shown)} more events | | | |')
+        if len(changes) > len(shown):
+            lines.append(f'| | ... {len(changes) - len(shown)} more events | | | |')
+    updates: dict[str, int] = {}
+    for event in summary['events']:
+        if event['event_type'] == 'fault_updated':
+            updates[event['fault_code']] = updates.get(event['fault_code'], 0) + 1
+    if updates:
+        folded = ', '.join(f'{code} {count}' for code, count in sorted(updates.items()))
+        lines += ['', f'fault_updated events (folded): {folded}']
     for cluster in summary['clusters']:
         lines.append(f'- cluster {cluster["cluster_id"]} ({cluster["rule_name"]}): {cluster["count"]} faults, '
                      f'shown as {cluster["representative_code"]}')

@@ -189,3 +189,19 @@ def test_check_without_fault_events_fails_with_exit_1(tmp_path, scenarios, capsy
 
 def test_check_missing_recording_is_exit_2(tmp_path, scenarios, capsys):
     assert main(['check', str(scenarios / 'rover_multi.yaml'), str(tmp_path / 'none.mcap')]) == 2
+
+
+def test_markdown_folds_fault_updated_events_into_counts():
+    """A fault re-reported every 0.1 s for 20 s gives ~200 fault_updated events: counted, not 200 rows."""
+    from bagfault.report.markdown import fault_manager_section
+
+    events = ([{'t_s': 1.0, 'event_type': 'fault_confirmed', 'fault_code': 'A', 'status': 'CONFIRMED',
+                'auto_cleared_codes': []}]
+              + [{'t_s': 1.0 + i / 10, 'event_type': 'fault_updated', 'fault_code': 'A', 'status': 'CONFIRMED',
+                  'auto_cleared_codes': []} for i in range(1, 198)]
+              + [{'t_s': 30.0, 'event_type': 'fault_cleared', 'fault_code': 'A', 'status': 'CLEARED',
+                  'auto_cleared_codes': []}])
+    summary = {'confirmed': [], 'muted_count': 0, 'cluster_count': 0, 'faults': [], 'events': events,
+               'clusters': [], 'muted': [], 'snapshots': []}
+    text = '\n'.join(fault_manager_section(summary))
+    assert text.count('| fault_') == 2 and 'fault_updated events (folded): A 197' in text
