@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from bagfault.events import EVENTS_JSON_TOPIC, event_json
+from bagfault.events import EVENTS_JSON_TOPIC, AssertionEvent, FaultEvent, ScenarioStatus, event_json
 from bagfault.live.ros import has_interface, interface_class
 
 if TYPE_CHECKING:
@@ -37,6 +37,9 @@ class LiveEvents:
         self._json = node.create_publisher(string, EVENTS_JSON_TOPIC, LATCHED)
         self._anchor: dict[str, Any] = {}
         self.published = 0
+        if anchor_topics:  # opened now, so a listener (volatile, as `ros2 topic echo`) is matched before the first
+            for kind in (FaultEvent, AssertionEvent, ScenarioStatus):
+                self._publisher(kind.topic, kind.msgtype)
 
     def attach(self, run: Run) -> None:
         """Publish this run's events (a play --loop attaches each pass)."""
@@ -50,8 +53,13 @@ class LiveEvents:
         self.published += 1
         if not self.anchor_topics or not has_interface(event.msgtype):
             return
-        publisher = self._anchor.get(event.topic)
-        if publisher is None:
-            publisher = self.node.create_publisher(interface_class(event.msgtype), event.topic, LATCHED)
-            self._anchor[event.topic] = publisher
-        publisher.publish(data)
+        publisher = self._publisher(event.topic, event.msgtype)
+        if publisher is not None:
+            publisher.publish(data)
+
+    def _publisher(self, topic: str, msgtype: str) -> Any:
+        """The anchor-typed publisher of a topic, made on first use; None where the type is not installed."""
+        publisher = self._anchor.get(topic)
+        if publisher is None and has_interface(msgtype):
+            publisher = self._anchor[topic] = self.node.create_publisher(interface_class(msgtype), topic, LATCHED)
+        return publisher

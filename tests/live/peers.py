@@ -75,11 +75,15 @@ def echo(args) -> None:
             row[path] = value if isinstance(value, (int, float, str)) else repr(value)
         print(json.dumps(row), flush=True)
 
-    node.create_subscription(interface(args.type), args.topic, received, qos)
+    subscription = node.create_subscription(interface(args.type), args.topic, received, qos)
     print('ready', file=sys.stderr, flush=True)
     end = time.monotonic() + args.seconds
+    matched = False
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
+        if not matched and subscription.get_publisher_count():
+            matched = True
+            print('matched', file=sys.stderr, flush=True)  # a publisher was discovered
 
 
 def clock_check(args) -> None:

@@ -66,6 +66,8 @@ def test_the_proxy_answers_the_anchors_services_and_publishes_its_events(graph, 
     proxy = graph.bagfault('proxy', str(scenario), name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
     assert 'serving the anchor interface (fault_injection/*)' in proxy.err_path.read_text()
+    graph.wait_for(events, 'matched')  # the events are volatile: the listener must be matched before they go out
+    time.sleep(0.5)                    # and the proxy's side of the match may come a moment later
     calls = graph.peer('anchor-calls', 'imu_yaw_rate_bias', name='calls')
     assert calls.wait(timeout=120) == 0, calls.err_path.read_text()
     rows = graph.lines(calls)
