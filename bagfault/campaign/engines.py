@@ -113,10 +113,15 @@ class Running:
         for process in processes:
             process.terminate()
         for process in processes:
-            process.join(TERM_GRACE)
-            if process.is_alive():
-                process.kill()
-                process.join()
+            _reap(process)
+
+
+def _reap(process: BaseProcess) -> None:
+    """Wait TERM_GRACE for a job process to end (after SIGTERM, or its result), then SIGKILL it."""
+    process.join(TERM_GRACE)
+    if process.is_alive():
+        process.kill()
+        process.join()
 
 
 def execute(spec: Spec) -> dict[str, Any]:
@@ -138,10 +143,7 @@ def execute(spec: Spec) -> dict[str, Any]:
             else:
                 timed_out = True
                 process.terminate()
-            process.join(TERM_GRACE)
-            if process.is_alive():
-                process.kill()
-                process.join()
+            _reap(process)
         finally:
             receiver.close()
             with Running.lock:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from bagfault.closedloop.domain import DomainLease
 from bagfault.closedloop.link import SystemLink
 from bagfault.closedloop.process import SystemProcess
-from bagfault.engine.offline import replay
+from bagfault.engine.offline import finish, replay
 from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenance
 from bagfault.engine.result import SystemReport
 from bagfault.errors import ClosedLoopError
@@ -94,12 +94,9 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                         origin = origin_metadata(run.stats.origin)
                         if origin is not None:
                             recording.add_metadata(ORIGIN_RECORD, origin)
-                        try:
-                            recording.finish()
-                        except BaseException:
-                            run.close(ok=False)
-                            raise
-                    run.close(ok=True)
+                        finish(recording, run)
+                    else:
+                        run.close(ok=True)
                 except BaseException:
                     if recording is not None:
                         recording.abort()

@@ -110,20 +110,12 @@ class Pipeline:
         if self.chunks is not None:
             self._process_chunks(self.chunks)
             return
-        batch: list[InputMessage] = []
-        order = size = 0
+        batches = _Batches(self._process)
         for item in self.inputs.messages():
             if self.scheduler is None:
                 self._start(item[1])
-            batch.append(item)
-            size += len(item[3])
-            if len(batch) >= BATCH or size >= BATCH_BYTES:
-                self._process(batch, order)
-                order += len(batch)
-                batch = []
-                size = 0
-        if batch:
-            self._process(batch, order)
+            batches.add(item)
+        batches.flush()
         self._flush_injectors()
         self.run.emit(self._merge.drain())
 
@@ -135,14 +127,10 @@ class Pipeline:
         source = chunks.source
         topic_of = {cid: source.channels[source.channel_number(cid)].topic for cid in chunks.passthrough}
         self.run.stats.chunks = len(chunks.refs)
-        batch: list[InputMessage] = []
-        order = size = 0
+        batches = _Batches(self._process)
         for ref in chunks.refs:
             if chunks.candidate(ref):
-                if batch:
-                    self._process(batch, order)
-                    order += len(batch)
-                    batch, size = [], 0
+                batches.flush()
                 if chunks.quiet(ref, self.scheduler) and not self._merge.holds(set(ref.channel_ids), ref.start,
                                                                                ref.end):
                     chunk = chunks.copy_of(ref)
@@ -153,14 +141,8 @@ class Pipeline:
                         self.progress(self.run.stats.input_messages, ref.end)
                     continue
             for item in source.messages_of(ref, source.records_of(ref, source.read_record(ref))):
-                batch.append(item)
-                size += len(item[3])
-                if len(batch) >= BATCH or size >= BATCH_BYTES:
-                    self._process(batch, order)
-                    order += len(batch)
-                    batch, size = [], 0
-        if batch:
-            self._process(batch, order)
+                batches.add(item)
+        batches.flush()
         self._flush_injectors()
         self.run.emit(self._merge.drain())
 
@@ -316,3 +298,27 @@ class Pipeline:
 
 def _unchanged(data: Data) -> Data:
     return data
+
+
+class _Batches:
+    """Input messages handed on in batches of BATCH messages or BATCH_BYTES, numbered in input order."""
+
+    def __init__(self, process: Callable[[list[InputMessage], int], None]) -> None:
+        self.process = process
+        self.items: list[InputMessage] = []
+        self.size = 0
+        self.order = 0
+
+    def add(self, item: InputMessage) -> None:
+        """One more message; a full batch goes on."""
+        self.items.append(item)
+        self.size += len(item[3])
+        if len(self.items) >= BATCH or self.size >= BATCH_BYTES:
+            self.flush()
+
+    def flush(self) -> None:
+        """Hand on what is pending (before a chunk is judged, and at the end)."""
+        if self.items:
+            self.process(self.items, self.order)
+            self.order += len(self.items)
+            self.items, self.size = [], 0

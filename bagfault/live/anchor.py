@@ -117,17 +117,25 @@ class AnchorServices:
         response.success, response.message = self.proxy.reload_scenario()
         return response
 
-    def _get_fault_schema(self, request: Any, response: Any) -> Any:
+    def _fault_of(self, request: Any, response: Any) -> tuple[Any, Any] | None:
+        """The requested fault and its injector; None with the anchor's answer set for an unknown id."""
         fault = self.scenario.fault(request.fault_id)
         if fault is None:
             response.success, response.message = False, f'unknown fault_id: {request.fault_id}'
-            return response
+            return None
         injector = self.scenario.injector(fault.injector_id)
         assert injector is not None
+        response.injector_id, response.injector_type = injector.id, injector.type
+        return fault, injector
+
+    def _get_fault_schema(self, request: Any, response: Any) -> Any:
+        found = self._fault_of(request, response)
+        if found is None:
+            return response
+        fault, injector = found
         cls = get_injector_type(injector.type)
         fields = sorted(cls.fields if cls is not None else (), key=lambda f: f.key)
         response.success, response.message = True, f'retrieved schema for fault_id: {fault.id}'
-        response.injector_id, response.injector_type = injector.id, injector.type
         response.keys = [f.key for f in fields]
         response.types = [f.type for f in fields]
         response.descriptions = [f.description for f in fields]
@@ -139,14 +147,11 @@ class AnchorServices:
         return response
 
     def _get_fault_config(self, request: Any, response: Any) -> Any:
-        fault = self.scenario.fault(request.fault_id)
-        if fault is None:
-            response.success, response.message = False, f'unknown fault_id: {request.fault_id}'
+        found = self._fault_of(request, response)
+        if found is None:
             return response
-        injector = self.scenario.injector(fault.injector_id)
-        assert injector is not None
+        fault, _ = found
         response.success, response.message = True, f'retrieved config for fault_id: {fault.id}'
-        response.injector_id, response.injector_type = injector.id, injector.type
         keys = sorted(fault.config)
         response.keys = keys
         response.values = [fault.config_text.get(k, _text(fault.config[k])) for k in keys]

@@ -10,6 +10,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from loop import running_with
 
 from bagfault.closedloop.domain import DomainLease
 from bagfault.closedloop.process import SystemProcess, describe_exit, processes
@@ -56,21 +57,6 @@ def test_the_current_domain_is_never_leased(locks: Path, monkeypatch: pytest.Mon
     monkeypatch.setenv('ROS_DOMAIN_ID', '60')
     with DomainLease(60, 61) as lease:
         assert lease.domain == 61
-
-
-def running_with(token: str) -> list[int]:
-    """Processes whose command line holds `token` (found independently of the code under test)."""
-    found = []
-    for entry in Path('/proc').iterdir():
-        if entry.name.isdigit():
-            try:
-                cmdline = (entry / 'cmdline').read_bytes()
-                state = (entry / 'stat').read_text().rsplit(')', 1)[1].split()[0]
-            except OSError:
-                continue
-            if token.encode() in cmdline and state != 'Z':
-                found.append(int(entry.name))
-    return found
 
 
 SLEEP = f"{sys.executable} -c 'import time; time.sleep(300)'"  # a long sleeper that takes extra arguments
