@@ -17,7 +17,7 @@ from bagfault.closedloop.domain import DomainLease
 from bagfault.closedloop.link import SystemLink
 from bagfault.closedloop.process import SystemProcess
 from bagfault.engine.offline import finish, replay
-from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenance
+from bagfault.engine.provenance import provenance, record_origin
 from bagfault.engine.result import SystemReport
 from bagfault.errors import ClosedLoopError
 from bagfault.io.definitions import load_definitions
@@ -91,9 +91,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                         raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '
                                               'nothing judged', tail=process.tail())
                     if recording is not None:
-                        origin = origin_metadata(run.stats.origin)
-                        if origin is not None:
-                            recording.add_metadata(ORIGIN_RECORD, origin)
+                        record_origin(recording, run.stats.origin)
                         finish(recording, run)
                     else:
                         run.close(ok=True)

@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from bagfault.engine.scheduler import Activation
+    from bagfault.io.mcap_sink import McapSink
     from bagfault.scenario.model import Scenario
 
 
@@ -38,7 +39,8 @@ def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activation
 ORIGIN_RECORD = 'bagfault.origin'
 
 
-def origin_metadata(origin: int | None) -> dict[str, str] | None:
-    """The `bagfault.origin` metadata of a live recording: where its bag time zero was, so `check` judges the
-    recording with the zero the live run used (not its first message)."""
-    return {'origin_ns': str(origin)} if origin is not None else None
+def record_origin(recording: McapSink, origin: int | None) -> None:
+    """Add the `bagfault.origin` metadata to a live recording: where its bag time zero was, so `check` judges
+    the recording with the zero the live run used (not its first message)."""
+    if origin is not None:
+        recording.add_metadata(ORIGIN_RECORD, {'origin_ns': str(origin)})

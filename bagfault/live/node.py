@@ -21,7 +21,8 @@ from rclpy.parameter import Parameter
 
 from bagfault import __version__
 from bagfault.engine.control import check_change
-from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata
+from bagfault.engine.offline import finish
+from bagfault.engine.provenance import record_origin
 from bagfault.errors import BagfaultError, LiveError, MalformedMessageError, ReloadError, ScenarioError
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
@@ -344,15 +345,10 @@ class ProxyNode:
                 self._publish(topic, message.data)
             self.session.finish()
             if self.recording is not None:
-                try:
-                    origin = origin_metadata(self.session.run.stats.origin)
-                    if origin is not None:
-                        self.recording.add_metadata(ORIGIN_RECORD, origin)
-                    self.recording.finish()
-                except BaseException:
-                    self.session.run.close(ok=False)
-                    raise
-            self.session.run.close(ok=True)
+                record_origin(self.recording, self.session.run.stats.origin)
+                finish(self.recording, self.session.run)
+            else:
+                self.session.run.close(ok=True)
         elif self.recording is not None:
             self.recording.abort()
         self.node.destroy_node()

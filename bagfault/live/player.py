@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.engine.control import FaultControl
 from bagfault.engine.offline import replay
-from bagfault.engine.provenance import ORIGIN_RECORD, origin_metadata, provenance
+from bagfault.engine.provenance import provenance, record_origin
 from bagfault.engine.result import RunStats
 from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
@@ -107,9 +107,7 @@ def run_play(
                     break
                 sink.restart(first)
             if recording is not None:
-                origin = origin_metadata(total.origin)
-                if origin is not None:
-                    recording.add_metadata(ORIGIN_RECORD, origin)
+                record_origin(recording, total.origin)
                 recording.finish()
         except BaseException:
             if recording is not None:

@@ -71,6 +71,11 @@ def test_a_10_hz_topic_reads_10_hz_outside_faults(turtlebot):
     raw = topic_seconds(TURTLEBOT, '/clock')
     stall = ((raw > 2.0) & (raw <= 7.0)).sum() / 5.0   # messages per second over the stall, from rosbags
     assert stall < 9.0 and np.nanmin(y[(x > 2.0) & (x < 7.0)]) < 9.0
+    intervals = np.diff(raw)
+    long = intervals > 3 * np.median(intervals)   # gaps: intervals over three nominal periods, from rosbags
+    gaps = trace(rates, '/clock gaps')
+    assert gaps['x'] == pytest.approx(raw[:-1][long].tolist(), abs=1e-6)
+    assert gaps['customdata'] == pytest.approx(intervals[long].tolist(), abs=1e-6)
     event_rows = {t['y'][0] for t in figures(turtlebot)['timeline']['data'] if t['y']}
     assert {'/fault_manager/events', '/rosout', '/tf_static'} <= event_rows   # markers, not rates
     assert not any(t.get('name') in ('/rosout', '/tf_static', '/fault_manager/events') for t in rates['data'])
