@@ -42,6 +42,11 @@ def publish_imu(args) -> None:
     publisher = node.create_publisher(interface('sensor_msgs/msg/Imu'), args.topic, qos)
     Imu = interface('sensor_msgs/msg/Imu')
     print('ready', file=sys.stderr, flush=True)
+    if args.wait_subscriber:
+        deadline = time.monotonic() + 30.0
+        while not publisher.get_subscription_count() and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        time.sleep(0.5)  # the subscriber's side of the match may come a moment later
     period = 1.0 / args.rate
     start = time.monotonic()
     k = 0
@@ -289,6 +294,7 @@ def main() -> None:
     p.add_argument('--seconds', type=float, default=5.0)
     p.add_argument('--best-effort', action='store_true')
     p.add_argument('--malformed-every', type=int, default=0)
+    p.add_argument('--wait-subscriber', action='store_true', help='start once a subscriber is matched')
     p = sub.add_parser('echo')
     p.add_argument('topic')
     p.add_argument('type')

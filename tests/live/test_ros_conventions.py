@@ -106,7 +106,7 @@ def test_a_clean_stop_publishes_delayed_messages_and_answers_delayed_calls(graph
     scenario = tmp_path / 'slow.yaml'
     scenario.write_text("""
 injectors:
-  - {id: imu, type: imu, input_topic: /imu_raw, output_topic: /imu}
+  - {id: imu, type: imu, input_topic: /imu_raw, output_topic: /imu, message_type: sensor_msgs/msg/Imu}
   - {id: motors, type: trigger_service, proxy_service: /enable_motors, target_service: /enable_motors_raw}
 faults:
   - {id: late, injector_id: imu, active_on_startup: true, config: {delay_ms: 1500}}
@@ -118,7 +118,9 @@ faults:
     graph.wait_for(echo, 'ready')
     proxy = graph.bagfault('proxy', str(scenario), '--record', str(record), name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
-    publisher = graph.peer('publish-imu', '/imu_raw', '--rate', '100', '--seconds', '2', name='imu')
+    graph.wait_for(echo, 'matched')  # message_type: the proxy's /imu exists before any input; count from here
+    publisher = graph.peer('publish-imu', '/imu_raw', '--rate', '100', '--seconds', '2', '--wait-subscriber',
+                           name='imu')
     caller = graph.peer('trigger-call', '/enable_motors', '--timeout', '15', name='call')
     publisher.wait(timeout=30)
     sent = graph.lines(publisher)[-1]['published']
