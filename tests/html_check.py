@@ -68,10 +68,11 @@ window.addEventListener('load', function () {
 </script>"""
 
 
-def click_first_assertion(page: Path, profile: Path) -> tuple[list[float], list[list[float]]]:
-    """Open a copy of the page, click the first assertion row; (its zoom, every timed figure's x range)."""
+def click_first_assertion(page: Path, profile: Path) -> tuple[list[float], list[list[float]], dict[str, str]]:
+    """Open a copy of the page, click the first assertion row; (its zoom, every timed figure's x range, the body's
+    attributes as `rendered` gives them)."""
     copy = profile.parent / f'clicked-{page.name}'
     copy.write_text(page.read_text().replace('</body>', CLICK + '</body>'))
     body = rendered(copy, profile)
     clicked = [float(v) for v in body['clicked'].split(',')]
-    return clicked, json.loads(body['ranges'].replace('&quot;', '"'))
+    return clicked, json.loads(body['ranges'].replace('&quot;', '"')), body

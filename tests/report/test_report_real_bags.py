@@ -44,9 +44,9 @@ def topic_seconds(bag: Path, topic: str) -> np.ndarray:
                                                                     if c.topic == topic])]) / 1e9
 
 
-@pytest.mark.parametrize('which', ['turtlebot', 'nav2'])
-def test_the_report_opens_in_chromium_with_every_figure_and_no_error(which, request, tmp_path):
-    page = request.getfixturevalue(which)
+def test_the_report_opens_in_chromium_with_every_figure_and_no_error(nav2, tmp_path):
+    """(The TurtleBot page is opened by the click test below.)"""
+    page = nav2
     body = rendered(page, tmp_path / 'profile')
     assert body['errors'] == '0' and int(body['figures']) == len(figures(page))
 
@@ -123,7 +123,8 @@ def test_scalar_fields_show_after_minus_before(nav2):
 def test_clicking_an_assertion_zooms_every_time_plot_to_it(turtlebot, tmp_path):
     """blind_confirmed was decided at 10.5 s; its row zooms all timed figures to 10.5 s +- max(1 s, 5% of the
     27.8 s bag)."""
-    clicked, ranges = click_first_assertion(turtlebot, tmp_path / 'profile')
+    clicked, ranges, body = click_first_assertion(turtlebot, tmp_path / 'profile')
+    assert body['errors'] == '0' and int(body['figures']) == len(figures(turtlebot))
     span = max(1.0, 0.05 * 27.782512332)
     assert clicked == pytest.approx([10.5 - span, 10.5 + span], abs=1e-3)
     assert len(ranges) == turtlebot.read_text().count('data-timed="1"') >= 5
