@@ -125,7 +125,8 @@ class _ImageBuilder:
             return
         self.size = max(self.size, values.size)
         column = min(COLUMNS - 1, max(0, int(seconds / self.duration * COLUMNS)))
-        rows = np.minimum((np.arange(values.size) * ROWS) // max(values.size, 1), ROWS - 1)
+        index = np.arange(values.size)
+        rows = index if values.size <= ROWS else (index * ROWS) // values.size  # longer arrays: ROWS bins
         finite = np.isfinite(values)
         np.minimum.at(self.values[:, column], rows[finite], values[finite])
         self.inf[rows[np.isinf(values)], column] = True

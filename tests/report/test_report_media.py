@@ -43,3 +43,21 @@ def test_cloud_and_image_at_the_fault_start(tmp_path):
     thumbs = {t['name']: np.array(t['z']) for t in drawn['thumbnails:/camera_out']['data']}
     assert np.array_equal(thumbs['before'], synthetic.image_pixels(2.0, 64, 48))
     assert thumbs['after'].shape == (48, 64, 3) and not thumbs['after'].any()
+
+
+def test_array_images_keep_short_arrays_element_by_element_and_bin_long_ones():
+    from bagfault.report.fields import ROWS, _ImageBuilder
+
+    short = _ImageBuilder(10.0)
+    short.add(1.0, np.array([1.0, np.inf, 3.0, np.nan]))
+    image = short.image(0.0, 1.0)
+    assert image.elements.tolist() == [0.0, 1.0, 2.0, 3.0]
+    assert image.values[:, 0].tolist()[::2] == [1.0, 3.0] and np.isnan(image.values[1, 0])
+    assert image.inf[:, 0].tolist() == [False, True, False, False]
+    assert image.nan[:, 0].tolist() == [False, False, False, True]
+    long = _ImageBuilder(10.0)
+    ranges = np.arange(2 * ROWS, dtype=float)         # 720 beams at 0.5 degree from -180
+    long.add(5.0, ranges)
+    image = long.image(-180.0, 0.5)
+    assert image.values.shape == (ROWS, 1) and image.values[:3, 0].tolist() == [0.0, 2.0, 4.0]   # minimum per bin
+    assert image.elements[:3].tolist() == [-180.0, -179.0, -178.0]
