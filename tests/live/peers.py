@@ -98,6 +98,8 @@ def clock_check(args) -> None:
              'last_stamp': None, 'stamp_after_clock': 0, 'first_wall': None, 'span': 0.0, 'first_stamp': None,
              'final_stamp': None, 'clock_count': 0}
 
+    ticked: list[float | None] = [None]  # wall time of the last /clock tick
+
     def on_clock(message) -> None:
         value = message.clock.sec * 1_000_000_000 + message.clock.nanosec
         if state['clock'] is not None and value < state['clock']:
@@ -106,6 +108,7 @@ def clock_check(args) -> None:
             state['clock_first'] = value
         state['clock'] = value
         state['clock_count'] += 1
+        ticked[0] = time.monotonic()
 
     def on_message(message) -> None:
         stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
@@ -128,6 +131,8 @@ def clock_check(args) -> None:
     end = time.monotonic() + args.seconds
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
+        if args.until_quiet and ticked[0] is not None and time.monotonic() - ticked[0] > args.until_quiet:
+            break  # the clock stopped: the player is done
     for key in ('clock', 'last_stamp', 'first_wall'):
         state.pop(key)
     print(json.dumps(state), flush=True)
@@ -305,6 +310,7 @@ def main() -> None:
     p.add_argument('topic')
     p.add_argument('type')
     p.add_argument('--seconds', type=float, default=10.0)
+    p.add_argument('--until-quiet', type=float, default=0.0, help='end once /clock was silent this long')
     p = sub.add_parser('imu-monitor')
     p.add_argument('topic')
     p.add_argument('--limit', type=float, default=0.5)

@@ -203,7 +203,8 @@ def test_play_clock_rate_between_messages(graph, tmp_path: Path) -> None:
     bag = make_bag(tmp_path / 'slow.mcap', [('/sensors/imu_raw', IMU, 2.0)], 3.0)  # 6 messages over 2.5 s
     counts = {}
     for hz in ('10', '100'):
-        checker = graph.peer('clock-check', '/sensors/imu_raw', IMU, '--seconds', '9', name=f'clock{hz}')
+        checker = graph.peer('clock-check', '/sensors/imu_raw', IMU, '--seconds', '30', '--until-quiet', '1.0',
+                             name=f'clock{hz}')
         graph.wait_for(checker, 'ready')
         play = graph.bagfault('play', str(bag), '--clock', hz, '--wait-for', '/sensors/imu_raw', name=f'play{hz}')
         assert play.wait(timeout=60) == 0
