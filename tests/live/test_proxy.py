@@ -81,8 +81,10 @@ assertions:
                            name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
     time.sleep(1.0)  # time zero is the proxy's start; the first message comes later
-    graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '100', '--seconds', '3', name='imu')
-    time.sleep(2.0)
+    publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '100', '--seconds', '1',
+                           '--wait-subscriber', name='imu')
+    publisher.wait(timeout=60)  # 100 messages, however long the publisher took to start
+    time.sleep(0.3)
     assert not record.exists()
     assert graph.stop(proxy, signal.SIGTERM) == 1  # the assertion never saw its event: failed, exit 1
     assert 'FAIL  bias_seen' in proxy.out_path.read_text()
