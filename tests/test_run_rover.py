@@ -6,6 +6,7 @@ import json
 import math
 import shutil
 
+import blake3
 import numpy as np
 import pytest
 from helpers import FIXTURES, NS, counts, decoded, raw_messages, rpy, sha256
@@ -135,7 +136,9 @@ def test_output_file_conventions(multi, scenarios):
         [attachment] = list(reader.iter_attachments())
     assert meta.metadata['seed'] == '3'
     inputs = json.loads(meta.metadata['inputs'])
-    assert inputs[0]['files'][0]['sha256'] == sha256(FIXTURES / 'rover_20s.mcap')
+    rover = FIXTURES / 'rover_20s.mcap'
+    assert inputs[0]['files'][0] == {'name': 'rover_20s.mcap', 'size': rover.stat().st_size,
+                                     'blake3': blake3.blake3(rover.read_bytes()).hexdigest()}
     assert attachment.name == 'rover_multi.yaml'
     assert attachment.data == (scenarios / 'rover_multi.yaml').read_bytes()
     assert any('live mode only' in note for note in result.notes)

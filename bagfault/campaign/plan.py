@@ -62,7 +62,7 @@ class Plan:
         c = self.campaign
         return {
             'campaign': c.name, 'scenario': str(c.scenario), 'mode': c.mode, 'bagfault': __version__,
-            'bags': [{'path': str(b), 'sha256': self.fingerprints[str(b)]} for b in self.bags],
+            'bags': [{'path': str(b), 'digest': self.fingerprints[str(b)]} for b in self.bags],
             'sweep': c.sweep, 'seeds': c.seeds, 'design': c.design, 'samples': c.samples, 'keep': c.keep,
             'search': asdict(c.search) if c.search is not None else None,
             'jobs': [{'index': j.index, 'bag': str(j.bag), 'values': j.values, 'seed': j.seed, 'key': j.key,
@@ -124,7 +124,7 @@ def points(campaign: Campaign) -> list[dict[str, Any]]:
 
 
 def bag_digest(path: Path) -> str:
-    """One digest over the bag's files (names, sizes, sha256)."""
+    """One digest over the bag's files (names, sizes, BLAKE3 digests)."""
     return hashlib.sha256(json.dumps([asdict(f) for f in fingerprint(path)], sort_keys=True).encode()).hexdigest()
 
 

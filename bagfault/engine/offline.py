@@ -161,8 +161,8 @@ def run_to_file(
         chunks = chunk_copy_for(inputs) if chunk_copy and batch else None
         if chunks is not None:
             chunks.reserve(sink)
-        hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-sha256')
-        try:  # the inputs' sha256 on the second core while the run reads them; the record goes at the end
+        hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
+        try:  # the inputs' digests on the second core while the run reads them; the record goes at the end
             origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset)
             sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
             run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,

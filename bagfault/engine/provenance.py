@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activations: Sequence[Activation],
                start_offset: float) -> dict[str, str]:
-    """Tool version, seed, scenario hash, inputs with sizes and sha256, `--activate` and `--start` options."""
+    """Tool version, seed, scenario hash, inputs with sizes and BLAKE3 digests, `--activate` and `--start` options."""
     return {
         'tool': 'bagfault',
         'version': __version__,

