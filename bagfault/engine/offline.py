@@ -168,6 +168,7 @@ def run_to_file(
             run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
                             start_offset=start_offset, batch=batch, progress=progress, observers=observers,
                             blackbox_base=output, chunks=chunks)
+            sink.flush()  # the copied chunks go to the file while the hash completes, not after it
             sink.add_metadata('bagfault', origin.result())
         except BaseException:
             sink.abort()

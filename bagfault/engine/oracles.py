@@ -7,7 +7,6 @@ from typing import TYPE_CHECKING
 from bagfault.assertions.runner import AssertionRunner
 from bagfault.events import AssertionEvent, FaultEvent, ScenarioStatus
 from bagfault.fault_manager.model import FaultManagerEvent
-from bagfault.fault_manager.observer import FaultManagerObserver
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -16,6 +15,7 @@ if TYPE_CHECKING:
     from bagfault.engine.result import RunResult
     from bagfault.engine.run import Observer
     from bagfault.events import Event, EventKind
+    from bagfault.fault_manager.observer import FaultManagerObserver
     from bagfault.io.types import TypeCatalog
     from bagfault.scenario.model import Scenario
 
@@ -31,6 +31,8 @@ class Oracles:
         kinds: list[EventKind] = []
         self.fault_manager: FaultManagerObserver | None = None
         if scenario.fault_manager_config is not None:
+            from bagfault.fault_manager.observer import FaultManagerObserver  # noqa: PLC0415 - only when used
+
             catalog.add_definition(FaultManagerEvent.msgtype, FaultManagerEvent.definition)
             self.fault_manager = FaultManagerObserver(scenario.fault_manager_config, scenario, dict(schemas), catalog,
                                                       emit, blackbox_base, blackbox_numbers)

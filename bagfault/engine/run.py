@@ -138,7 +138,7 @@ class Run:
         """Output channel and codec of an event type, registered on first use."""
         entry = self._events.get(kind.msgtype)
         if entry is None:
-            if self.catalog.codec(kind.msgtype) is None:  # adding a definition rebuilds the store: only once
+            if not self.catalog.defines(kind.msgtype):  # a bag written by bagfault carries the definition
                 self.catalog.add_definition(kind.msgtype, kind.definition)
             codec = self.catalog.codec(kind.msgtype)
             assert codec is not None

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import sys
 from functools import lru_cache
-from importlib.metadata import entry_points
 
 from bagfault.injectors.base import Injector, InjectorType, ServiceInjector
 from bagfault.injectors.field import FieldInjector
@@ -42,10 +41,14 @@ BUILTIN: tuple[InjectorType, ...] = (
     ImageInjector,
 )
 
+_BUILTIN_TYPES: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}
+
 
 @lru_cache(maxsize=1)
 def injector_types() -> dict[str, InjectorType]:
     """All known injector types, built-ins first; a plugin cannot replace a built-in."""
+    from importlib.metadata import entry_points  # noqa: PLC0415 - 70 ms; scenarios of built-ins never need it
+
     types: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}
     for entry in sorted(entry_points(group=GROUP), key=lambda e: e.name):
         if entry.name in types:
@@ -64,5 +67,5 @@ def injector_types() -> dict[str, InjectorType]:
 
 
 def get_injector_type(name: str) -> InjectorType | None:
-    """Injector class for a type name, or None."""
-    return injector_types().get(name)
+    """Injector class for a type name, or None (plugins are looked for only when no built-in has the name)."""
+    return _BUILTIN_TYPES.get(name) or injector_types().get(name)

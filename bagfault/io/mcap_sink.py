@@ -131,6 +131,13 @@ class McapSink:
         if self.flush_every is not None:
             self.tick()
 
+    def flush(self) -> None:
+        """Write every completed chunk, copied ones included (a run does it while the input's hash completes)."""
+        try:
+            self._writer.flush()
+        except OSError as exc:
+            raise self._failed(exc) from None
+
     def tick(self) -> None:
         """Live recordings: when `flush_every` has passed, complete the open chunk and hand it to the kernel, so
         a kill (SIGKILL, the OOM killer) loses at most that much; `bagfault recover` reads the rest."""

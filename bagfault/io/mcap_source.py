@@ -1,7 +1,7 @@
 """MCAP input, read chunk by chunk in log-time order, with every record checked.
 
-The `mcap` library parses the summary and metadata; chunks are read and
-split here so that messages come out as zero-copy slices of one
+The summary is parsed by `mcap_summary` (into the `mcap` library's
+records); chunks are read and split here so that messages come out as zero-copy slices of one
 decompressed buffer, channels found only inside chunks are still known,
 and overlapping chunks are merged by log time.
 
@@ -34,9 +34,12 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel, normalize_msgtype
+from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, parse_summary, read_footer, read_metadata
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
+
+    from mcap.summary import Summary
 
 
 MAGIC = b'\x89MCAP0\r\n'
@@ -169,11 +172,8 @@ class McapSource:
         self._file.seek(-8, io.SEEK_END)
         if self._file.read(8) != MAGIC:
             raise InputError(f'{self.path}: truncated MCAP file (no closing magic; was the recording stopped cleanly?)')
-        self._check_summary_crc()
-        self._file.seek(0)
-        reader = SeekingReader(self._file, validate_crcs=True)
-        summary = reader.get_summary()
-        for record in reader.iter_metadata():
+        summary, metadata = self._read_summary()
+        for record in metadata:
             if record.name == 'rosbag2':
                 self._read_rosbag2_metadata(record.metadata)
             elif record.name == 'bagfault.origin' and record.metadata.get('origin_ns', '').isdigit():
@@ -213,21 +213,25 @@ class McapSource:
         for channel_id in sorted(self._pending_channels):
             self._register(channel_id)
 
-    def _check_summary_crc(self) -> None:
-        """The footer's summary CRC covers the summary section and the footer up to the CRC itself."""
-        footer = self._size - 8 - 29
-        self._file.seek(footer)
-        opcode, _, summary_start, _, crc = struct.unpack('<BQQQI', self._file.read(29))
-        if opcode != 0x02:
-            raise Corrupt(f'no footer record before the closing magic (found type {opcode:#x})')
-        if not crc or not summary_start:
-            return
-        if not 8 < summary_start < footer:
-            raise Corrupt(f'the footer points the summary at offset {summary_start}, outside the file')
-        self._file.seek(summary_start)
-        computed = zlib.crc32(self._file.read(footer + 25 - summary_start))
-        if computed != crc:
-            raise Corrupt(f'summary CRC mismatch (stored {crc:#010x}, computed {computed:#010x})')
+    def _read_summary(self) -> tuple[Summary | None, list[Metadata]]:
+        """The summary section (its CRC checked) and the metadata records its index points at; without a
+        summary, the metadata records found by reading the file through."""
+        try:
+            summary_start, crc = read_footer(self._file, self._size)
+            footer = self._size - 8 - FOOTER_LENGTH
+            if not summary_start:
+                self._file.seek(0)
+                return None, list(SeekingReader(self._file).iter_metadata())
+            if not 8 < summary_start <= footer:
+                raise Corrupt(f'the footer points the summary at offset {summary_start}, outside the file')
+            self._file.seek(summary_start)
+            covered = self._file.read(footer + FOOTER_LENGTH - 4 - summary_start)  # up to the footer's CRC
+            if crc and zlib.crc32(covered) != crc:
+                raise Corrupt(f'summary CRC mismatch (stored {crc:#010x}, computed {zlib.crc32(covered):#010x})')
+            summary = parse_summary(memoryview(covered)[: footer - summary_start])
+            return summary, [read_metadata(self._file, index) for index in summary.metadata_indexes]
+        except SummaryError as exc:
+            raise Corrupt(str(exc)) from None
 
     def _scan_definitions(self) -> None:
         """Schemas and channels from the data section: top-level records, and inside chunks."""

@@ -8,6 +8,7 @@ topics costs nothing for the topics no fault touches.
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
@@ -67,8 +68,6 @@ class TypeCatalog:
 
     def __init__(self, channels: list[Channel], distro: str | None, definitions: Definitions | None = None) -> None:
         self.distro = (distro or DEFAULT_DISTRO).lower()
-        store_name = DISTROS.get(self.distro, DISTROS[DEFAULT_DISTRO])
-        self.standard = get_typestore(store_name)
         self._stored: dict[str, tuple[str, str]] = {}
         for channel in channels:
             if channel.schema_text and channel.msgtype and channel.schema_encoding in {'ros2msg', 'ros2idl'}:
@@ -79,6 +78,15 @@ class TypeCatalog:
         self._store_types: frozenset[str] = frozenset()
         self._codecs: dict[str, Codec | None] = {}
         self._errors: dict[str, str] = {}
+
+    @cached_property
+    def standard(self) -> Typestore:
+        """The distro's standard types (built when a type is not in the bag: building costs 0.2 s)."""
+        return get_typestore(DISTROS.get(self.distro, DISTROS[DEFAULT_DISTRO]))
+
+    def defines(self, msgtype: str) -> bool:
+        """Whether the bag, the user or bagfault gives a definition of this type (the standard store aside)."""
+        return msgtype in self._stored or msgtype in self._user or msgtype in self._extra
 
     def add_definition(self, msgtype: str, text: str, encoding: str = 'ros2msg') -> None:
         """Make a type known that no bag carries (bagfault's own event types)."""
@@ -96,10 +104,11 @@ class TypeCatalog:
                 except (TypesysError, ValueError, IndexError) as exc:
                     where = 'given' if msgtype in self._user else 'stored'
                     self._errors[msgtype] = f'{where} definition does not parse: {one_line(exc)}'
-        missing = [x for x in wanted if x not in types]
+        store = get_typestore(Stores.EMPTY)  # builtin_interfaces only: the standard store is built when needed
+        missing = [x for x in wanted if x not in types and x not in store.fielddefs]
         while missing:
             name = missing.pop()
-            if name in types or name not in self.standard.fielddefs:
+            if name in types or name in store.fielddefs or name not in self.standard.fielddefs:
                 continue
             types[name] = self.standard.fielddefs[name]
             for _, desc in types[name][1]:
@@ -107,9 +116,8 @@ class TypeCatalog:
         for _, fields in list(types.values()):
             for _, desc in fields:
                 for ref in _references(desc):
-                    if ref not in types and ref in self.standard.fielddefs:
+                    if ref not in types and ref not in store.fielddefs and ref in self.standard.fielddefs:
                         types[ref] = self.standard.fielddefs[ref]
-        store = get_typestore(Stores.EMPTY)
         store.register({k: v for k, v in types.items() if k not in store.fielddefs})
         self._store_types = frozenset(wanted)
         return store

@@ -223,3 +223,64 @@ def test_inputs_outside_the_fast_path_take_the_reference_path(bags: dict[str, Pa
     assert main(['run', str(scenario_file), str(bag), '-o', str(tmp_path / 'ref.mcap'), '--no-chunk-copy']) == 0
     assert 'chunks copied' not in capsys.readouterr().out
     assert streams(tmp_path / 'one.mcap') == streams(tmp_path / 'ref.mcap')
+
+
+def test_copied_chunks_handed_over_in_any_span_give_the_same_file(bags: dict[str, Path], tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """Consecutive copied chunks go to the copy thread as one span (at most SPAN_LIMIT bytes): one chunk per
+    span and the whole file in one span write the same bytes, around the window's rewritten chunks too."""
+    from bagfault.io import mcap_writer
+
+    loaded = parse_scenario(IMU_WINDOW)
+    outputs = []
+    for limit in (1, 1 << 40):
+        monkeypatch.setattr(mcap_writer, 'SPAN_LIMIT', limit)
+        out = tmp_path / f'span-{limit}.mcap'
+        result = api.run(loaded, [bags['sensor-heavy']], out, seed=4)
+        assert 0 < result.stats.chunks_copied < result.stats.chunks
+        outputs.append(out.read_bytes())
+    assert outputs[0] == outputs[1]
+    api.run(loaded, [bags['sensor-heavy']], tmp_path / 'reference.mcap', seed=4, chunk_copy=False)
+    assert streams(tmp_path / 'span-1.mcap') == streams(tmp_path / 'reference.mcap')
+
+
+def test_chunk_index_records_are_packed_as_the_library_packs_them() -> None:
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import ChunkIndex
+
+    from bagfault.io.mcap_writer import chunk_index_record
+
+    for offsets, compression in (({}, ''), ({1: 4242, 7: 2**40 + 3}, 'zstd'), ({65535: 2**64 - 1}, 'lz4')):
+        values = {'message_start_time': 2**63 + 5, 'message_end_time': 2**64 - 1, 'chunk_start_offset': 77,
+                  'chunk_length': 123456, 'message_index_offsets': offsets,
+                  'message_index_length': len(offsets) * 31, 'compression': compression, 'compressed_size': 999,
+                  'uncompressed_size': 2**33}
+        builder = RecordBuilder()
+        ChunkIndex(**values).write(builder)
+        assert chunk_index_record(*values.values()) == builder.end()
+
+
+def test_a_copy_that_cannot_be_written_leaves_nothing(bags: dict[str, Path], tmp_path: Path) -> None:
+    """The copy thread meets a file size limit (as a full disk would stop it): exit 2, one line naming the
+    output, no output and no temporary file left."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    bag = bags['sensor-heavy']
+    scenario_file = tmp_path / 's.yaml'
+    scenario_file.write_text(scenario('sensor-heavy', 'a'))
+    out = tmp_path / 'out' / 'run.mcap'
+    out.parent.mkdir()
+    limit = bag.stat().st_size // 2
+
+    def limited() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write fails with EFBIG instead of killing
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'run', str(scenario_file), str(bag), '-o', str(out)],
+                          capture_output=True, text=True, preexec_fn=limited, check=False, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines() == [f'bagfault: error: {out}: cannot write: File too large']
+    assert list(out.parent.iterdir()) == []
