@@ -143,7 +143,7 @@ class McapWriter:
         self._chunk = _OpenChunk()
         self._summary_crc: int | None = None  # running CRC of the summary section, once it starts
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='mcap-compress')
-        self._pending: deque[tuple[_OpenChunk | CopiedChunk, Future[tuple[bytes, int]] | None, int]] = deque()
+        self._pending: deque[tuple[_OpenChunk | CopiedChunk, Future[tuple[bytes, int]] | None, int, bytes]] = deque()
         self._next_schema = 1
         self._next_channel = 1
         self._in_kernel = hasattr(os, 'copy_file_range')
@@ -247,19 +247,22 @@ class McapWriter:
         data = b''.join(chunk.parts)
         chunk.parts = []
         future = self._pool.submit(_compress, self._compression, data)
-        self._pending.append((chunk, future, len(data)))
+        self._pending.append((chunk, future, len(data), data))
         self._drain(wait=False)
 
     def copy_chunk(self, chunk: CopiedChunk) -> None:
         """Write an input's chunk as it is (after the chunks pending before it); the open chunk stays open."""
-        self._pending.append((chunk, None, 0))
+        self._pending.append((chunk, None, 0, b''))
         self._drain(wait=False)
 
     def _drain(self, *, wait: bool) -> None:
         """Write completed chunks in order; with wait, every pending chunk."""
         while self._pending and (wait or self._pending[0][1] is None or self._pending[0][1].done()
                                  or len(self._pending) > PENDING_CHUNKS):
-            chunk, future, size = self._pending.popleft()
+            head = self._pending[0][1]
+            while head is not None and not head.done() and self._help():
+                pass
+            chunk, future, size, _ = self._pending.popleft()
             if future is None:
                 assert isinstance(chunk, CopiedChunk)
                 self._write_copied(chunk)
@@ -267,6 +270,18 @@ class McapWriter:
             assert isinstance(chunk, _OpenChunk)
             compressed, crc = future.result()
             self._write_chunk(chunk, compressed, crc, size)
+
+    def _help(self) -> bool:
+        """Instead of waiting for the compressor, compress here a queued chunk it has not started (zstd
+        releases the GIL, so both cores compress); False when there is none."""
+        for position in range(1, len(self._pending)):
+            chunk, future, size, data = self._pending[position]
+            if future is not None and future.cancel():
+                done: Future[tuple[bytes, int]] = Future()
+                done.set_result(_compress(self._compression, data))
+                self._pending[position] = (chunk, done, size, b'')
+                return True
+        return False
 
     def _write_copied(self, chunk: CopiedChunk) -> None:
         """The chunk record and its message indexes byte for byte; the chunk index pointing at them here. The

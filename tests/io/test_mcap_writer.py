@@ -109,3 +109,28 @@ def test_sink_output_has_the_usual_file_permissions(tmp_path: Path) -> None:
     finally:
         os.umask(mask)
     assert stat.S_IMODE((tmp_path / 'out.mcap').stat().st_mode) == 0o644
+
+
+def test_a_waiting_writer_compresses_queued_chunks_itself(monkeypatch: pytest.MonkeyPatch) -> None:
+    """When the compressor falls behind, the writing thread compresses chunks the worker has not started
+    instead of waiting: the same bytes, part of the chunks compressed on each thread."""
+    import threading
+    import time
+
+    from bagfault.io import mcap_writer
+
+    expected = write(chunk_size=60)  # about 25 chunks
+    original, where = mcap_writer._compress, []
+
+    def slow(compression: str, data: bytes) -> tuple[bytes, int]:
+        worker = threading.current_thread().name.startswith('mcap-compress')
+        where.append('worker' if worker else 'writer')
+        if worker:
+            time.sleep(0.02)
+        return original(compression, data)
+
+    monkeypatch.setattr(mcap_writer, '_compress', slow)
+    monkeypatch.setattr(mcap_writer, 'PENDING_CHUNKS', 2)
+    assert write(chunk_size=60) == expected
+    assert 'worker' in where and 'writer' in where
+    assert len(where) == make_reader(io.BytesIO(expected)).get_summary().statistics.chunk_count
