@@ -8,6 +8,7 @@ messages to the same Run with nothing injected. `run_to_file` wraps
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
@@ -153,31 +154,34 @@ def run_to_file(
     """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing); with
     `chunk_copy`, the untouched chunks of a single MCAP input are copied as they are."""
     definitions = load_definitions([*msg_paths, *scenario.msg_paths])
-    inputs = InputSet(paths, salvage=salvage)
-    try:
-        begin_progress(progress, inputs)
-        catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
-        sink = McapSink(output, compression=compression, ros_distro=catalog.distro)
-        chunks = chunk_copy_for(inputs) if chunk_copy and batch else None
-        if chunks is not None:
-            chunks.reserve(sink)
-        hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
-        try:  # the inputs' digests on the second core while the run reads them; the record goes at the end
-            origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset)
-            sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
-            run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
-                            start_offset=start_offset, batch=batch, progress=progress, observers=observers,
-                            blackbox_base=output, chunks=chunks)
-            sink.flush()  # the copied chunks go to the file while the hash completes, not after it
-            sink.add_metadata('bagfault', origin.result())
-        except BaseException:
-            sink.abort()
-            raise
+    stop = threading.Event()
+    hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
+    try:  # the inputs' digests on the second core from the start, beside the setup, the run and the copy
+        origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset, stop)
+        inputs = InputSet(paths, salvage=salvage)
+        try:
+            begin_progress(progress, inputs)
+            catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
+            sink = McapSink(output, compression=compression, ros_distro=catalog.distro)
+            try:
+                chunks = chunk_copy_for(inputs) if chunk_copy and batch else None
+                if chunks is not None:
+                    chunks.reserve(sink)
+                sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
+                run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
+                                start_offset=start_offset, batch=batch, progress=progress, observers=observers,
+                                blackbox_base=output, chunks=chunks)
+                sink.flush()  # the copied chunks go to the file while the hash completes, not after it
+                sink.add_metadata('bagfault', origin.result())
+            except BaseException:
+                sink.abort()
+                raise
+            finish(sink, run)
         finally:
-            hashing.shutdown(wait=True, cancel_futures=True)
-        finish(sink, run)
+            inputs.close()
     finally:
-        inputs.close()
+        stop.set()  # a failed run does not wait for the hash of a large input
+        hashing.shutdown(wait=True, cancel_futures=True)
     if run.stats.input_messages == 0:
         run.notes.append(EMPTY_INPUT)
     return run.result('run', paths, output, seed)

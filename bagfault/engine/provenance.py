@@ -11,6 +11,7 @@ from bagfault import __version__
 from bagfault.io.sources import fingerprint
 
 if TYPE_CHECKING:
+    import threading
     from collections.abc import Sequence
     from pathlib import Path
 
@@ -20,7 +21,7 @@ if TYPE_CHECKING:
 
 
 def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activations: Sequence[Activation],
-               start_offset: float) -> dict[str, str]:
+               start_offset: float, stop: threading.Event | None = None) -> dict[str, str]:
     """Tool version, seed, scenario hash, inputs with sizes and BLAKE3 digests, `--activate` and `--start` options."""
     return {
         'tool': 'bagfault',
@@ -29,7 +30,7 @@ def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activation
         'scenario': scenario.name,
         'scenario_sha256': hashlib.sha256(scenario.text.encode()).hexdigest(),
         'inputs': json.dumps(
-            [{'name': p.name, 'files': [asdict(f) for f in fingerprint(p)]} for p in inputs], sort_keys=True
+            [{'name': p.name, 'files': [asdict(f) for f in fingerprint(p, stop)]} for p in inputs], sort_keys=True
         ),
         'activate': json.dumps([asdict(a) for a in activations], sort_keys=True),
         'start_offset': repr(float(start_offset)),

@@ -164,3 +164,26 @@ def test_metadata_listing_missing_files(tmp_path, rover_sqlite):
 def test_empty_file_bag_from_rosbag_js(external):
     with pytest.raises(InputError, match='file is empty'):
         open_source(external / 'rosbag.js/fixtures/empty-file.bag')
+
+
+def test_input_digests_are_blake3_over_every_window_and_stop_when_asked(tmp_path: Path) -> None:
+    import threading
+
+    import blake3
+
+    from bagfault.io import sources
+
+    data = bytes(range(256)) * 41 + b'tail'  # windows of 4096 bytes: two whole and a partial one
+    path = tmp_path / 'input.bin'
+    path.write_bytes(data)
+    assert sources._blake3(path, None, window=4096) == blake3.blake3(data).hexdigest()
+    # the BLAKE3 test vector of the empty input (the reference implementation's test_vectors.json)
+    (tmp_path / 'empty.bin').write_bytes(b'')
+    assert sources.fingerprint(tmp_path / 'empty.bin')[0].blake3 == (
+        'af1349b9f5f9a1a6a0404dea36dcc9499bcb25c9adc112b7cc9a93cae41f3262')
+    stop = threading.Event()
+    stop.set()
+    with pytest.raises(sources.HashStopped):
+        sources.fingerprint(path, stop)
+    with pytest.raises(InputError, match=r'missing\.bin: cannot read: No such file'):
+        sources.fingerprint(tmp_path / 'missing.bin')
