@@ -185,6 +185,10 @@ class Pacer:
     def finish(self, run: Run) -> None:
         """Nothing after the last record of a plain play."""
 
+    def delivered(self, timeout: float) -> list[str]:
+        """The topics whose subscribers have not acknowledged every message within `timeout` (none here)."""
+        return []
+
     def _tick(self, bag_time: int) -> None:
         """While waiting: every clock period the timeline's time goes out; the recording's chunk when due."""
         if time.monotonic() - self._last_tick >= self.clock_period:

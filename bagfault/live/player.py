@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from bagfault.view.foxglove import FoxgloveView
 
 LOOP_GAP = 1_000_000  # ns between the end of a pass and the start of the next
+ACK_WAIT = 5.0  # seconds after the last message for subscribers to acknowledge it (0.5 after a stop)
 
 
 def run_play(
@@ -106,6 +107,7 @@ def run_play(
                 if not sink.seeking():
                     break
                 sink.restart(first)
+            unacknowledged = sink.delivered(ACK_WAIT / 10 if stop.is_set() else ACK_WAIT)
             if recording is not None:
                 record_origin(recording, total.origin)
                 recording.finish()
@@ -120,6 +122,9 @@ def run_play(
     result = last.result('play', inputs, record, seed, total)
     result.notes.append(f'published {sink.published} messages in {passes} pass{"es" if passes != 1 else ""}'
                         + (f' (stopped by {stop.reason})' if stop.is_set() and stop.reason != SEEK else ''))
+    if unacknowledged:
+        result.notes.append(f'{", ".join(unacknowledged)}: not every subscriber acknowledged the last messages '
+                            f'within {ACK_WAIT:g} s (they may have missed them)')
     if passes > 1:
         result.notes.append(f'verdicts are those of the last pass ({passes} passes)')
     for topic, msgtype in sorted(getattr(sink, 'skipped', {}).items()):

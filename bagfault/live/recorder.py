@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from bagfault.engine.stop import StopFlag
 
 DISCOVERY_PERIOD = 0.1  # seconds between looks at the graph for new topics
-DEPTH = 100
+DEPTH = 1000  # messages a topic may queue while the executor is busy elsewhere (keep-last drops beyond)
 
 
 @dataclass

@@ -104,6 +104,19 @@ class LiveSink(Pacer):
             if self.stop.wait(0.02):
                 raise Stopped(self.stop.reason)
 
+    def delivered(self, timeout: float) -> list[str]:
+        """After the last message: wait until every subscriber acknowledged what the reliable publishers sent (a
+        player that exits first takes the samples still being resent with it); the topics still unacknowledged."""
+        from rclpy.duration import Duration  # noqa: PLC0415
+
+        deadline = time.monotonic() + timeout
+        late = []
+        for _, publisher in sorted(self._publishers.items()):
+            left = max(deadline - time.monotonic(), 0.0)
+            if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                late.append(publisher.topic_name)
+        return late
+
     def begin(self, run: Run) -> None:
         """The run's events go out on /bagfault/events as they happen (and to the view)."""
         super().begin(run)

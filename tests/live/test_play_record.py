@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import time
 from pathlib import Path
 
@@ -100,3 +101,22 @@ fault_manager:
     assert [p.name for p in tmp_path.iterdir() if p.name.endswith('.partial')] == []
     for box in tmp_path.glob('played.blackbox.*'):
         assert counts(box)['/imu_out'] > 0
+
+
+def test_play_waits_for_every_acknowledgement_and_says_when_a_subscriber_gave_none(graph, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'imu.mcap', [('/sensors/imu_raw', 'sensor_msgs/msg/Imu', 50.0)], 3.0)
+    play = graph.bagfault('play', str(bag), '--wait-for', '/sensors/imu_raw', name='play')
+    echo = graph.peer('echo', '/sensors/imu_raw', 'sensor_msgs/msg/Imu', '--seconds', '300', name='echo')
+    deadline = time.monotonic() + 30
+    while not graph.lines(echo) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    echo.send_signal(signal.SIGSTOP)  # alive to DDS (its lease lasts 20 s) but never acknowledging again
+    stopped = time.monotonic()
+    try:
+        assert play.wait(timeout=60) == 0
+        waited = time.monotonic() - stopped
+    finally:
+        echo.send_signal(signal.SIGCONT)
+    out = play.out_path.read_text()
+    assert '/sensors/imu_raw: not every subscriber acknowledged the last messages within 5 s' in out, out
+    assert waited > 5.0  # at most 3 s of bag left to play, then the whole wait for acknowledgements
