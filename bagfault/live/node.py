@@ -32,7 +32,7 @@ from bagfault.live.diagnostics import diagnostic_array
 from bagfault.live.events import LiveEvents
 from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
 from bagfault.live.params import FaultParameters
-from bagfault.live.ros import interface_class, make_node, qos
+from bagfault.live.ros import interface_class, make_node, qos, unacknowledged
 from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import ServiceHost, TriggerProxy
 from bagfault.scenario import load_scenario
@@ -81,6 +81,7 @@ class ProxyNode:
         self.recording: McapSink | None = None
         self.delay: DelayLine | None = None
         self.publishers: dict[int, Any] = {}
+        self.unacknowledged: list[str] = []  # output topics whose subscribers missed acknowledging the last messages
         self.subscriptions: list[Any] = []
         self.services: list[TriggerProxy] = []
         self.service_host: ServiceHost | None = None
@@ -343,6 +344,7 @@ class ProxyNode:
         if self.session is not None:
             for topic, message in self.session.flush():
                 self._publish(topic, message.data)
+            self.unacknowledged = unacknowledged(self.publishers.values(), DRAIN)
             self.session.finish()
             if self.recording is not None:
                 record_origin(self.recording, self.session.run.stats.origin)

@@ -54,6 +54,9 @@ def run_proxy(
     for topic in session.topics:
         result.notes.append(f'{topic.input_topic} -> {topic.output_topic}: {topic.received} received, '
                             f'{topic.forwarded} published, {topic.malformed} malformed')
+    if proxy.unacknowledged:
+        result.notes.append(f'{", ".join(proxy.unacknowledged)}: not every subscriber acknowledged the last messages '
+                            f'within {DRAIN:g} s of the stop (they may have missed them)')
     if proxy.early:
         result.notes.append(f'{proxy.early} delayed messages were still waiting {DRAIN:g} s after the stop and '
                             'were published then, before their time')

@@ -7,13 +7,17 @@ bagfault runs without ROS installed.
 from __future__ import annotations
 
 import importlib
-from typing import Any
+import time
+from typing import TYPE_CHECKING, Any
 
 import yaml
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from bagfault.errors import LiveError
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
 
 RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 'best_effort': ReliabilityPolicy.BEST_EFFORT}
 DURABILITY = {'volatile': DurabilityPolicy.VOLATILE, 'transient_local': DurabilityPolicy.TRANSIENT_LOCAL}
@@ -32,6 +36,18 @@ def interface_class(name: str) -> Any:
             f'{name}: type not installed for rclpy (pip install ros-jazzy-{package.replace("_", "-")} '
             'or source the workspace that builds it)'
         ) from None
+
+
+def unacknowledged(publishers: Iterable[Any], timeout: float) -> list[str]:
+    """Wait until every subscriber acknowledged what the reliable `publishers` sent, `timeout` seconds in all;
+    the topics still unacknowledged. A process that exits first takes the samples still being resent with it."""
+    deadline = time.monotonic() + timeout
+    late = []
+    for publisher in publishers:
+        left = max(deadline - time.monotonic(), 0.0)
+        if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+            late.append(publisher.topic_name)
+    return sorted(late)
 
 
 def has_interface(name: str) -> bool:

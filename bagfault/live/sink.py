@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from bagfault.engine.stop import Stopped
 from bagfault.errors import LiveError
 from bagfault.live.pacer import CLOCK_PERIOD, Pacer
-from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos
+from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos, unacknowledged
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
@@ -105,17 +105,8 @@ class LiveSink(Pacer):
                 raise Stopped(self.stop.reason)
 
     def delivered(self, timeout: float) -> list[str]:
-        """After the last message: wait until every subscriber acknowledged what the reliable publishers sent (a
-        player that exits first takes the samples still being resent with it); the topics still unacknowledged."""
-        from rclpy.duration import Duration  # noqa: PLC0415
-
-        deadline = time.monotonic() + timeout
-        late = []
-        for _, publisher in sorted(self._publishers.items()):
-            left = max(deadline - time.monotonic(), 0.0)
-            if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
-                late.append(publisher.topic_name)
-        return late
+        """After the last message: the topics whose subscribers have not acknowledged it within `timeout`."""
+        return unacknowledged(self._publishers.values(), timeout)
 
     def begin(self, run: Run) -> None:
         """The run's events go out on /bagfault/events as they happen (and to the view)."""

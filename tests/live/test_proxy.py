@@ -259,3 +259,26 @@ faults:
     lags = sorted(sent[k] - received[k] for k in sent)
     assert lags[0] >= 200_000_000  # never early
     assert lags[len(lags) // 2] < 220_000_000  # and on time: the delay line wakes at the due time
+
+
+def test_a_stopped_proxy_waits_for_acknowledgements_and_says_which_topic_missed_them(graph, scenarios: Path) -> None:
+    proxy = graph.bagfault('proxy', str(scenarios / 'imu.yaml'), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    echo = graph.peer('echo', '/sensors/imu', 'sensor_msgs/msg/Imu', '--seconds', '300', name='echo')
+    graph.wait_for(echo, 'ready')
+    publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '100', '--seconds', '60', name='imu')
+    deadline = time.monotonic() + 30
+    while not graph.lines(echo) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    echo.send_signal(signal.SIGSTOP)  # alive to DDS (its lease lasts 20 s) but never acknowledging again
+    try:
+        time.sleep(0.5)
+        graph.stop(publisher)
+        stopped = time.monotonic()
+        assert graph.stop(proxy, signal.SIGINT) == 0
+        waited = time.monotonic() - stopped
+    finally:
+        echo.send_signal(signal.SIGCONT)
+    out = proxy.out_path.read_text()
+    assert '/sensors/imu: not every subscriber acknowledged the last messages within 2 s of the stop' in out, out
+    assert waited > 2.0
