@@ -66,6 +66,8 @@ def publish_imu(args) -> None:
         delay = start + k * period - time.monotonic()
         if delay > 0:
             time.sleep(delay)
+    from rclpy.duration import Duration
+    publisher.wait_for_all_acked(Duration(seconds=5))  # exiting earlier would lose what is still being resent
     print(json.dumps({'published': k}), flush=True)
 
 
