@@ -110,7 +110,7 @@ injectors:
   - {id: motors, type: trigger_service, proxy_service: /enable_motors, target_service: /enable_motors_raw}
 faults:
   - {id: late, injector_id: imu, active_on_startup: true, config: {delay_ms: 1500}}
-  - {id: slow_motors, injector_id: motors, active_on_startup: true, config: {delay_ms: 4000}}
+  - {id: slow_motors, injector_id: motors, active_on_startup: true, config: {delay_ms: 8000}}
 """)
     record = tmp_path / 'stop.mcap'
     graph.peer('trigger-server', '/enable_motors_raw', '--message', 'motors on', name='server')
@@ -124,12 +124,12 @@ faults:
     caller = graph.peer('trigger-call', '/enable_motors', '--timeout', '15', name='call')
     publisher.wait(timeout=30)
     sent = graph.lines(publisher)[-1]['published']
-    time.sleep(0.3)  # 1.2 s of messages still in the delay line, the call 3.7 s from its answer
+    time.sleep(0.3)  # 1.2 s of messages still in the delay line, the call about 5 s from its answer
     assert graph.stop(proxy, signal.SIGINT) == 0
     caller.wait(timeout=30)
     answer = graph.lines(caller)[-1]
     assert answer['success'] is True and answer['message'] == 'motors on'
-    assert answer['seconds'] < 4.0  # answered at the stop, not after its whole delay
+    assert answer['seconds'] < 6.0  # answered at the stop (about 3 s after the call), not after its whole delay
     time.sleep(0.5)
     echo.send_signal(signal.SIGINT)
     echo.wait(timeout=30)
@@ -138,7 +138,7 @@ faults:
     calls = decoded(record, ['/bagfault/service_calls'])['/bagfault/service_calls']
     assert [json.loads(m.data) for _, m in calls] == [
         {'service': '/enable_motors', 'target': '/enable_motors_raw', 'outcome': 'forwarded', 'success': True,
-         'message': 'motors on', 'delay_ms': 4000}]
+         'message': 'motors on', 'delay_ms': 8000}]
     assert len(decoded(record, ['/imu'])['/imu']) == sent
 
 
