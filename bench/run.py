@@ -150,6 +150,7 @@ JOB_ENV = {k: v for k, v in os.environ.items() if k != 'PYTHONDONTWRITEBYTECODE'
 def run_job(code: str, **values: str) -> tuple[float, int]:
     """Run one job in a fresh process; return (wall seconds, its peak RSS in bytes)."""
     prelude = ''.join(f'{k} = {v!r}\n' for k, v in values.items())
+    os.sync()  # the previous job's output is written back before this one is timed, not during it
     started = time.perf_counter()
     done = subprocess.run([sys.executable, '-c', prelude + textwrap.dedent(code) + PEAK_RSS],
                           stdout=subprocess.PIPE, text=True, check=False, env=JOB_ENV)
