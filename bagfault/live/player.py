@@ -107,7 +107,8 @@ def run_play(
                 if not sink.seeking():
                     break
                 sink.restart(first)
-            unacknowledged = sink.delivered(ACK_WAIT / 10 if stop.is_set() else ACK_WAIT)
+            ack_wait = ACK_WAIT / 10 if stop.is_set() else ACK_WAIT
+            unacknowledged = sink.delivered(ack_wait)
             if recording is not None:
                 record_origin(recording, total.origin)
                 recording.finish()
@@ -124,7 +125,7 @@ def run_play(
                         + (f' (stopped by {stop.reason})' if stop.is_set() and stop.reason != SEEK else ''))
     if unacknowledged:
         result.notes.append(f'{", ".join(unacknowledged)}: not every subscriber acknowledged the last messages '
-                            f'within {ACK_WAIT:g} s (they may have missed them)')
+                            f'within {ack_wait:g} s (they may have missed them)')
     if passes > 1:
         result.notes.append(f'verdicts are those of the last pass ({passes} passes)')
     for topic, msgtype in sorted(getattr(sink, 'skipped', {}).items()):
