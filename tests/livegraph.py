@@ -82,6 +82,15 @@ class Graph:
             time.sleep(0.05)
         raise AssertionError(f'{text!r} not seen; stderr:\n{path.read_text()}')
 
+    @classmethod
+    def wait_for_line(cls, process: subprocess.Popen[str], timeout: float = 30.0) -> None:
+        """Wait until a peer printed its first JSON line (an echo received a message)."""
+        deadline = time.monotonic() + timeout
+        while not cls.lines(process):
+            if time.monotonic() > deadline or process.poll() is not None:
+                raise AssertionError(f'no line from the peer; stderr:\n{process.err_path.read_text()}')  # type: ignore[attr-defined]
+            time.sleep(0.02)
+
     @staticmethod
     def stop(process: subprocess.Popen[str], sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
         """Signal a process and wait for its exit code."""

@@ -107,9 +107,7 @@ def test_play_waits_for_every_acknowledgement_and_says_when_a_subscriber_gave_no
     bag = make_bag(tmp_path / 'imu.mcap', [('/sensors/imu_raw', 'sensor_msgs/msg/Imu', 50.0)], 3.0)
     play = graph.bagfault('play', str(bag), '--wait-for', '/sensors/imu_raw', name='play')
     echo = graph.peer('echo', '/sensors/imu_raw', 'sensor_msgs/msg/Imu', '--seconds', '300', name='echo')
-    deadline = time.monotonic() + 30
-    while not graph.lines(echo) and time.monotonic() < deadline:
-        time.sleep(0.02)
+    graph.wait_for_line(echo)
     echo.send_signal(signal.SIGSTOP)  # alive to DDS (its lease lasts 20 s) but never acknowledging again
     stopped = time.monotonic()
     try:

@@ -267,9 +267,7 @@ def test_a_stopped_proxy_waits_for_acknowledgements_and_says_which_topic_missed_
     echo = graph.peer('echo', '/sensors/imu', 'sensor_msgs/msg/Imu', '--seconds', '300', name='echo')
     graph.wait_for(echo, 'ready')
     publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '100', '--seconds', '60', name='imu')
-    deadline = time.monotonic() + 30
-    while not graph.lines(echo) and time.monotonic() < deadline:
-        time.sleep(0.02)
+    graph.wait_for_line(echo)
     echo.send_signal(signal.SIGSTOP)  # alive to DDS (its lease lasts 20 s) but never acknowledging again
     try:
         time.sleep(0.5)
