@@ -13,7 +13,9 @@ own process (peak RSS per job):
   (c) PointCloud2 noise + point dropout all along; (d) drop 20 % + delay
   50 ms on every topic;
 - chunk copy (--copy, a 300 s sensor-heavy bag): `cp` of the file against
-  (a) and (w) an IMU bias active for 10 s, with and without chunk copy.
+  (a) and (w) an IMU bias active for 10 s, with and without chunk copy, and
+  the time a bagfault process takes to start and import before it reads
+  anything (the part of every run that `cp` does not have).
 Prints median times, throughput, peak RSS and the ratios, and writes JSON.
 Jobs run with bytecode caching on (bagfault is byte-compiled first).
 """
@@ -91,6 +93,11 @@ BAGFAULT = """
 from bagfault import api
 from bagfault.scenario import parse_scenario
 api.run(parse_scenario(SCENARIO), [SRC], DST, seed=1, chunk_copy=CHUNK_COPY == 'yes')
+"""
+
+IMPORT_ONLY = """
+from bagfault import api
+from bagfault.scenario import parse_scenario
 """
 
 CP = """
@@ -214,7 +221,7 @@ def measure_copy(seconds: float, repeat: int) -> dict[str, dict]:
     """Chunk copy against `cp` of the same file: no fault active, and an IMU bias active 10 s (from 100 s)."""
     bag = ensure_bag('sensor-heavy', seconds)
     out = DATA / 'out.mcap'
-    jobs = {'cp': (CP, {})}
+    jobs = {'cp': (CP, {}), 'start and import only': (IMPORT_ONLY, {})}
     for case, what in (('a', 'none active'), ('w', 'IMU bias 10 s')):
         for copy in ('yes', 'no'):
             name = f'{what}{"" if copy == "yes" else ", --no-chunk-copy"}'
