@@ -3,7 +3,9 @@
 Before the first message the link waits until the system is ready (each
 condition in turn, failing at once if the system exits), learns the types
 of the topics the oracles read, and subscribes on a second node, spun in
-a thread, to what the system publishes. A message from the system takes
+a thread, to what the system publishes (on a topic the bag plays too, once
+the system publishes there, with bagfault's own messages told apart by
+`OwnEchoes`). A message from the system takes
 the bag time of its arrival (wall time since the first record x rate),
 never earlier than what was judged before it and never later than the
 record about to be played; before each record is judged everything that
@@ -19,13 +21,16 @@ import time
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
+from rclpy.qos import DurabilityPolicy
+
 from bagfault.assertions.base import AssertionResult
 from bagfault.closedloop.process import describe_exit
 from bagfault.engine.run import OutputChannel
 from bagfault.engine.stop import Stopped
 from bagfault.errors import ClosedLoopError
 from bagfault.events import AssertionEvent
-from bagfault.live.graph import OWN_PREFIXES, watched_topics
+from bagfault.live.echoes import OwnEchoes
+from bagfault.live.graph import OWN_PREFIXES, oracle_topics, watched_topics
 from bagfault.live.recorder import Recorder
 from bagfault.live.sink import LiveSink
 
@@ -78,6 +83,9 @@ class SystemLink(LiveSink):
         self._run: Run | None = None
         self._floor = 0  # nothing is handed over earlier than what was judged before
         self._last_look = 0.0
+        self._echoes = OwnEchoes()
+        self._listened: set[str] = set()  # played topics the system publishes on too
+        self._latched: dict[str, deque[bytes]] = {}  # played transient-local topics: their publisher's history
 
     # -- before the first record --------------------------------------------------------------
     def prepare(self, routing: Routing) -> Mapping[str, Schema]:
@@ -91,9 +99,16 @@ class SystemLink(LiveSink):
         watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
         record = self.system.record
         every = record == 'all'
-        self._recorder = Recorder(self.listener, [] if record == 'all' else record, every,
+        asserted_played = [t for t in oracle_topics(self.scenario) if t in self._publishers]
+        for topic, publisher in self._publishers.items():
+            profile = publisher.qos_profile
+            if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
+                self._latched[topic] = deque(maxlen=max(1, profile.depth))
+        self._recorder = Recorder(self.listener, [*([] if record == 'all' else record), *asserted_played], every,
                                   on_topic=self._on_topic, on_message=self._on_message,
-                                  exclude=own, every_excludes=(*NOT_RECORDED, *OWN_PREFIXES))
+                                  exclude=NOT_RECORDED, every_excludes=(*NOT_RECORDED, *OWN_PREFIXES),
+                                  shared=self.played, own_nodes={self.node.get_fully_qualified_name()},
+                                  echoes=self._echoes)
         self._recorder.discover()
         for topic, msgtype in watched.items():
             if topic not in self._recorder.subscriptions:
@@ -169,6 +184,9 @@ class SystemLink(LiveSink):
 
     # -- the system's messages ---------------------------------------------------------------
     def _on_topic(self, topic: str, msgtype: str, profile: str) -> None:
+        if topic in self._publishers:  # the system publishes on a topic the bag plays: tell ours from its
+            self._echoes.listen(topic, tuple(self._latched.get(topic, ())))
+            self._listened.add(topic)
         channel = self.record_only(topic, msgtype, *self.catalog.schema(msgtype),
                                    metadata={'offered_qos_profiles': profile})
         self._outputs[topic] = OutputChannel(channel, topic, msgtype)
@@ -176,6 +194,19 @@ class SystemLink(LiveSink):
     def _on_message(self, topic: str, data: bytes) -> None:
         with self._lock:
             self._queue.append((topic, time.monotonic(), data))
+
+    def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
+        """Play one record; on a topic the system publishes on too, noted first so the listener drops it."""
+        publisher = self._entries[channel_id][0]
+        if publisher is not None:
+            topic = self._names[channel_id]
+            kept = self._latched.get(topic)
+            if kept is not None or topic in self._listened:
+                data = bytes(data)
+                if kept is not None:
+                    kept.append(data)  # what a late subscriber of a latched topic receives first
+                self._echoes.sent(topic, data)
+        super().write(channel_id, log_time, publish_time, data)
 
     def begin(self, run: Run) -> None:
         """Messages of the system go into this run; its events go out live."""

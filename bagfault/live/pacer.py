@@ -100,11 +100,13 @@ class Pacer:
 
     def record_only(self, topic: str, msgtype: str, schema_encoding: str, schema_text: str,
                     metadata: dict[str, str] | None = None) -> int:
-        """A channel that is recorded and shown, never published (what a system under test publishes)."""
-        return self._register((topic, msgtype), None, schema_encoding, schema_text, 'cdr', metadata)
+        """A channel that is recorded and shown, never published (what a system under test publishes; a
+        channel of its own beside the played one when the system publishes on a topic the bag plays)."""
+        return self._register((topic, msgtype), None, schema_encoding, schema_text, 'cdr', metadata, played=False)
 
     def _register(self, key: tuple[str, str], publisher: Any, schema_encoding: str, schema_text: str,
-                  message_encoding: str, metadata: dict[str, str] | None, *, keep: bool = True) -> int:
+                  message_encoding: str, metadata: dict[str, str] | None, *, keep: bool = True,
+                  played: bool = True) -> int:
         recorded = shown = None
         if keep and self.recording is not None:
             recorded = self.recording.add_channel(key[0], key[1], schema_encoding, schema_text, message_encoding,
@@ -113,7 +115,8 @@ class Pacer:
             shown = self.view.add_channel(key[0], key[1], schema_encoding, schema_text, message_encoding)
         self._entries.append((publisher, recorded, shown))
         self._names.append(key[0])
-        self._channels[key] = len(self._entries) - 1
+        if played:
+            self._channels[key] = len(self._entries) - 1
         return len(self._entries) - 1
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:

@@ -203,3 +203,63 @@ keep: failed
     assert all(r['odom_blackout_detected'] == 'passed' for r in result.table.rows)
     assert result.table.rows[0]['output'] and not result.table.rows[1]['output']  # keep: failed
     assert seconds < 1.6 * max(r['seconds'] for r in result.table.rows)  # side by side, each in its own domain
+
+
+FUSER = """
+import sys
+import rclpy
+from nav_msgs.msg import Odometry
+from rclpy.executors import ExternalShutdownException
+from sensor_msgs.msg import Imu
+
+rclpy.init(args=sys.argv)
+node = rclpy.create_node('odom_fuser')
+publisher = node.create_publisher(Odometry, '/odom', 100)
+received = []
+
+
+def on_imu(imu):
+    received.append(imu)
+    if len(received) % 50 == 0:  # its own odometry on the topic the bag plays, every 50th IMU message
+        out = Odometry()
+        out.header.stamp = imu.header.stamp
+        out.header.frame_id = 'odom'
+        out.child_frame_id = 'fused'
+        out.pose.pose.position.x = float(len(received))
+        publisher.publish(out)
+
+
+node.create_subscription(Imu, '/imu', on_imu, 2000)
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+print(f'published {len(received) // 50}', file=sys.stderr, flush=True)
+"""
+
+
+def test_a_system_publishing_on_a_played_topic_is_heard_there_and_bagfaults_own_messages_are_not(
+        tester: LoopRunner, example_bag: Path, tmp_path: Path) -> None:
+    (tmp_path / 'fuser.py').write_text(FUSER)
+    (tmp_path / 'fuser.bagfault.yaml').write_text("""
+system_under_test:
+  command: ['{python}', fuser.py]
+  record: all
+  stop_timeout: 10
+injectors: []
+faults: []
+""")
+    out = tmp_path / 'fused.mcap'
+    result = tester.run(str(tmp_path / 'fuser.bagfault.yaml'), str(example_bag), '-o', str(out),
+                        '--keep-logs', str(tmp_path / 'logs'))
+    assert result.code == 0, result.stdout + result.stderr
+    log = (tmp_path / 'logs' / 'system.stderr.log').read_text()
+    published = int(log.rsplit('published ', 1)[1].split()[0])
+    assert published == 1200 // 50  # it heard every one of the bag's 1200 IMU messages (12 s at 100 Hz)
+    topics = decoded(out)
+    fused = [m for _, m in topics['/odom'] if m.child_frame_id == 'fused']
+    played = [m for _, m in topics['/odom'] if m.child_frame_id != 'fused']
+    assert [m.pose.pose.position.x for m in fused] == [50.0 * n for n in range(1, published + 1)]
+    assert len(played) == 600  # the bag's odometry (50 Hz for 12 s) once each: its echo is not heard as the system's
+    assert result.report is not None
+    assert result.report['system_under_test']['heard_per_topic'] == {'/odom': published}
