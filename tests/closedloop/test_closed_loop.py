@@ -263,3 +263,71 @@ faults: []
     assert len(played) == 600  # the bag's odometry (50 Hz for 12 s) once each: its echo is not heard as the system's
     assert result.report is not None
     assert result.report['system_under_test']['heard_per_topic'] == {'/odom': published}
+
+
+DESCRIBER = """
+import sys
+import time
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from std_msgs.msg import String
+
+rclpy.init(args=sys.argv)
+node = rclpy.create_node('describer')
+time.sleep(2.0)  # after the bag's own description was played: bagfault's listener subscribes late
+publisher = node.create_publisher(String, '/robot_description', QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+publisher.publish(String(data='system urdf'))
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
+
+LATCHED = '- history: keep_last\n  depth: 1\n  reliability: reliable\n  durability: transient_local\n'
+VOLATILE = '- history: keep_last\n  depth: 10\n  reliability: reliable\n  durability: volatile\n'
+
+
+def latched_bag(path: Path) -> Path:
+    """/robot_description latched once at 0 s, /chatter at 10 Hz for 4 s (std_msgs/String, CDR from rosbags)."""
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    string = store.types['std_msgs/msg/String']
+    with path.open('wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data')
+        described = writer.register_channel('/robot_description', 'cdr', schema, {'offered_qos_profiles': LATCHED})
+        chatter = writer.register_channel('/chatter', 'cdr', schema, {'offered_qos_profiles': VOLATILE})
+        start = 1_700_000_000 * NS
+        writer.add_message(described, start, bytes(store.serialize_cdr(string(data='bag urdf'), string.__msgtype__)),
+                           start)
+        for n in range(40):
+            data = bytes(store.serialize_cdr(string(data=f'hello {n}'), string.__msgtype__))
+            writer.add_message(chatter, start + n * NS // 10, data, start + n * NS // 10)
+        writer.finish()
+    return path
+
+
+def test_a_latched_topic_the_system_publishes_on_late_keeps_bagfaults_history_out_of_what_is_heard(
+        tester: LoopRunner, tmp_path: Path) -> None:
+    (tmp_path / 'describer.py').write_text(DESCRIBER)
+    (tmp_path / 'describer.bagfault.yaml').write_text("""
+system_under_test:
+  command: ['{python}', describer.py]
+  ready: [{delay: 0.2}]
+  record: all
+  stop_timeout: 10
+injectors: []
+faults: []
+""")
+    out = tmp_path / 'described.mcap'
+    result = tester.run(str(tmp_path / 'describer.bagfault.yaml'), str(latched_bag(tmp_path / 'latched.mcap')),
+                        '-o', str(out))
+    assert result.code == 0, result.stdout + result.stderr
+    assert sorted(m.data for _, m in decoded(out)['/robot_description']) == ['bag urdf', 'system urdf']
+    assert result.report is not None
+    # the listener joined after the bag's description was played and received it from bagfault's history first
+    assert result.report['system_under_test']['heard_per_topic'] == {'/robot_description': 1}
