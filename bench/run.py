@@ -89,15 +89,13 @@ with open(SRC, 'rb') as src, open(DST, 'wb') as dst:
     writer.finish()
 """
 
-BAGFAULT = """
-from bagfault import api
-from bagfault.scenario import parse_scenario
-api.run(parse_scenario(SCENARIO), [SRC], DST, seed=1, chunk_copy=CHUNK_COPY == 'yes')
-"""
-
 IMPORT_ONLY = """
 from bagfault import api
 from bagfault.scenario import parse_scenario
+"""
+
+BAGFAULT = IMPORT_ONLY + """
+api.run(parse_scenario(SCENARIO), [SRC], DST, seed=1, chunk_copy=CHUNK_COPY == 'yes')
 """
 
 CP = """

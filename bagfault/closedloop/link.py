@@ -84,7 +84,6 @@ class SystemLink(LiveSink):
         self._floor = 0  # nothing is handed over earlier than what was judged before
         self._last_look = 0.0
         self._echoes = OwnEchoes()
-        self._listened: set[str] = set()  # played topics the system publishes on too
         self._latched: dict[str, deque[bytes]] = {}  # played transient-local topics: their publisher's history
 
     # -- before the first record --------------------------------------------------------------
@@ -186,7 +185,6 @@ class SystemLink(LiveSink):
     def _on_topic(self, topic: str, msgtype: str, profile: str) -> None:
         if topic in self._publishers:  # the system publishes on a topic the bag plays: tell ours from its
             self._echoes.listen(topic, tuple(self._latched.get(topic, ())))
-            self._listened.add(topic)
         channel = self.record_only(topic, msgtype, *self.catalog.schema(msgtype),
                                    metadata={'offered_qos_profiles': profile})
         self._outputs[topic] = OutputChannel(channel, topic, msgtype)
@@ -197,11 +195,10 @@ class SystemLink(LiveSink):
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Play one record; on a topic the system publishes on too, noted first so the listener drops it."""
-        publisher = self._entries[channel_id][0]
-        if publisher is not None:
+        if self._latched or self._echoes:
             topic = self._names[channel_id]
             kept = self._latched.get(topic)
-            if kept is not None or topic in self._listened:
+            if self._entries[channel_id][0] is not None and (kept is not None or topic in self._echoes):
                 data = bytes(data)
                 if kept is not None:
                     kept.append(data)  # what a late subscriber of a latched topic receives first

@@ -45,6 +45,14 @@ class OwnEchoes:
         for data in history:
             self.sent(topic, data)
 
+    def __bool__(self) -> bool:
+        """True once a topic is listened to."""
+        return bool(self._notes)
+
+    def __contains__(self, topic: object) -> bool:
+        """True for a topic listened to (its messages are noted)."""
+        return topic in self._notes
+
     def sent(self, topic: str, data: bytes) -> None:
         """bagfault published `data` on `topic` (ignored for topics not listened to)."""
         notes = self._notes.get(topic)

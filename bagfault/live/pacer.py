@@ -90,9 +90,12 @@ class Pacer:
         if found is not None:
             return found
         if self.topics and topic not in self.topics:
-            return self._register(key, None, schema_encoding, schema_text, message_encoding, metadata, keep=False)
-        return self._register(key, self._publisher(topic, msgtype, metadata), schema_encoding, schema_text,
-                              message_encoding, metadata)
+            number = self._register(key, None, schema_encoding, schema_text, message_encoding, metadata, keep=False)
+        else:
+            number = self._register(key, self._publisher(topic, msgtype, metadata), schema_encoding, schema_text,
+                                    message_encoding, metadata)
+        self._channels[key] = number
+        return number
 
     def _publisher(self, topic: str, msgtype: str, metadata: dict[str, str] | None) -> Any:
         """Where a topic is published (nothing here; ROS publishers in LiveSink)."""
@@ -102,11 +105,10 @@ class Pacer:
                     metadata: dict[str, str] | None = None) -> int:
         """A channel that is recorded and shown, never published (what a system under test publishes; a
         channel of its own beside the played one when the system publishes on a topic the bag plays)."""
-        return self._register((topic, msgtype), None, schema_encoding, schema_text, 'cdr', metadata, played=False)
+        return self._register((topic, msgtype), None, schema_encoding, schema_text, 'cdr', metadata)
 
     def _register(self, key: tuple[str, str], publisher: Any, schema_encoding: str, schema_text: str,
-                  message_encoding: str, metadata: dict[str, str] | None, *, keep: bool = True,
-                  played: bool = True) -> int:
+                  message_encoding: str, metadata: dict[str, str] | None, *, keep: bool = True) -> int:
         recorded = shown = None
         if keep and self.recording is not None:
             recorded = self.recording.add_channel(key[0], key[1], schema_encoding, schema_text, message_encoding,
@@ -115,8 +117,6 @@ class Pacer:
             shown = self.view.add_channel(key[0], key[1], schema_encoding, schema_text, message_encoding)
         self._entries.append((publisher, recorded, shown))
         self._names.append(key[0])
-        if played:
-            self._channels[key] = len(self._entries) - 1
         return len(self._entries) - 1
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:

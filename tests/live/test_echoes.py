@@ -27,7 +27,9 @@ def test_identical_messages_each_need_their_own_note() -> None:
 
 def test_topics_not_listened_to_are_not_noted() -> None:
     echoes = OwnEchoes()
+    assert not echoes
     echoes.listen('/odom')
+    assert echoes and '/odom' in echoes and '/imu' not in echoes
     echoes.sent('/imu', b'x')
     assert not echoes.take('/imu', b'x')
     assert not echoes.take('/odom', b'x')
