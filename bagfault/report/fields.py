@@ -176,10 +176,9 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duratio
                 if isinstance(target, _ImageBuilder):
                     target.add(seconds, path.read(message))
                 else:
-                    values = path.read(message)
-                    finite = values[np.isfinite(values)]
-                    target[0].append(seconds)
-                    target[1].append(float(finite.mean()) if finite.size else float('nan'))
+                    values = np.asarray(path.read(message), dtype=float)
+                    target[0].append(seconds)   # the value itself; nan and inf stay what they are
+                    target[1].append(float(values.mean()) if values.size else float('nan'))
     finally:
         inputs.close()
     return out

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bagfault.report.page import LEGEND, Page, envelope, shade, title
+from bagfault.report.page import LEGEND, Page, buckets_hit, envelope, shade, title
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -185,6 +185,9 @@ def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> N
                     (f'after: {plot.output_topic}', _xy(ax, ay), {}),
                     ('after - before', _xy(ax[: difference.size], difference),
                      {'xaxis': 'x', 'yaxis': 'y2', 'line': {'color': '#7f7f7f'}}))]
+        shown = np.concatenate([by[np.isfinite(by)], ay[np.isfinite(ay)]])
+        bounds = (float(shown.min()), float(shown.max())) if shown.size else (0.0, 0.0)
+        data += [*_non_finite(bx, by, 'before', bounds), *_non_finite(ax, ay, 'after', bounds)]
         page.figure(data, {'title': title(heading), 'height': 380, 'margin': {'t': 56},
                            'xaxis': {'title': {'text': 'bag time (s)'}, 'anchor': 'y2'},
                            'yaxis': {'domain': [0.38, 1], 'title': {'text': plot.field}},
@@ -197,6 +200,22 @@ def _xy(x: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
     """A series decimated to min/max envelopes, as trace keys."""
     ex, ey = envelope(x, y)
     return {'x': ex, 'y': ey}
+
+
+def _non_finite(x: np.ndarray, y: np.ndarray, side: str, bounds: tuple[float, float]) -> list[dict[str, Any]]:
+    """Markers where a scalar is nan or +-inf (a line would only show a gap): nan and +inf at the top of the
+    finite values, -inf at the bottom; at most one marker per envelope bucket."""
+    traces = []
+    for label, mask, level, symbol, color in (
+            ('nan', np.isnan(y), bounds[1], 'x', '#000000'),
+            ('+inf', np.isposinf(y), bounds[1], 'triangle-up', '#ff00ff'),
+            ('-inf', np.isneginf(y), bounds[0], 'triangle-down', '#ff00ff')):
+        times = buckets_hit(x[mask], x[0], x[-1]) if mask.any() else np.zeros(0)
+        if times.size:
+            traces.append({'type': 'scatter', 'mode': 'markers', 'x': times, 'y': np.full(times.size, level),
+                           'name': f'{side}: {label}', 'marker': {'symbol': symbol, 'size': 7, 'color': color},
+                           'hovertemplate': f'{side} {label} at %{{x:.3f}} s<extra></extra>'})
+    return traces
 
 
 def _aligned(bx: np.ndarray, by: np.ndarray, ax: np.ndarray) -> np.ndarray:

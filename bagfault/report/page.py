@@ -166,3 +166,13 @@ def envelope(x: np.ndarray, y: np.ndarray, buckets: int = 800) -> tuple[np.ndarr
             out_x.append(x[first + position])
             out_y.append(chunk[position])
     return np.array(out_x), np.array(out_y)
+
+
+def buckets_hit(times: np.ndarray, start: float, end: float, buckets: int = 800) -> np.ndarray:
+    """The first of the given times in each of the envelope's time buckets that holds any (markers for
+    events inside a decimated series: every bucket with one keeps one)."""
+    if times.size <= 2 * buckets or end <= start:
+        return times
+    index = np.clip(((times - start) / (end - start) * buckets).astype(np.int64), 0, buckets - 1)
+    _, first = np.unique(index, return_index=True)
+    return times[first]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import textwrap
 
 import numpy as np
+import pytest
 from helpers import make_bag
 from html_check import figures
 
@@ -61,3 +62,51 @@ def test_array_images_keep_short_arrays_element_by_element_and_bin_long_ones():
     image = long.image(-180.0, 0.5)
     assert image.values.shape == (ROWS, 1) and image.values[:3, 0].tolist() == [0.0, 2.0, 4.0]   # minimum per bin
     assert image.elements[:3].tolist() == [-180.0, -179.0, -178.0]
+
+
+def test_non_finite_scalars_are_marked_where_they_are(tmp_path):
+    """A `nan` operation on odometry x from 1 s to 3 s and +inf on y from 4 s: the line would only show gaps, so
+    the field figures mark every such message, on the after side only (times from the 10 Hz generator)."""
+    bag = make_bag(tmp_path / 'in.mcap', [('/odom', 'nav_msgs/msg/Odometry', 10.0)], 6.0)
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text(textwrap.dedent("""
+        injectors:
+          - {id: f, type: field, input_topic: /odom, output_topic: /odom_out}
+        faults:
+          - {id: blank, injector_id: f, start: 1.0, duration: 2.0,
+             config: {operations: [{op: nan, path: pose.pose.position.x}]}}
+          - {id: huge, injector_id: f, start: 4.0,
+             config: {operations: [{op: set, path: pose.pose.position.y, value: .inf}]}}
+    """))
+    page = tmp_path / 'r.html'
+    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--html', str(page)]) == 0
+    drawn = figures(page)
+    x = {t['name']: t for t in drawn['field:/odom_out:pose.pose.position.x']['data']}
+    y = {t['name']: t for t in drawn['field:/odom_out:pose.pose.position.y']['data']}
+    assert x['after: nan']['x'] == pytest.approx([1.0 + 0.1 * k for k in range(20)])
+    assert y['after: +inf']['x'] == pytest.approx([4.0 + 0.1 * k for k in range(20)])
+    assert not {'before: nan', 'before: +inf', 'after: -inf', 'after: +inf'} & set(x)
+    assert not {'before: nan', 'before: +inf', 'after: nan'} & set(y)
+    finite_top = max(v for t in ('before: /odom', 'after: /odom_out') for v in x[t]['y'] if v is not None)
+    assert set(x['after: nan']['y']) == {finite_top}
+
+
+def test_envelopes_keep_every_extreme_of_a_long_series():
+    """An hour at 200 Hz (720,000 samples) with one spike and one dip among small noise: the decimated series is
+    at most two points per bucket and still holds the spike and the dip at their own times."""
+    from bagfault.report.page import buckets_hit, envelope
+
+    rng = np.random.default_rng(7)
+    x = np.arange(720_000) / 200.0
+    y = rng.normal(0.0, 0.01, x.size)
+    y[123_457], y[600_001] = 5.0, -3.0
+    ex, ey = envelope(x, y)
+    assert ex.size <= 1600 and np.all(np.diff(ex) >= 0)
+    assert (ey.max(), ex[ey.argmax()]) == (5.0, x[123_457])
+    assert (ey.min(), ex[ey.argmin()]) == (-3.0, x[600_001])
+    # a bucket of 4.5 s (3600 s / 800) never reduces to more than its min and max: no point dropped blindly
+    bucket = (ex // 4.5).astype(int)
+    assert np.bincount(bucket).max() <= 2
+    # markers: one per bucket that holds any, the first of them
+    marks = buckets_hit(x[::7], 0.0, x[-1])
+    assert marks.size == 800 and marks[0] == 0.0
