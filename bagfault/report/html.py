@@ -132,7 +132,7 @@ def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) 
         f'{", black box " + escape(s["black_box"]) if s["black_box"] else ""}</summary>'
         f'<pre>{escape(json.dumps(s["freeze_frame"], indent=1, sort_keys=True)[:4000])}</pre></details>'
         for s in summary['snapshots'])
-    page.html(f'<p>{len(summary["confirmed"])} confirmed; {summary["muted_count"]} muted; '
+    page.html(f'<p>At the end of the bag: {len(summary["confirmed"])} confirmed, {summary["muted_count"]} muted, '
               f'{summary["cluster_count"]} clusters.</p>'
               '<table><tr><th>code</th><th>severity</th><th>status</th><th>occurrences</th><th>first (s)</th>'
               '<th>last (s)</th><th>confirmed</th><th>updated</th><th>cleared</th></tr>'

@@ -61,7 +61,7 @@ def render(report: dict[str, Any]) -> str:
 def fault_manager_section(summary: dict[str, Any]) -> list[str]:
     """Final fault table, events, clusters and snapshots of the fault manager oracle."""
     lines = ['', '## Fault manager', '',
-             f'{len(summary["confirmed"])} confirmed; {summary["muted_count"]} muted; '
+             f'At the end of the bag: {len(summary["confirmed"])} confirmed, {summary["muted_count"]} muted, '
              f'{summary["cluster_count"]} clusters.', '',
              '| code | severity | status | occurrences | first (s) | last (s) | sources |',
              '|---|---|---|---:|---:|---:|---|']
