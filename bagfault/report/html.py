@@ -270,6 +270,15 @@ def _media(page: Page, report: dict[str, Any], media: Sequence[MediaPlot]) -> No
                             name=f'thumbnails:{item.output_topic}')
 
 
+def _broken_at(x: np.ndarray, y: np.ndarray, gaps: list[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """The series with a nan in the middle of each gap, so no line is drawn across a silence."""
+    if not gaps:
+        return x, y
+    middles = np.array([(a + b) / 2 for a, b in gaps])
+    at = np.searchsorted(x, middles)
+    return np.insert(x, at, middles), np.insert(y, at, np.nan)
+
+
 def _rates(page: Page, report: dict[str, Any], rates: RateTracker | None, topics: Sequence[str]) -> None:
     """Small multiples on one shared time axis: each topic's rate over a window matched to its nominal rate,
     fault windows shaded, gaps marked."""
@@ -287,7 +296,7 @@ def _rates(page: Page, report: dict[str, Any], rates: RateTracker | None, topics
                               'shapes': shade(_windows(report)), 'margin': {'l': 60, 'r': 20, 't': 24, 'b': 36}}
     for number, topic in enumerate(shown, start=1):
         series = rates.series(topic)
-        x, y = envelope(series.times, series.rates)
+        x, y = envelope(*_broken_at(series.times, series.rates, series.gaps))
         top = 1 - (number - 1) / rows
         axis = '' if number == 1 else str(number)
         layout[f'yaxis{axis}'] = {'domain': [max(0.0, top - 1 / rows + gap), top], 'rangemode': 'tozero',

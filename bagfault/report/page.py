@@ -147,7 +147,8 @@ LEGEND = {'orientation': 'h', 'x': 1, 'xanchor': 'right', 'y': 1.0, 'yanchor': '
 
 
 def envelope(x: np.ndarray, y: np.ndarray, buckets: int = 800) -> tuple[np.ndarray, np.ndarray]:
-    """Decimate a series to min/max pairs per time bucket (extremes kept, unlike dropping points)."""
+    """Decimate a series to min/max pairs per time bucket (extremes kept, unlike dropping points); a bucket
+    holding a nan keeps one, so a break in the line (a gap, a nan value) stays a break."""
     if x.size <= 2 * buckets:
         return x, y
     edges = np.linspace(x[0], x[-1], buckets + 1)
@@ -162,7 +163,8 @@ def envelope(x: np.ndarray, y: np.ndarray, buckets: int = 800) -> tuple[np.ndarr
             out_y += [np.nan]
             continue
         low, high = int(np.nanargmin(chunk)), int(np.nanargmax(chunk))
-        for position in sorted({low, high}):
+        holes = np.flatnonzero(np.isnan(chunk))
+        for position in sorted({low, high, *holes[:1].tolist()}):
             out_x.append(x[first + position])
             out_y.append(chunk[position])
     return np.array(out_x), np.array(out_y)

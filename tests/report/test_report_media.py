@@ -100,12 +100,14 @@ def test_envelopes_keep_every_extreme_of_a_long_series():
     x = np.arange(720_000) / 200.0
     y = rng.normal(0.0, 0.01, x.size)
     y[123_457], y[600_001] = 5.0, -3.0
+    y[300_000] = np.nan                                 # a break in the line (a gap, a nan value)
     ex, ey = envelope(x, y)
-    assert ex.size <= 1600 and np.all(np.diff(ex) >= 0)
-    assert (ey.max(), ex[ey.argmax()]) == (5.0, x[123_457])
-    assert (ey.min(), ex[ey.argmin()]) == (-3.0, x[600_001])
+    assert ex.size <= 1600 + 1 and np.all(np.diff(ex) >= 0)
+    assert ex[np.isnan(ey)].tolist() == [x[300_000]]    # kept, between the bucket's extremes where it was
+    assert (np.nanmax(ey), ex[np.nanargmax(ey)]) == (5.0, x[123_457])
+    assert (np.nanmin(ey), ex[np.nanargmin(ey)]) == (-3.0, x[600_001])
     # a bucket of 4.5 s (3600 s / 800) never reduces to more than its min and max: no point dropped blindly
-    bucket = (ex // 4.5).astype(int)
+    bucket = (ex[np.isfinite(ey)] // 4.5).astype(int)
     assert np.bincount(bucket).max() <= 2
     # markers: one per bucket that holds any, the first of them
     marks = buckets_hit(x[::7], 0.0, x[-1])

@@ -76,6 +76,9 @@ def test_a_10_hz_topic_reads_10_hz_outside_faults(turtlebot):
     gaps = trace(rates, '/clock gaps')
     assert gaps['x'] == pytest.approx(raw[:-1][long].tolist(), abs=1e-6)
     assert gaps['customdata'] == pytest.approx(intervals[long].tolist(), abs=1e-6)
+    for start, end in zip(raw[:-1][long], raw[1:][long], strict=True):   # no line drawn across a silence
+        between = (x > start) & (x < end)
+        assert between.any() and np.isnan(y[between]).all()
     event_rows = {t['y'][0] for t in figures(turtlebot)['timeline']['data'] if t['y']}
     assert {'/fault_manager/events', '/rosout', '/tf_static'} <= event_rows   # markers, not rates
     assert not any(t.get('name') in ('/rosout', '/tf_static', '/fault_manager/events') for t in rates['data'])
