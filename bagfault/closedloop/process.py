@@ -3,7 +3,9 @@
 It is started in a new session (its own process group). Stopping sends
 SIGINT, then SIGTERM, then SIGKILL, `stop_timeout` apart, to the group and
 to every descendant that left it (a daemonised child); `leftovers` lists
-whatever still runs, which a test can assert is empty.
+whatever still runs, which a test can assert is empty. A process seen
+during the run is known by its pid and start time, so a pid the kernel hands
+to another program after ours ended is never signalled.
 """
 
 from __future__ import annotations
@@ -25,12 +27,14 @@ TAIL_LINES = 20
 
 @dataclass(frozen=True)
 class ProcessStat:
-    """One line of /proc/PID/stat: what is needed to find a process's group and parent."""
+    """One line of /proc/PID/stat: what is needed to find a process's group and parent, and to tell it from a
+    later process with the same pid (its start time in clock ticks since boot)."""
 
     pid: int
     ppid: int
     pgid: int
     state: str
+    start: int
 
 
 def processes() -> list[ProcessStat]:
@@ -44,7 +48,7 @@ def processes() -> list[ProcessStat]:
         except OSError:
             continue
         fields = text[text.rfind(')') + 2:].split()  # the command name may hold spaces and parentheses
-        found.append(ProcessStat(int(entry.name), int(fields[1]), int(fields[2]), fields[0]))
+        found.append(ProcessStat(int(entry.name), int(fields[1]), int(fields[2]), fields[0], int(fields[19])))
     return found
 
 
@@ -60,22 +64,22 @@ def describe_exit(code: int | None) -> str:
     return f'code {code}'
 
 
-def family(leader: int) -> set[int]:
-    """Live processes of the group `leader` leads, and every descendant of the leader and of those."""
-    table = [p for p in processes() if p.state != 'Z']
-    members = {p.pid for p in table if p.pgid == leader}
-    if any(p.pid == leader for p in table):
-        members.add(leader)
+def family(leader: int, known: dict[int, int]) -> dict[int, int]:
+    """Live processes (pid -> start time) of the group `leader` leads (a group id is not reused while the group
+    has members), the `known` ones still running as the same process, and every descendant of those."""
+    table = {p.pid: p for p in processes() if p.state != 'Z'}
+    members = {p.pid for p in table.values() if p.pgid == leader}
+    members |= {pid for pid, start in known.items() if pid in table and table[pid].start == start}
     children: dict[int, list[int]] = {}
-    for p in table:
+    for p in table.values():
         children.setdefault(p.ppid, []).append(p.pid)
-    todo = list(members | {leader})
+    todo = list(members)
     while todo:
         for child in children.get(todo.pop(), []):
             if child not in members:
                 members.add(child)
                 todo.append(child)
-    return members
+    return {pid: table[pid].start for pid in members}
 
 
 class SystemProcess:
@@ -99,7 +103,7 @@ class SystemProcess:
             raise ClosedLoopError(f'system under test: cannot start {" ".join(command)}: '
                                   f'{exc.strerror or exc}') from None
         self.pid = self.popen.pid
-        self._known: set[int] = {self.pid}
+        self._known: dict[int, int] = family(self.pid, {})  # the group: the new process at least
 
     @property
     def returncode(self) -> int | None:
@@ -112,7 +116,7 @@ class SystemProcess:
 
     def watch(self) -> None:
         """Remember the current descendants, so those that leave the group are still stopped."""
-        self._known |= family(self.pid)
+        self._known |= family(self.pid, self._known)
 
     def stop(self, timeout: float) -> Ending:
         """SIGINT, SIGTERM, SIGKILL to the group and its descendants, `timeout` apart; how it ended."""
@@ -138,8 +142,7 @@ class SystemProcess:
 
     def leftovers(self) -> set[int]:
         """Processes of the system still running (its group and the descendants seen)."""
-        alive = {p.pid for p in processes() if p.state != 'Z'}
-        return (family(self.pid) | self._known) & alive - {os.getpid()}
+        return set(family(self.pid, self._known)) - {os.getpid()}
 
     def tail(self, lines: int = TAIL_LINES) -> list[str]:
         """The last lines the system wrote, stderr's after stdout's."""

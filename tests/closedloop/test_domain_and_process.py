@@ -117,6 +117,26 @@ def test_a_child_that_left_the_group_is_stopped_too(tmp_path: Path) -> None:
     assert running_with(token) == []
 
 
+def test_a_pid_the_kernel_gave_to_another_program_is_never_signalled(tmp_path: Path) -> None:
+    """A process of the system seen during the run ended and its pid went to an unrelated program (pids wrap at
+    32768 here): that program has another start time, is not counted as the system's, and is left running."""
+    bystander = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(300)'])
+    try:
+        token = uuid.uuid4().hex
+        process = start(tmp_path, f'{READY_SLEEP} {token}', token)
+        wait_for(lambda: 'sleeping' in process.stderr_path.read_text())
+        began = next(p.start for p in processes() if p.pid == bystander.pid)
+        process._known[bystander.pid] = began - 1     # what the run saw: an earlier process with this pid
+        assert bystander.pid not in process.leftovers()
+        assert process.stop(timeout=2.0) == 'SIGINT'
+        assert bystander.poll() is None and running_with(token) == []
+        process._known[bystander.pid] = began         # had it been the system's own (daemonised) child
+        assert process.leftovers() == {bystander.pid}
+    finally:
+        bystander.kill()
+        bystander.wait()
+
+
 def test_a_system_that_exits_by_itself(tmp_path: Path) -> None:
     process = start(tmp_path, 'echo one; echo two >&2; exit 3', 'x')
     wait_for(lambda: not process.alive())
@@ -139,8 +159,11 @@ def test_exit_descriptions() -> None:
 
 def test_process_table_matches_ps() -> None:
     ours = next(p for p in processes() if p.pid == os.getpid())
-    ps = subprocess.run(['ps', '-o', 'ppid=,pgid=', '-p', str(os.getpid())], capture_output=True, text=True,
-                        check=False)
+    ps = subprocess.run(['ps', '-o', 'ppid=,pgid=,etimes=', '-p', str(os.getpid())], capture_output=True,
+                        text=True, check=False)
+    uptime = float(Path('/proc/uptime').read_text().split()[0])
     if ps.returncode != 0:
         pytest.skip('ps not available')
-    assert [ours.ppid, ours.pgid] == [int(v) for v in ps.stdout.split()]
+    ppid, pgid, elapsed = (int(v) for v in ps.stdout.split())
+    assert [ours.ppid, ours.pgid] == [ppid, pgid]
+    assert abs(uptime - ours.start / os.sysconf('SC_CLK_TCK') - elapsed) < 2.0   # start: ticks since boot
