@@ -68,7 +68,10 @@ def test_the_example_passes_and_its_recording_holds_the_whole_loop(tester: LoopR
     assert origin <= diagnostics[0][0] and diagnostics[-1][0] <= origin + 13 * NS
     assert len(diagnostics) >= 5 * 12  # 5 Hz of sim time over 12 s and the tail
     offsets = [t - (m.header.stamp.sec * NS + m.header.stamp.nanosec) for t, m in diagnostics]
-    assert max(abs(o) for o in offsets) < 0.1 * NS  # the system's sim clock is the bag's clock
+    # the system's sim clock is the bag's clock: its stamps are where its messages were heard (a wall clock would
+    # be years off, a clock at another rate seconds off by the end); a starved system's message arrives a few
+    # hundred ms late under load (0.14 and 0.39 s seen beside Chromium and Ray tests), hence 1 s
+    assert max(abs(o) for o in offsets) < 1.0 * NS
     # detection seen by the fault manager, within the asserted 2 s
     [activated] = [t for t, e in topics['/fault_injection/events'] if e.fault_id == 'gyro_drift' and e.state == 'active']
     confirmed = [t for t, e in topics['/fault_manager/events']
