@@ -65,11 +65,14 @@ def describe_exit(code: int | None) -> str:
 
 
 def family(leader: int, known: dict[int, int]) -> dict[int, int]:
-    """Live processes (pid -> start time) of the group `leader` leads (a group id is not reused while the group
-    has members), the `known` ones still running as the same process, and every descendant of those."""
+    """Live processes (pid -> start time) of the group `leader` leads, the `known` ones still running as the same
+    process, and every descendant of those. The kernel reuses neither a group id while the group has members
+    nor, then, the leader's pid; so a live process with the leader's pid and another start time means the group
+    of that id is a new one, not the system's."""
     table = {p.pid: p for p in processes() if p.state != 'Z'}
-    members = {p.pid for p in table.values() if p.pgid == leader}
-    members |= {pid for pid, start in known.items() if pid in table and table[pid].start == start}
+    members = {pid for pid, start in known.items() if pid in table and table[pid].start == start}
+    if not (leader in table and leader in known and table[leader].start != known[leader]):
+        members |= {p.pid for p in table.values() if p.pgid == leader}
     children: dict[int, list[int]] = {}
     for p in table.values():
         children.setdefault(p.ppid, []).append(p.pid)
@@ -154,11 +157,13 @@ class SystemProcess:
         return out[-lines:]
 
     def _signal(self, sig: int, pids: set[int]) -> None:
-        """Once to the group, and once to each process that left it (never twice to one process: a second
-        SIGINT can reach a node after its handler was removed and kill it instead of stopping it)."""
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(self.pid, sig)
-        grouped = {p.pid for p in processes() if p.pgid == self.pid}
+        """Once to the group while it is the system's, and once to each process that left it (never twice to one
+        process: a second SIGINT can reach a node after its handler was removed and kill it instead of stopping
+        it)."""
+        grouped = {p.pid for p in processes() if p.pgid == self.pid} & pids
+        if grouped:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(self.pid, sig)
         for pid in pids - grouped:
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.kill(pid, sig)

@@ -13,7 +13,7 @@ import pytest
 from loop import running_with
 
 from bagfault.closedloop.domain import DomainLease
-from bagfault.closedloop.process import SystemProcess, describe_exit, processes
+from bagfault.closedloop.process import ProcessStat, SystemProcess, describe_exit, family, processes
 from bagfault.errors import ClosedLoopError
 
 
@@ -135,6 +135,24 @@ def test_a_pid_the_kernel_gave_to_another_program_is_never_signalled(tmp_path: P
     finally:
         bystander.kill()
         bystander.wait()
+
+
+def test_a_group_id_taken_by_a_new_program_is_not_the_systems(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Tables written by hand. The system's leader 100 (started at tick 7) led group 100 with child 101; once
+    the whole group ended, the kernel may give 100 to a new program that leads a group 100 of its own: another
+    start time, and neither it nor its group is the system's. Descendants of a known process stay the system's."""
+    from bagfault.closedloop import process as module
+
+    def table(*rows: tuple[int, int, int, int]) -> None:
+        monkeypatch.setattr(module, 'processes', lambda: [ProcessStat(pid, ppid, pgid, 'S', start)
+                                                          for pid, ppid, pgid, start in rows])
+
+    table((100, 1, 100, 7), (101, 100, 100, 9), (300, 101, 300, 12))   # 300: a child that left the group
+    assert family(100, {}) == {100: 7, 101: 9, 300: 12}
+    table((100, 1, 100, 50), (102, 100, 100, 51))                      # pid 100 is someone else's now
+    assert family(100, {100: 7, 101: 9}) == {}
+    table((102, 1, 100, 51))                                           # its leader gone, its member stays
+    assert family(100, {100: 7}) == {102: 51}   # no live pid 100 to tell: the group is taken as the system's
 
 
 def test_a_system_that_exits_by_itself(tmp_path: Path) -> None:
