@@ -151,8 +151,7 @@ def envelope(x: np.ndarray, y: np.ndarray, buckets: int = 800) -> tuple[np.ndarr
     holding a nan keeps one, so a break in the line (a gap, a nan value) stays a break."""
     if x.size <= 2 * buckets:
         return x, y
-    edges = np.linspace(x[0], x[-1], buckets + 1)
-    index = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, buckets - 1)
+    index = _bucket_of(x, x[0], x[-1], buckets)
     starts = np.flatnonzero(np.r_[True, index[1:] != index[:-1]])
     out_x, out_y = [], []
     finite = np.where(np.isfinite(y), y, np.nan)
@@ -175,6 +174,11 @@ def buckets_hit(times: np.ndarray, start: float, end: float, buckets: int = 800)
     events inside a decimated series: every bucket with one keeps one)."""
     if times.size <= 2 * buckets or end <= start:
         return times
-    index = np.clip(((times - start) / (end - start) * buckets).astype(np.int64), 0, buckets - 1)
-    _, first = np.unique(index, return_index=True)
+    _, first = np.unique(_bucket_of(times, start, end, buckets), return_index=True)
     return times[first]
+
+
+def _bucket_of(times: np.ndarray, start: float, end: float, buckets: int) -> np.ndarray:
+    """The envelope bucket (0 .. buckets - 1, equal spans of start..end) of each time."""
+    edges = np.linspace(start, end, buckets + 1)
+    return np.clip(np.searchsorted(edges, times, side='right') - 1, 0, buckets - 1)
