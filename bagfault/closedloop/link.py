@@ -182,11 +182,11 @@ class SystemLink(LiveSink):
                 return
 
     # -- the system's messages ---------------------------------------------------------------
-    def _on_topic(self, topic: str, msgtype: str, profile: str) -> None:
+    def _on_topic(self, topic: str, msgtype: str, metadata: dict[str, str]) -> None:
         if topic in self._publishers:  # the system publishes on a topic the bag plays: tell ours from its
             self._echoes.listen(topic, tuple(self._latched.get(topic, ())))
         channel = self.record_only(topic, msgtype, *self.catalog.schema(msgtype),
-                                   metadata={'offered_qos_profiles': profile})
+                                   metadata=metadata)
         self._outputs[topic] = OutputChannel(channel, topic, msgtype)
 
     def _on_message(self, topic: str, data: bytes) -> None:

@@ -25,7 +25,7 @@ from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live import LOOPBACK_PROFILE
-from bagfault.live.runtime import make_executor, ros_context
+from bagfault.live.runtime import make_executor, ros_context, running_distro
 from bagfault.scenario.system import command_line
 
 if TYPE_CHECKING:
@@ -59,7 +59,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
         input_set = InputSet(inputs)
         try:
             catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
-            recording = (McapSink(output, ros_distro=catalog.distro, flush_every=LIVE_FLUSH)
+            recording = (McapSink(output, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
                          if output is not None else None)
             with ros_context(stop, domain_id=lease.domain) as context:
                 node = Node('bagfault_test_player', context=context)
@@ -78,7 +78,8 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                     if recording is not None:
                         recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0),
                                                             'mode': 'test', 'command': ' '.join(command)})
-                        recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
+                        recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
+                                                 input_set.start_time or 0)
                     process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
                                             shell=system.shell, logs=folder)
                     link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,

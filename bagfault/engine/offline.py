@@ -162,12 +162,12 @@ def run_to_file(
         try:
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
-            sink = McapSink(output, compression=compression, ros_distro=catalog.distro)
+            sink = McapSink(output, compression=compression, ros_distro=inputs.ros_distro or '')
             try:
                 chunks = chunk_copy_for(inputs) if chunk_copy and batch else None
                 if chunks is not None:
                     chunks.reserve(sink)
-                sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
+                sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(), inputs.start_time or 0)
                 run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
                                 start_offset=start_offset, batch=batch, progress=progress, observers=observers,
                                 blackbox_base=output, chunks=chunks)

@@ -2,9 +2,11 @@
 
 As rosbag2's MCAP storage writes it: a type without a definition gets a
 schema with an empty encoding and text, every channel carries
-`offered_qos_profiles` (the default profile when the input had none), and a
-`rosbag2` metadata record describes the bag, so `ros2 bag info` and
-`ros2 bag play` read it as one of theirs. A disk that fills up, or any
+`offered_qos_profiles` in the integer form with nine keys (the default
+profile when the input had none) and `topic_type_hash`, and a `rosbag2`
+metadata record (version 8, its keys at the top level) describes the bag, so
+`ros2 bag info` and `ros2 bag play` of Humble, Iron and Jazzy read it as one
+of theirs. A disk that fills up, or any
 other failed write, is an `OutputError`; nothing is left under the name.
 """
 
@@ -24,15 +26,11 @@ from mcap.records import Schema as McapSchema
 from bagfault.errors import OutputError
 from bagfault.io.mcap_writer import CopiedChunk, McapWriter
 from bagfault.io.outputs import current_umask
+from bagfault.io.qos import DEFAULT_QOS, normalized
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')
 LIVE_FLUSH = 1.0  # seconds: a live recording loses at most this much to a kill
-INFINITE = {'sec': 9223372036, 'nsec': 854775807}  # rmw's "infinite" duration, as Jazzy's recorder writes it
-DEFAULT_QOS = yaml.safe_dump([{
-    'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
-    'deadline': INFINITE, 'lifespan': INFINITE, 'liveliness': 'automatic',
-    'liveliness_lease_duration': INFINITE, 'avoid_ros_namespace_conventions': False,
-}], sort_keys=False)
+METADATA_VERSION = 8  # the last version whose QoS every distro reads (9 writes names Humble and Iron cannot)
 
 
 class McapSink:
@@ -43,9 +41,9 @@ class McapSink:
     """
 
     def __init__(self, path: Path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 ros_distro: str = 'jazzy', flush_every: float | None = None) -> None:
+                 ros_distro: str = '', flush_every: float | None = None) -> None:
         self.path = path
-        self.ros_distro = ros_distro
+        self.ros_distro = ros_distro  # the input's or the recording rclpy's; '' when unknown, never guessed
         self.flush_every = flush_every  # live recordings: complete a chunk at least this often (seconds)
         self._flushed = time.monotonic()
         if compression not in COMPRESSIONS:
@@ -66,8 +64,10 @@ class McapSink:
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
                                   library=f'bagfault {_version()}')
         self._schemas: dict[tuple[str, str, str], int] = {}
-        self._topics: dict[int, tuple[str, str, str, str]] = {}  # channel id -> topic, type, encoding, QoS
+        self._topics: dict[int, tuple[str, str, str, str, str]] = {}  # id -> topic, type, encoding, QoS, hash
         self._kept_schemas: set[int] = set()
+        if flush_every is not None:  # a live recording says what it is at its start, as rosbag2's recorder does
+            self.add_metadata('rosbag2', self._rosbag2_metadata())
 
     def add_channel(
         self,
@@ -80,8 +80,9 @@ class McapSink:
     ) -> int:
         """Register a channel (and its schema once); return its id."""
         key = (msgtype, schema_encoding if schema_text else '', schema_text)
-        channel_metadata = dict(metadata or {})
-        channel_metadata.setdefault('offered_qos_profiles', DEFAULT_QOS)
+        given = dict(metadata or {})
+        channel_metadata = {'offered_qos_profiles': normalized(given.pop('offered_qos_profiles', None)),
+                            'topic_type_hash': given.pop('topic_type_hash', ''), **given}
         try:
             schema_id = self._schemas.get(key)
             if schema_id is None:
@@ -90,7 +91,8 @@ class McapSink:
             channel_id = self._writer.register_channel(topic, message_encoding, schema_id, channel_metadata)
         except OSError as exc:
             raise self._failed(exc) from None
-        self._topics[channel_id] = (topic, msgtype, message_encoding, channel_metadata['offered_qos_profiles'])
+        self._topics[channel_id] = (topic, msgtype, message_encoding, channel_metadata['offered_qos_profiles'],
+                                    channel_metadata['topic_type_hash'])
         return channel_id
 
     # -- chunk copy: an input's channels kept as they are, its chunks copied -------------------------
@@ -109,7 +111,8 @@ class McapSink:
         except OSError as exc:
             raise self._failed(exc) from None
         qos = channel.metadata.get('offered_qos_profiles', DEFAULT_QOS)
-        self._topics[channel.id] = (channel.topic, msgtype, channel.message_encoding, qos)
+        self._topics[channel.id] = (channel.topic, msgtype, channel.message_encoding, qos,
+                                    channel.metadata.get('topic_type_hash', ''))
         return channel.id
 
     def copy_chunk(self, chunk: CopiedChunk) -> None:
@@ -200,24 +203,25 @@ class McapSink:
         return OutputError(f'{self.path}: cannot write: {exc.strerror or exc}')
 
     def _rosbag2_metadata(self) -> dict[str, str]:
-        """The `rosbag2` metadata record of rosbag2's MCAP storage (metadata version 9)."""
+        """The `rosbag2` metadata record as rosbag2's MCAP storage writes it: `serialized_metadata` holds the
+        BagMetadata YAML with its keys at the top level (metadata.yaml nests them; this record does not)."""
         counts, (start, end) = self._writer.counts, self._writer.time_range
         total = sum(counts.values())
         span = {'nanoseconds': end - start if total else 0}
         first = {'nanoseconds_since_epoch': start if total else 0}
         topics = [{
             'topic_metadata': {'name': topic, 'type': msgtype, 'serialization_format': encoding,
-                               'offered_qos_profiles': _profiles(qos), 'type_description_hash': ''},
+                               'offered_qos_profiles': qos, 'type_description_hash': type_hash},
             'message_count': counts.get(number, 0),
-        } for number, (topic, msgtype, encoding, qos) in sorted(self._topics.items())]
+        } for number, (topic, msgtype, encoding, qos, type_hash) in sorted(self._topics.items())]
         info = {
-            'version': 9, 'storage_identifier': 'mcap', 'duration': span, 'starting_time': first,
+            'version': METADATA_VERSION, 'storage_identifier': 'mcap', 'duration': span, 'starting_time': first,
             'message_count': total, 'topics_with_message_count': topics, 'compression_format': '',
-            'compression_mode': '', 'relative_file_paths': [], 'files': [],  # rosbag2's reader fills these in
+            'compression_mode': '', 'relative_file_paths': [self.path.name],
+            'files': [{'path': self.path.name, 'starting_time': first, 'duration': span, 'message_count': total}],
             'custom_data': {}, 'ros_distro': self.ros_distro,
         }
-        text = yaml.dump({'rosbag2_bagfile_information': info}, Dumper=_PlainDumper, sort_keys=False)
-        return {'serialized_metadata': text, 'ROS_DISTRO': self.ros_distro}
+        return {'serialized_metadata': yaml.dump(info, Dumper=_PlainDumper, sort_keys=False)}
 
 
 class _PlainDumper(yaml.SafeDumper):
@@ -225,15 +229,6 @@ class _PlainDumper(yaml.SafeDumper):
 
     def ignore_aliases(self, data: object) -> bool:
         return True
-
-
-def _profiles(text: str) -> object:
-    """offered_qos_profiles as a YAML sequence (metadata version 9), or the text as recorded when it is not one."""
-    try:
-        profiles = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return text
-    return profiles if isinstance(profiles, list) else text
 
 
 def _version() -> str:

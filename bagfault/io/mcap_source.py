@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 import lz4.frame
-import yaml
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, SeekingReader
@@ -35,6 +34,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel, normalize_msgtype
 from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, parse_summary, read_footer, read_metadata
+from bagfault.io.rosbag2_record import distro_of
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -253,13 +253,7 @@ class McapSource:
             position += 9 + length
 
     def _read_rosbag2_metadata(self, metadata: dict[str, str]) -> None:
-        try:
-            info = yaml.safe_load(metadata.get('serialized_metadata', '')) or {}
-            stored = info.get('rosbag2_bagfile_information', {}).get('ros_distro') if isinstance(info, dict) else None
-        except yaml.YAMLError:
-            stored = None
-        distro = stored or metadata.get('ROS_DISTRO')
-        self.ros_distro = distro if isinstance(distro, str) else None
+        self.ros_distro = distro_of(metadata) or self.ros_distro
 
     def _register(self, channel_id: int) -> int:
         index = self._ids.get(channel_id)

@@ -20,6 +20,7 @@ from mcap.stream_reader import StreamReader
 
 from bagfault.errors import InputError
 from bagfault.io.mcap_sink import McapSink
+from bagfault.io.rosbag2_record import distro_of
 
 READ_ERRORS = (McapError, EOFError, ValueError, KeyError, OSError, struct.error)
 
@@ -60,7 +61,7 @@ def recover(source: Path, output: Path) -> Recovered:
     with source.open('rb') as stream:
         if stream.read(8) != b'\x89MCAP0\r\n':
             raise InputError(f'{source}: not an MCAP recording (no MCAP magic at its start); nothing to recover')
-    sink = McapSink(output)
+    sink = McapSink(output, ros_distro=_distro(source))
     channels: dict[int, int] = {}
     schemas: dict[int, Schema] = {}
     try:
@@ -99,3 +100,18 @@ def recover(source: Path, output: Path) -> Recovered:
     result.channels = len(channels)
     sink.finish()
     return result
+
+
+def _distro(source: Path) -> str:
+    """The distro of the recording's opening `rosbag2` record (live recordings write one at their start, as
+    rosbag2 does), '' when it has none."""
+    with source.open('rb') as stream:
+        try:
+            for record in StreamReader(stream, validate_crcs=True).records:
+                if isinstance(record, Metadata) and record.name == 'rosbag2':
+                    return distro_of(record.metadata) or ''
+                if isinstance(record, (Message, DataEnd)):
+                    break
+        except READ_ERRORS:
+            pass
+    return ''

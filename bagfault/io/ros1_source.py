@@ -22,12 +22,12 @@ from rosbags.typesys.base import TypesysError
 
 from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel
+from bagfault.io.qos import DURABILITY, HISTORY, QosProfile, dump_profiles
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator
     from pathlib import Path
 
-ROS2_DISTRO = 'humble'
 # What rosbags' reader raises on a damaged bag: its own errors, bz2/lz4 failures, and asserts on record headers.
 CONVERT_ERRORS = (SerdeError, TypesysError, struct.error, ValueError, IndexError, KeyError, UnicodeDecodeError)
 READ_ERRORS = (AnyReaderError, ReaderError, TypesysError, SerdeError, AssertionError, OSError, RuntimeError,
@@ -45,7 +45,7 @@ class Ros1Source:
     def __init__(self, path: Path, *, salvage: bool = False) -> None:
         self.path = path
         self.salvage = salvage
-        self.ros_distro: str | None = ROS2_DISTRO
+        self.ros_distro: str | None = None  # ROS 1 names no ROS 2 distro; its types convert to Humble's
         self.channels: list[Channel] = []
         self.losses: list[str] = []
         self.warnings: list[str] = []
@@ -121,11 +121,5 @@ class Ros1Source:
         self._reader.close()
 
 
-LATCHED_QOS = (
-    '- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n'
-    '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
-    '  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n'
-    '  liveliness: 1\n'
-    '  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n'
-    '  avoid_ros_namespace_conventions: false\n'
-)
+# a latched ROS 1 topic as rosbag2 records a transient-local publisher
+LATCHED_QOS = dump_profiles([QosProfile(history=HISTORY['unknown'], depth=0, durability=DURABILITY['transient_local'])])

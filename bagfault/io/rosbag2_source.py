@@ -25,7 +25,8 @@ from bagfault.io.sqlite_source import SqliteSource
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-    from bagfault.io.channel import Channel
+    from bagfault.io.qos import normalized
+from bagfault.io.channel import Channel
 
 STORAGE_SUFFIXES = ('.db3', '.mcap', '.db3.zstd', '.mcap.zstd')
 
@@ -128,13 +129,19 @@ class Rosbag2Source(MergedSource):
             if isinstance(t, dict) and isinstance(t.get('topic_metadata'), dict)
         ]
         qos = {t.get('name'): t.get('offered_qos_profiles', '') for t in declared}
+        hashes = {t.get('name'): t.get('type_description_hash') for t in declared}
         formats = {t.get('name'): t.get('serialization_format') for t in declared}
 
         def adjust(channel: Channel) -> Channel:
-            metadata = channel.metadata
+            metadata = dict(channel.metadata)
             declared_qos = qos.get(channel.topic)
+            if not channel.qos and isinstance(declared_qos, list) and declared_qos:  # version 9: a sequence
+                declared_qos = normalized(declared_qos)
             if not channel.qos and isinstance(declared_qos, str) and declared_qos:
-                metadata = (('offered_qos_profiles', declared_qos),)
+                metadata['offered_qos_profiles'] = declared_qos
+            declared_hash = hashes.get(channel.topic)
+            if not metadata.get('topic_type_hash') and isinstance(declared_hash, str) and declared_hash:
+                metadata['topic_type_hash'] = declared_hash
             # A format declared in metadata.yaml counts even if the storage says cdr.
             declared_format = formats.get(channel.topic)
             encoding = channel.message_encoding
@@ -142,7 +149,7 @@ class Rosbag2Source(MergedSource):
                 encoding = declared_format
             if encoding != 'cdr' and channel.message_encoding != 'cdr':
                 encoding = channel.message_encoding
-            return replace(channel, message_encoding=encoding, metadata=metadata)
+            return replace(channel, message_encoding=encoding, metadata=tuple(metadata.items()))
 
         return adjust
 

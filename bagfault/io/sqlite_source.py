@@ -93,13 +93,17 @@ class SqliteSource:
                 if isinstance(typename, str) and isinstance(text, str) and text:
                     definitions[typename] = (encoding if isinstance(encoding, str) else '', text)
         qos = ', offered_qos_profiles' if 'offered_qos_profiles' in columns else ", ''"
+        qos += ', type_description_hash' if 'type_description_hash' in columns else ", ''"
         query = f'SELECT id, name, type, serialization_format{qos} FROM topics ORDER BY id'
-        for topic_id, name, typename, fmt, qos_text in self._db.execute(query):
+        for topic_id, name, typename, fmt, qos_text, type_hash in self._db.execute(query):
             if not (isinstance(name, str) and isinstance(typename, str) and isinstance(fmt, str)):
                 raise InputError(f'{self.display}: topics row {topic_id} has no usable name, type or format '
                                  f'({name!r}, {typename!r}, {fmt!r})')
             encoding, text = definitions.get(typename, ('', ''))
-            metadata = (('offered_qos_profiles', qos_text),) if isinstance(qos_text, str) and qos_text else ()
+            metadata: tuple[tuple[str, str], ...] = (
+                (('offered_qos_profiles', qos_text),) if isinstance(qos_text, str) and qos_text else ())
+            if isinstance(type_hash, str) and type_hash:
+                metadata += (('topic_type_hash', type_hash),)
             self._ids[topic_id] = len(self.channels)
             self.channels.append(
                 Channel(

@@ -33,6 +33,7 @@ from bagfault.live.events import LiveEvents
 from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
 from bagfault.live.params import FaultParameters
 from bagfault.live.ros import interface_class, make_node, qos, unacknowledged
+from bagfault.live.runtime import running_distro
 from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import ServiceHost, TriggerProxy
 from bagfault.scenario import load_scenario
@@ -113,11 +114,12 @@ class ProxyNode:
         watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
-            self.recording = McapSink(self.record_path, flush_every=LIVE_FLUSH)
+            self.recording = McapSink(self.record_path, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
             self.recording.add_metadata('bagfault', {
                 'tool': 'bagfault', 'version': __version__, 'mode': 'proxy', 'seed': str(self.seed),
                 'scenario': self.scenario.name})
-            self.recording.add_attachment(self.scenario.name, 'application/yaml', self.scenario.text.encode())
+            self.recording.add_attachment(self.scenario.name, 'application/yaml', self.scenario.text.encode(),
+                                          self.now())
         sink: Any = self.recording
         if self.foxglove is not None:
             from bagfault.engine.run import NullSink  # noqa: PLC0415

@@ -26,6 +26,7 @@ from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live.pacer import SEEK, Pacer
+from bagfault.live.runtime import running_distro
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -69,13 +70,13 @@ def run_play(
     first, end = _time_range(inputs)
     control = FaultControl(scenario) if foxglove is not None else None
     with _node(ros, stop, ros_args) as node:
-        recording = (McapSink(record, ros_distro=_distro(inputs), flush_every=LIVE_FLUSH)
+        recording = (McapSink(record, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
                      if record is not None else None)
         view: FoxgloveView | None = None
         try:
             if recording is not None:
                 recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'})
-                recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode())
+                recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(), first)
             sink = _sink(node, rate=rate, clock=clock, stop=stop, recording=recording, delay=delay,
                          wait_for=wait_for, clock_hz=clock_hz, topics=topics, start_offset=start_offset)
             if foxglove is not None:
@@ -201,14 +202,5 @@ def _time_range(inputs: list[Path]) -> tuple[int, int]:
     input_set = InputSet(inputs)
     try:
         return input_set.start_time or 0, input_set.end_time or 0
-    finally:
-        input_set.close()
-
-
-def _distro(inputs: list[Path]) -> str:
-    """The distro whose definitions the recording will carry (that of the bag, as offline)."""
-    input_set = InputSet(inputs)
-    try:
-        return TypeCatalog(input_set.channels, input_set.ros_distro).distro
     finally:
         input_set.close()

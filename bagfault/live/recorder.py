@@ -20,7 +20,7 @@ from bagfault import __version__
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
 from bagfault.live.ros import has_interface, interface_class, make_node, offered_yaml
-from bagfault.live.runtime import make_executor, ros_context
+from bagfault.live.runtime import make_executor, ros_context, running_distro
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Collection
@@ -47,7 +47,7 @@ class RecordResult:
 class Recorder:
     """Subscribes raw to matching topics as they appear and hands on what arrives.
 
-    `on_topic(topic, msgtype, offered_qos_yaml)` is called once per subscribed
+    `on_topic(topic, msgtype, metadata)` (offered_qos_profiles, topic_type_hash) is called once per subscribed
     topic, `on_message(topic, data)` for every message (in the executor's
     thread). Topics in `exclude` are never subscribed. Topics in `shared`
     are also published by this process (a player's own): they are subscribed
@@ -56,7 +56,7 @@ class Recorder:
     """
 
     def __init__(self, node: Any, topics: Collection[str], every: bool, *,
-                 on_topic: Callable[[str, str, str], None], on_message: Callable[[str, bytes], None],
+                 on_topic: Callable[[str, str, dict[str, str]], None], on_message: Callable[[str, bytes], None],
                  exclude: Collection[str] = (), every_excludes: tuple[str, ...] = (),
                  shared: Collection[str] = (), own_nodes: Collection[str] = (),
                  echoes: OwnEchoes | None = None) -> None:
@@ -109,8 +109,10 @@ class Recorder:
     def subscribe(self, topic: str, msgtype: str) -> None:
         """Subscribe raw to one topic now (QoS from its current publishers, whose profiles are recorded)."""
         profile = self._profile(topic)
-        offered = [info.qos_profile for info in self.node.get_publishers_info_by_topic(topic)]
-        self.on_topic(topic, msgtype, offered_yaml(offered))
+        infos = self.node.get_publishers_info_by_topic(topic)
+        hashes = {str(info.topic_type_hash) for info in infos if str(info.topic_type_hash).startswith('RIHS')}
+        self.on_topic(topic, msgtype, {'offered_qos_profiles': offered_yaml([info.qos_profile for info in infos]),
+                                       'topic_type_hash': hashes.pop() if len(hashes) == 1 else ''})
         self.counts.setdefault(topic, 0)
         self.subscriptions[topic] = self.node.create_subscription(
             interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
@@ -145,7 +147,7 @@ def run_record(
     with ros_context(stop) as context:
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
         node = make_node('bagfault_recorder', context, ros_args, parameter_overrides=overrides)
-        recording = McapSink(output, flush_every=LIVE_FLUSH)
+        recording = McapSink(output, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
         executor = make_executor(context)
         executor.add_node(node)
         finished = False
@@ -155,9 +157,8 @@ def run_record(
             catalog = TypeCatalog([], 'jazzy')
             channels: dict[str, int] = {}
 
-            def on_topic(topic: str, msgtype: str, profile: str) -> None:
-                channels[topic] = recording.add_channel(topic, msgtype, *catalog.schema(msgtype), 'cdr',
-                                                        {'offered_qos_profiles': profile})
+            def on_topic(topic: str, msgtype: str, metadata: dict[str, str]) -> None:
+                channels[topic] = recording.add_channel(topic, msgtype, *catalog.schema(msgtype), 'cdr', metadata)
 
             def on_message(topic: str, data: bytes) -> None:
                 now = node.get_clock().now().nanoseconds

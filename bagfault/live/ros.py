@@ -10,11 +10,12 @@ import importlib
 import time
 from typing import TYPE_CHECKING, Any
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from bagfault.errors import LiveError
+from bagfault.io.qos import DEFAULT_QOS, dump_profiles, parse_profiles
+from bagfault.io.qos import QosProfile as StoredProfile
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -66,52 +67,33 @@ def qos(depth: int, reliability: str = 'reliable', durability: str = 'volatile')
 
 
 def recorded_qos(text: str, depth: int = 10) -> QoSProfile | None:
-    """The first profile of rosbag2's `offered_qos_profiles` YAML, None when absent or unreadable.
-
-    rosbag2 writes the policies as numbers (rmw enums; 1 = reliable or
-    transient_local) in older releases and as names in newer ones.
-    """
-    if not text:
-        return None
-    try:
-        profiles = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return None
-    if not isinstance(profiles, list) or not profiles or not isinstance(profiles[0], dict):
+    """The first profile of rosbag2's `offered_qos_profiles` YAML (numbers or names), None when absent or
+    unreadable; a recorded depth of 0 (what recorders report for other nodes' publishers) gives `depth`."""
+    profiles = parse_profiles(text)
+    if profiles is None:
         return None
     first = profiles[0]
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=first.depth or depth,
+        reliability=ReliabilityPolicy.BEST_EFFORT if first.best_effort else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if first.transient_local else DurabilityPolicy.VOLATILE)
 
-    def policy(key: str, names: dict[str, Any], numbers: dict[int, Any], default: Any) -> Any:
-        value = first.get(key)
-        if isinstance(value, int) and value in numbers:
-            return numbers[value]
-        if isinstance(value, str) and value.lower() in names:
-            return names[value.lower()]
-        return default
 
-    reliability = policy('reliability', RELIABILITY, {1: ReliabilityPolicy.RELIABLE, 2: ReliabilityPolicy.BEST_EFFORT},
-                         ReliabilityPolicy.RELIABLE)
-    durability = policy('durability', DURABILITY, {1: DurabilityPolicy.TRANSIENT_LOCAL, 2: DurabilityPolicy.VOLATILE},
-                        DurabilityPolicy.VOLATILE)
-    recorded_depth = first.get('depth')
-    if not isinstance(recorded_depth, int) or recorded_depth <= 0:
-        recorded_depth = depth
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=recorded_depth, reliability=reliability,
-                      durability=durability)
+def _duration(value: Any) -> dict[str, int]:
+    nanoseconds = int(getattr(value, 'nanoseconds', 0))
+    return {'sec': nanoseconds // 1_000_000_000, 'nsec': nanoseconds % 1_000_000_000}
 
 
 def offered_yaml(profiles: list[QoSProfile]) -> str:
-    """rosbag2-style `offered_qos_profiles` text (names): one entry per publisher, as `ros2 bag record` writes
-    them, so a replay offers what the original publishers offered. No publisher: reliable, volatile, depth 10."""
-    entries = []
-    for profile in profiles or [qos(10)]:
-        entries.append({
-            'history': 'keep_all' if profile.history == HistoryPolicy.KEEP_ALL else 'keep_last',
-            'depth': int(profile.depth),
-            'reliability': 'reliable' if profile.reliability == ReliabilityPolicy.RELIABLE else 'best_effort',
-            'durability': 'transient_local' if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL else 'volatile',
-        })
-    return yaml.safe_dump(entries, sort_keys=False)
+    """rosbag2's `offered_qos_profiles` text (integer form, nine keys): one entry per publisher, as `ros2 bag
+    record` writes them, so a replay offers what the original publishers offered. No publisher: the default."""
+    if not profiles:
+        return DEFAULT_QOS
+    return dump_profiles([StoredProfile(
+        history=int(p.history), depth=int(p.depth), reliability=int(p.reliability), durability=int(p.durability),
+        deadline=_duration(p.deadline), lifespan=_duration(p.lifespan), liveliness=int(p.liveliness),
+        liveliness_lease_duration=_duration(p.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(p.avoid_ros_namespace_conventions)) for p in profiles])
 
 
 def sleep_duration(seconds: float) -> Duration:

@@ -8,12 +8,15 @@ recording.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
 import traceback
+from importlib import metadata
 from typing import TYPE_CHECKING, Any
 
+from bagfault.io.types import DISTROS
 from bagfault.live import require_rclpy
 
 if TYPE_CHECKING:
@@ -72,3 +75,18 @@ def make_executor(context: Any) -> Any:
         else:
             return EventsExecutor(context=context)
     return SingleThreadedExecutor(context=context)
+
+
+def running_distro() -> str:
+    """The distro of the rclpy this process runs: `ROS_DISTRO` of a sourced install, else the distro in the name
+    of the installed `ros-DISTRO-rclpy` wheel; '' when neither says."""
+    named = os.environ.get('ROS_DISTRO', '').strip()
+    if named:
+        return named
+    for distro in DISTROS:
+        try:
+            metadata.version(f'ros-{distro}-rclpy')
+        except metadata.PackageNotFoundError:
+            continue
+        return distro
+    return ''
