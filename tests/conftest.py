@@ -42,3 +42,15 @@ def anchors() -> Path:
 def external() -> Path:
     """Folder of third-party bags."""
     return need(EXTERNAL)
+
+
+@pytest.fixture(scope='session')
+def quirks_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """6 s MCAP with a real robot bag's quirks: its own /clock, an undefined type, a best-effort /imu, a topic
+    without a leading slash (tests/fixtures/quirks.py)."""
+    sys.path.insert(0, str(FIXTURES))
+    try:
+        import quirks
+    finally:
+        sys.path.remove(str(FIXTURES))
+    return quirks.write(tmp_path_factory.mktemp('quirks') / 'quirks.mcap')

@@ -69,6 +69,7 @@ class SystemLink(LiveSink):
         self.scenario = scenario
         self.catalog = catalog
         self.played: list[str] = []
+        self._graph: dict[str, Any] = {}  # played topics by their name in the graph
         self.unwatched: list[str] = []
         self.ready_seconds = 0.0
         self.died_at: int | None = None  # bag time the system was found dead, if it died during the run
@@ -89,7 +90,8 @@ class SystemLink(LiveSink):
     # -- before the first record --------------------------------------------------------------
     def prepare(self, routing: Routing) -> Mapping[str, Schema]:
         """Wait until the system is ready, subscribe to its topics; the schemas of those the oracles read."""
-        self.played = sorted(self._publishers)
+        self._graph = {p.topic_name: p for p in self._publishers.values()}  # as the graph names them
+        self.played = sorted(self._graph)  # (a bag's `odom` is played as /odom, a remapped topic by its new name)
         started = time.monotonic()
         for condition in self.system.conditions():
             self._await(condition)
@@ -98,8 +100,8 @@ class SystemLink(LiveSink):
         watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
         record = self.system.record
         every = record == 'all'
-        asserted_played = [t for t in oracle_topics(self.scenario) if t in self._publishers]
-        for topic, publisher in self._publishers.items():
+        asserted_played = [t for t in oracle_topics(self.scenario) if t in self._graph]
+        for topic, publisher in self._graph.items():
             profile = publisher.qos_profile
             if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
                 self._latched[topic] = deque(maxlen=max(1, profile.depth))
@@ -164,15 +166,16 @@ class SystemLink(LiveSink):
             return any(name == condition.name for name, _ in self.listener.get_service_names_and_types())
         if condition.kind == 'subscribes':
             topics = self.played if condition.topics == 'played' else list(condition.topics)
-            missing = [t for t in topics if t not in self._publishers]
+            named = {**self._publishers, **self._graph}
+            missing = [t for t in topics if t not in named]
             if missing:
                 raise ClosedLoopError(f'ready: {", ".join(missing)} is not a topic this bag plays '
                                       f'(it plays {", ".join(self.played) or "nothing"})')
-            return all(self._publishers[t].get_subscription_count() > 0 for t in topics)
+            return all(named[t].get_subscription_count() > 0 for t in topics)
         # default: the system subscribes to at least one played topic, and every such subscription is matched
         subscribed = [t for t in self.played if self.listener.count_subscribers(t) > 0]
         return bool(subscribed) and all(
-            self._publishers[t].get_subscription_count() >= self.listener.count_subscribers(t) for t in subscribed)
+            self._graph[t].get_subscription_count() >= self.listener.count_subscribers(t) for t in subscribed)
 
     def _spin(self) -> None:
         while not self.stop.is_set() and self._thread is not None:
@@ -183,7 +186,7 @@ class SystemLink(LiveSink):
 
     # -- the system's messages ---------------------------------------------------------------
     def _on_topic(self, topic: str, msgtype: str, metadata: dict[str, str]) -> None:
-        if topic in self._publishers:  # the system publishes on a topic the bag plays: tell ours from its
+        if topic in self._graph:  # the system publishes on a topic the bag plays: tell ours from its
             self._echoes.listen(topic, tuple(self._latched.get(topic, ())))
         channel = self.record_only(topic, msgtype, *self.catalog.schema(msgtype),
                                    metadata=metadata)
@@ -195,10 +198,11 @@ class SystemLink(LiveSink):
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Play one record; on a topic the system publishes on too, noted first so the listener drops it."""
-        if self._latched or self._echoes:
-            topic = self._names[channel_id]
+        publisher = self._entries[channel_id][0]
+        if (self._latched or self._echoes) and publisher is not None:
+            topic = publisher.topic_name
             kept = self._latched.get(topic)
-            if self._entries[channel_id][0] is not None and (kept is not None or topic in self._echoes):
+            if kept is not None or topic in self._echoes:
                 data = bytes(data)
                 if kept is not None:
                     kept.append(data)  # what a late subscriber of a latched topic receives first

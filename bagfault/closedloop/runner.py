@@ -25,6 +25,7 @@ from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live import LOOPBACK_PROFILE
+from bagfault.live.pacer import CLOCK_NOTE
 from bagfault.live.runtime import make_executor, ros_context, running_distro
 from bagfault.scenario.system import command_line
 
@@ -124,6 +125,8 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
     for topic in link.unwatched:
         result.warnings.append(f'{topic}: asserted, but the system under test never advertised it and the '
                                'scenario does not give its message_type; not heard')
+    if link.clock_left_out:
+        result.notes.append(CLOCK_NOTE)
     for topic, msgtype in sorted(link.skipped.items()):
         result.notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
     return result

@@ -217,9 +217,8 @@ class McapSink:
         info = {
             'version': METADATA_VERSION, 'storage_identifier': 'mcap', 'duration': span, 'starting_time': first,
             'message_count': total, 'topics_with_message_count': topics, 'compression_format': '',
-            'compression_mode': '', 'relative_file_paths': [self.path.name],
-            'files': [{'path': self.path.name, 'starting_time': first, 'duration': span, 'message_count': total}],
-            'custom_data': {}, 'ros_distro': self.ros_distro,
+            'compression_mode': '', 'relative_file_paths': [], 'files': [],  # rosbag2's reader fills these in
+            'custom_data': {}, 'ros_distro': self.ros_distro,  # (and a name here would differ between copies)
         }
         return {'serialized_metadata': yaml.dump(info, Dumper=_PlainDumper, sort_keys=False)}
 

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 
 OBSERVE_WAIT = 5.0  # seconds to wait for publishers of watched topics whose type is not known
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
-OWN_PREFIXES = ('/fault_injection/', '/fault_manager/')
+OWN_PREFIXES = ('/fault_injection/', '/fault_manager/', '/bagfault/')  # bagfault's own topics, never the system's
 
 
 def _message_type(spec: InjectorSpec) -> str | None:

@@ -28,6 +28,9 @@ if TYPE_CHECKING:
 CLOCK_PERIOD = 0.01  # ticks (and /clock) at 100 Hz while waiting for the next record
 SLICE = 0.05  # longest sleep between checks of the stop flag
 SEEK = 'seek'
+CLOCK_TOPIC = '/clock'
+CLOCK_NOTE = ("the bag's own /clock was not published (recorded only): bagfault's /clock, the bag time, is the "
+              'only clock')
 
 
 class View(Protocol):

@@ -25,7 +25,7 @@ from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
-from bagfault.live.pacer import SEEK, Pacer
+from bagfault.live.pacer import CLOCK_NOTE, SEEK, Pacer
 from bagfault.live.runtime import running_distro
 
 if TYPE_CHECKING:
@@ -129,6 +129,8 @@ def run_play(
                             f'within {ack_wait:g} s (they may have missed them)')
     if passes > 1:
         result.notes.append(f'verdicts are those of the last pass ({passes} passes)')
+    if getattr(sink, 'clock_left_out', False):
+        result.notes.append(CLOCK_NOTE)
     for topic, msgtype in sorted(getattr(sink, 'skipped', {}).items()):
         result.notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
     if not ros:

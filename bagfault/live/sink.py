@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.engine.stop import Stopped
 from bagfault.errors import LiveError
-from bagfault.live.pacer import CLOCK_PERIOD, Pacer
+from bagfault.live.pacer import CLOCK_PERIOD, CLOCK_TOPIC, Pacer
 from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos, unacknowledged
 
 if TYPE_CHECKING:
@@ -47,12 +47,18 @@ class LiveSink(Pacer):
         self._clock = None
         if clock:
             clock_type = interface_class('rosgraph_msgs/msg/Clock')
-            self._clock = node.create_publisher(clock_type, '/clock', qos(1))
+            self._clock = node.create_publisher(clock_type, CLOCK_TOPIC, qos(1))
             self._clock_message = clock_type()
         self.skipped: dict[str, str] = {}
+        self.clock_left_out = False  # the bag's own /clock was recorded, not published (bagfault's is the clock)
 
     def _publisher(self, topic: str, msgtype: str, metadata: dict[str, str] | None) -> Any:
-        """A publisher with the recorded QoS when the type is installed."""
+        """A publisher with the recorded QoS when the type is installed; none for the bag's own /clock while
+        bagfault publishes the bag time there (a simulator's recording holds its /clock: two clocks would
+        make every node's time jump between them)."""
+        if self._clock is not None and topic == CLOCK_TOPIC:
+            self.clock_left_out = True
+            return None
         if has_interface(msgtype):
             profile = recorded_qos((metadata or {}).get('offered_qos_profiles', '')) or qos(10)
             publisher = self.node.create_publisher(interface_class(msgtype), topic, profile)

@@ -83,3 +83,22 @@ def test_nothing_to_recover_is_one_clear_error(tmp_path: Path) -> None:
 def test_requested_names() -> None:
     assert requested_name(Path('/d/.out.mcap.k2j4x.partial')) == Path('/d/out.mcap')
     assert requested_name(Path('/d/copy.mcap')) == Path('/d/copy.recovered.mcap')
+
+
+def test_a_recovered_recording_opens_in_the_ros_toolchain_with_the_recorders_distro(tmp_path: Path) -> None:
+    from toolchain import assert_toolchain_opens
+
+    sink = McapSink(tmp_path / 'live.mcap', ros_distro='jazzy', flush_every=0.0)
+    channel = sink.add_channel('/n', 'std_msgs/msg/Int32', 'ros2msg', 'int32 data',
+                               metadata={'offered_qos_profiles': '- history: keep_last\n  depth: 5\n'
+                                                                 '  reliability: best_effort\n'})
+    for n in range(40):
+        sink.write(channel, 1_000 + n, 1_000 + n, b'\x00\x01\x00\x00' + struct.pack('<i', n))
+    data = sink.partial.read_bytes()
+    sink.abort()
+    (tmp_path / '.out.mcap.k1.partial').write_bytes(data[:chunk_ends(data)[-1] + 3])  # cut inside the next record
+    done = api.recover(tmp_path / 'out.mcap')
+    assert done.messages == 40
+    info = assert_toolchain_opens(done.output, tmp_path, distro='jazzy')  # from the recording's opening record
+    [(topic, count)] = info['topics']
+    assert count == 40 and topic['offered_qos_profiles'][0]['reliability'] == 2  # best effort, in rmw's number
