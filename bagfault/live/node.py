@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy
 
 from bagfault import __version__
 from bagfault.engine.control import check_change
@@ -32,7 +33,7 @@ from bagfault.live.diagnostics import diagnostic_array
 from bagfault.live.events import LiveEvents
 from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
 from bagfault.live.params import FaultParameters
-from bagfault.live.ros import interface_class, make_node, qos, unacknowledged
+from bagfault.live.ros import adapted_qos, interface_class, make_node, qos, unacknowledged
 from bagfault.live.runtime import running_distro
 from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import ServiceHost, TriggerProxy
@@ -90,6 +91,8 @@ class ProxyNode:
         self.ros_args = ros_args
         self.parameters: FaultParameters | None = None
         self._warned: set[tuple[str, str]] = set()
+        self._inputs: dict[int, tuple[Any, Any, Any]] = {}  # id(topic) -> its subscription, class and QoS
+        self._incompatible_inputs: set[LiveTopic] = set()  # inputs whose subscription asks more than a publisher
         self._last_diagnostics = 0.0
         self.early = 0  # delayed messages published before their time at the stop
         self.failure: BagfaultError | None = None  # raised once the proxy has stopped cleanly
@@ -138,17 +141,16 @@ class ProxyNode:
         self.events.attach(self.session.run)
         self.delay = DelayLine(self.now, self._publish)
         for topic in self.session.topics:
-            profile = qos(topic.spec.qos_depth, topic.spec.options.get('reliability', 'reliable'),
-                          topic.spec.options.get('durability', 'volatile'))
+            profile = self._profile(topic)
             cls = classes[topic.spec.id]
+            offered = profile if 'reliability' in topic.spec.options else qos(
+                profile.depth, 'reliable', 'transient_local' if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                else 'volatile')  # reliable reaches best-effort and reliable subscribers alike
             self.publishers[id(topic)] = self.node.create_publisher(
-                cls, topic.output_topic, profile,
+                cls, topic.output_topic, offered,
                 event_callbacks=PublisherEventCallbacks(
                     incompatible_qos=partial(self._incompatible, topic, 'subscriber')))
-            self.subscriptions.append(self.node.create_subscription(
-                cls, topic.input_topic, partial(self._on_message, topic), profile, raw=True,
-                event_callbacks=SubscriptionEventCallbacks(
-                    incompatible_qos=partial(self._incompatible, topic, 'publisher'))))
+            self._subscribe(topic, cls, profile)
             self.logger.info(f'proxy {topic.input_topic} -> {topic.output_topic} ({topic.spec.type}, {topic.msgtype})')
         for name, cls in watched_classes.items():
             self.subscriptions.append(self.node.create_subscription(
@@ -217,7 +219,40 @@ class ProxyNode:
             return
         self.session.sent(topic, payload)
 
+    def _profile(self, topic: LiveTopic) -> Any:
+        """The injector's QoS when it sets reliability or durability; else one every current publisher of its
+        input connects to (a best-effort sensor driver gets a best-effort proxy), as rosbag2's recorder adapts."""
+        options = topic.spec.options
+        if 'reliability' in options or 'durability' in options:
+            return qos(topic.spec.qos_depth, options.get('reliability', 'reliable'),
+                       options.get('durability', 'volatile'))
+        return adapted_qos(topic.spec.qos_depth, self.node.get_publishers_info_by_topic(topic.input_topic))
+
+    def _subscribe(self, topic: LiveTopic, cls: Any, profile: Any) -> None:
+        self._inputs[id(topic)] = (self.node.create_subscription(
+            cls, topic.input_topic, partial(self._on_message, topic), profile, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(
+                incompatible_qos=partial(self._incompatible, topic, 'publisher'))), cls, profile)
+
+    def _readapt(self) -> None:
+        """A publisher that appeared later offers less than the input subscription asks: ask for less (in the
+        timer's callback, not the event's)."""
+        while self._incompatible_inputs:
+            topic = self._incompatible_inputs.pop()
+            subscription, cls, profile = self._inputs[id(topic)]
+            wanted = self._profile(topic)
+            if (wanted.reliability, wanted.durability) == (profile.reliability, profile.durability):
+                continue
+            self.node.destroy_subscription(subscription)
+            self._subscribe(topic, cls, wanted)
+            self.logger.info(f'{topic.input_topic}: subscription now {wanted.reliability.name.lower()}, '
+                             f'{wanted.durability.name.lower()} to match its publishers')
+
     def _incompatible(self, topic: LiveTopic, other: str, info: Any) -> None:
+        options = topic.spec.options
+        if other == 'publisher' and 'reliability' not in options and 'durability' not in options:
+            self._incompatible_inputs.add(topic)
+            return
         key = (topic.spec.id, other)
         if key in self._warned:
             return
@@ -260,6 +295,7 @@ class ProxyNode:
                     return
             self.logger.info('bagfault proxy ready')
             self._publish_diagnostics()
+        self._readapt()
         session.advance()
         if self.recording is not None:
             with session.lock:

@@ -66,6 +66,16 @@ def qos(depth: int, reliability: str = 'reliable', durability: str = 'volatile')
                       durability=DURABILITY[durability])
 
 
+def adapted_qos(depth: int, endpoints: Iterable[Any]) -> QoSProfile:
+    """A subscription every publisher of a topic connects to, as rosbag2's recorder requests it
+    (`Rosbag2QoS::adapt_request_to_offers`): reliable only when all offer reliable, transient local only when
+    all offer transient local; reliable and volatile when there is none yet."""
+    profiles = [e.qos_profile for e in endpoints]
+    reliable = all(p.reliability == ReliabilityPolicy.RELIABLE for p in profiles)
+    latched = bool(profiles) and all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in profiles)
+    return qos(depth, 'reliable' if reliable else 'best_effort', 'transient_local' if latched else 'volatile')
+
+
 def recorded_qos(text: str, depth: int = 10) -> QoSProfile | None:
     """The first profile of rosbag2's `offered_qos_profiles` YAML (numbers or names), None when absent or
     unreadable; a recorded depth of 0 (what recorders report for other nodes' publishers) gives `depth`."""

@@ -280,3 +280,26 @@ def test_a_stopped_proxy_waits_for_acknowledgements_and_says_which_topic_missed_
     out = proxy.out_path.read_text()
     assert '/sensors/imu: not every subscriber acknowledged the last messages within 2 s of the stop' in out, out
     assert waited > 2.0
+
+
+def test_a_best_effort_publisher_that_comes_later_is_heard_through_the_default_qos(graph, scenarios: Path,
+                                                                                  tmp_path: Path) -> None:
+    """A sensor driver offers best effort; the proxy's input asked for reliable (no publisher at its start) and
+    adapts, as rosbag2's recorder does; its output stays reliable, so a reliable subscriber gets every message."""
+    record = tmp_path / 'proxy.mcap'
+    proxy = graph.bagfault('proxy', str(scenarios / 'imu.yaml'), '--record', str(record), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    echo = graph.peer('echo', '/sensors/imu', 'sensor_msgs/msg/Imu', '--seconds', '60', '--fields',
+                      'orientation_covariance', name='echo')
+    graph.wait_for(echo, 'ready')
+    publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--best-effort', '--rate', '100', '--seconds', '3',
+                           '--wait-subscriber', name='imu')
+    assert publisher.wait(timeout=60) == 0
+    time.sleep(1.0)
+    graph.stop(echo)
+    assert graph.stop(proxy, signal.SIGINT) == 0
+    numbers = [int(row['orientation_covariance'].split('[')[1].split(',')[0].split('.')[0])
+               for row in graph.lines(echo)]
+    assert len(numbers) >= 295 and numbers == sorted(numbers)  # best effort on loopback: none or hardly any lost
+    assert 'subscription now best_effort' in proxy.err_path.read_text()
+    assert decoded(record, ['/sensors/imu_raw'])['/sensors/imu_raw'][-1][1].orientation_covariance[0] == numbers[-1]
