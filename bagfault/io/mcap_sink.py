@@ -134,6 +134,14 @@ class McapSink:
         if self.flush_every is not None:
             self.tick()
 
+    def written(self) -> dict[str, int]:
+        """Messages written so far per topic."""
+        out: dict[str, int] = {}
+        for number, count in self._writer.counts.items():
+            topic = self._topics[number][0]
+            out[topic] = out.get(topic, 0) + count
+        return out
+
     def flush(self) -> None:
         """Write every completed chunk, copied ones included (a run does it while the input's hash completes)."""
         try:

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 CLOCK_PERIOD = 0.01  # ticks (and /clock) at 100 Hz while waiting for the next record
 SLICE = 0.05  # longest sleep between checks of the stop flag
 SEEK = 'seek'
+EVENT_PREFIXES = ('/fault_injection/', '/fault_manager/', '/bagfault/')  # bagfault's own: kept by --topics
 CLOCK_TOPIC = '/clock'
 CLOCK_NOTE = ("the bag's own /clock was not published (recorded only): bagfault's /clock, the bag time, is the "
               'only clock')
@@ -65,7 +66,7 @@ class Pacer:
         self.recording = recording
         self.view = view
         self.settle = settle  # seconds before the first record (discovery)
-        self.topics = set(topics)  # only these are played and recorded (all when empty)
+        self.topics = set(topics)  # only these are played and recorded (all when empty; events always)
         self.skip = round(skip * 1e9)  # bag ns from the first record that are not played (--start-offset, seek)
         self.clock_period = 1.0 / clock_hz
         self.offset = 0  # added to bag times: loops continue the timeline
@@ -92,7 +93,7 @@ class Pacer:
         found = self._channels.get(key)
         if found is not None:
             return found
-        if self.topics and topic not in self.topics:
+        if self.topics and topic not in self.topics and not topic.startswith(EVENT_PREFIXES):
             number = self._register(key, None, schema_encoding, schema_text, message_encoding, metadata, keep=False)
         else:
             number = self._register(key, self._publisher(topic, msgtype, metadata), schema_encoding, schema_text,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import yaml
 from rcl_interfaces.msg import (
@@ -24,13 +24,17 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
+from bagfault.engine.control import check_change
 from bagfault.errors import FieldValueError, LiveError
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-    from bagfault.live.session import LiveSession, LiveTopic
+    from bagfault.engine.control import FaultControl
+    from bagfault.events import FaultSource
+    from bagfault.injectors.base import RawMessage
+    from bagfault.live.session import FaultState, LiveTopic
     from bagfault.scenario.model import FaultSpec, Scenario
     from bagfault.schema import ConfigField
 
@@ -109,10 +113,51 @@ def fault_parameters(scenario: Scenario) -> tuple[list[FaultParameter], list[str
     return declared, notes
 
 
-class FaultParameters:
-    """The proxy's faults as ROS parameters: declared from the schema, checked, applied, kept in sync."""
+class FaultTarget(Protocol):
+    """Where parameter changes go: the proxy's live session, or the play's fault control."""
 
-    def __init__(self, node: Any, session: LiveSession,
+    @property
+    def scenario(self) -> Scenario: ...
+
+    def check_config(self, fault_id: str, key: str, value: object) -> Any: ...
+
+    def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None: ...
+
+    def set_config(self, fault_id: str, key: str, value: object) -> list[tuple[LiveTopic, RawMessage]]: ...
+
+    def faults(self) -> list[FaultState]: ...
+
+
+class ControlledFaults:
+    """A play's faults as parameters see them: every change is checked and queued on the run's FaultControl,
+    which switches it between two messages at bag time (the state itself is the run's, not shown back)."""
+
+    def __init__(self, control: FaultControl) -> None:
+        self.control = control
+
+    @property
+    def scenario(self) -> Scenario:
+        return self.control.scenario
+
+    def check_config(self, fault_id: str, key: str, value: object) -> Any:
+        return check_change(self.control.scenario, fault_id, key, value)
+
+    def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None:
+        self.control.ask(fault_id, None, active)
+
+    def set_config(self, fault_id: str, key: str, value: object) -> list[tuple[LiveTopic, RawMessage]]:
+        self.control.ask(fault_id, key, value)
+        return []
+
+    def faults(self) -> list[FaultState]:
+        return []
+
+
+class FaultParameters:
+    """Faults as ROS parameters: declared from the schema, checked, applied, kept in sync. A `-p` override of
+    a name that is no parameter here is refused (LiveError naming the faults and keys there are)."""
+
+    def __init__(self, node: Any, session: FaultTarget,
                  publish: Callable[[LiveTopic, bytes | memoryview], None]) -> None:
         self.node = node
         self.session = session
@@ -121,6 +166,10 @@ class FaultParameters:
         self.overrides: list[Parameter] = []  # values given at start (-p, params files), applied once started
         self._syncing = False
         self.declare()
+        given = getattr(node, '_parameter_overrides', {})  # -p and params files (rclpy keeps them here)
+        unknown = [n for n in given if n not in self.parameters and not n.startswith(ROS_OWN)]
+        if unknown:
+            raise LiveError(f'--ros-args -p {self.unknown(unknown[0])}')
         node.add_pre_set_parameters_callback(self.widen)
         node.add_on_set_parameters_callback(self.check)
         node.add_post_set_parameters_callback(self.apply)

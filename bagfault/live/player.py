@@ -17,10 +17,11 @@ from __future__ import annotations
 import contextlib
 from typing import TYPE_CHECKING, Any
 
-from bagfault.engine.control import FaultControl
+from bagfault.engine.control import FaultControl, check_change
 from bagfault.engine.offline import replay
 from bagfault.engine.provenance import provenance, record_origin
 from bagfault.engine.result import RunStats
+from bagfault.errors import FieldValueError, LiveError
 from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
@@ -68,8 +69,8 @@ def run_play(
     passes = 0
     last: Run | None = None
     first, end = _time_range(inputs)
-    control = FaultControl(scenario) if foxglove is not None else None
-    with _node(ros, stop, ros_args) as node:
+    control = FaultControl(scenario) if foxglove is not None or ros else None
+    with _node(ros, stop, ros_args, control) as (node, start_values):
         recording = (McapSink(record, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
                      if record is not None else None)
         view: FoxgloveView | None = None
@@ -87,6 +88,9 @@ def run_play(
                 print(f'bagfault: Foxglove view on {view.url} (open it in the Foxglove app: Open connection, '
                       'Foxglove WebSocket)', flush=True)
             while True:
+                if control is not None:  # -p values at the start of every pass, as manual switches
+                    for fault_id, key, value in start_values:
+                        control.ask(fault_id, key, value)
                 run, stopped = _pass(scenario, inputs, sink, seed=seed, record=record, numbers=numbers,
                                      control=control)
                 last = run
@@ -112,6 +116,9 @@ def run_play(
             unacknowledged = sink.delivered(ack_wait)
             if recording is not None:
                 record_origin(recording, total.origin)
+                written = recording.written()  # what the file holds (--topics leaves the rest out)
+                total.per_topic_out = written
+                total.output_messages = sum(written.values())
                 recording.finish()
         except BaseException:
             if recording is not None:
@@ -139,20 +146,51 @@ def run_play(
 
 
 @contextlib.contextmanager
-def _node(ros: bool, stop: StopFlag, ros_args: list[str] | None) -> Iterator[Any]:
-    """The player's node on a fresh rclpy context (None without ROS: signals still stop the play)."""
+def _node(ros: bool, stop: StopFlag, ros_args: list[str] | None,
+          control: FaultControl | None) -> Iterator[tuple[Any, list[tuple[str, str | None, Any]]]]:
+    """The player's node on a fresh rclpy context (None without ROS: signals still stop the play), spun on a
+    thread of its own so its parameter services answer: every fault's `<fault>.active` and `<fault>.<key>`,
+    changed through `control`; with the values given by `-p` (checked, unknown names refused)."""
     if not ros:
         with _signals(stop):
-            yield None
+            yield None, []
         return
+    import threading  # noqa: PLC0415
+
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+
+    from bagfault.live.params import ControlledFaults, FaultParameters  # noqa: PLC0415
     from bagfault.live.ros import make_node  # noqa: PLC0415
     from bagfault.live.runtime import ros_context  # noqa: PLC0415
 
+    assert control is not None
     with ros_context(stop) as context:
-        node = make_node('bagfault_player', context, ros_args)
+        node = make_node('bagfault_player', context, ros_args, allow_undeclared_parameters=True)
+        executor = SingleThreadedExecutor(context=context)  # (the events executor deadlocks with publishers
+        # the main thread creates while it spins)
+        thread: threading.Thread | None = None
         try:
-            yield node
+            parameters = FaultParameters(node, ControlledFaults(control), lambda _topic, _data: None)
+            given, parameters.overrides = parameters.overrides, []
+            refused = parameters.check(given)
+            if not refused.successful:
+                raise LiveError(f'--ros-args: {refused.reason}')
+            start: list[tuple[str, str | None, Any]] = []
+            for value in given:
+                declared = parameters.parameters[value.name]
+                try:
+                    checked = check_change(control.scenario, declared.fault_id, declared.key, value.value)
+                except FieldValueError as exc:
+                    raise LiveError(f'--ros-args -p {value.name}: {exc}') from None
+                start.append((declared.fault_id, declared.key, checked))
+            executor.add_node(node)
+            thread = threading.Thread(target=executor.spin, name='bagfault-player-parameters', daemon=True)
+            thread.start()
+            yield node, start
         finally:
+            executor.shutdown()
+            if thread is not None:
+                thread.join(timeout=5)
             node.destroy_node()
 
 

@@ -118,3 +118,72 @@ def test_play_waits_for_every_acknowledgement_and_says_when_a_subscriber_gave_no
     out = play.out_path.read_text()
     assert '/sensors/imu_raw: not every subscriber acknowledged the last messages within 5 s' in out, out
     assert waited > 5.0  # at most 3 s of bag left to play, then the whole wait for acknowledgements
+
+
+PARAMETER_SCENARIO = """
+injector: {id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}
+faults:
+  - {id: bias, injector_id: odom, active_on_startup: false, config: {x_bias: 0.5}}
+"""
+
+
+def _x(data: bytes) -> float:
+    """pose.pose.position.x of a CDR nav_msgs/Odometry, read with rosbags."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr(data, 'nav_msgs/msg/Odometry').pose.pose.position.x
+
+
+def test_play_takes_fault_parameters_and_records_the_events_whatever_the_topics(graph, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'rover.mcap', STREAMS, 2.0)
+    scenario = tmp_path / 'bias.yaml'
+    scenario.write_text(PARAMETER_SCENARIO)
+    played = tmp_path / 'played.mcap'
+    play = graph.bagfault('play', str(scenario), str(bag), '--rate', '2', '--delay', '1', '--record', str(played),
+                          '--topics', '/odom', '--ros-args', '-p', 'bias.active:=true', '-p', 'bias.x_bias:=2.0',
+                          name='play')
+    assert play.wait(timeout=60) == 0, play.err_path.read_text()
+    found = counts(played)
+    assert set(found) == {'/odom', '/fault_injection/events'}  # the event topic whatever --topics says
+    raw = {t: _x(d) for t, _, d in raw_messages(bag)['/odom_raw']}
+    recorded = raw_messages(played)['/odom']
+    assert len(recorded) == len(raw) == 100
+    assert all(abs(_x(d) - raw[t] - 2.0) < 1e-9 for t, _, d in recorded)  # on from the first message, 2.0 not 0.5
+    assert f'output    {played}  ({sum(found.values())} messages' in play.out_path.read_text()
+
+
+def test_play_refuses_an_unknown_fault_parameter_in_one_line(graph, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'rover.mcap', STREAMS, 1.0)
+    scenario = tmp_path / 'bias.yaml'
+    scenario.write_text(PARAMETER_SCENARIO)
+    play = graph.bagfault('play', str(scenario), str(bag), '--ros-args', '-p', 'bias.y_bais:=1.0', name='play')
+    assert play.wait(timeout=60) == 2
+    error = play.err_path.read_text().strip()
+    assert error.count('\n') == 0 and 'Traceback' not in error
+    assert "'y_bais' is not a key of fault 'bias'" in error and 'x_bias' in error and 'active' in error
+
+
+def test_the_players_parameter_services_answer_and_switch_a_fault(graph, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'rover.mcap', STREAMS, 6.0)
+    scenario = tmp_path / 'bias.yaml'
+    scenario.write_text(PARAMETER_SCENARIO)
+    played = tmp_path / 'played.mcap'
+    echo = graph.peer('echo', '/odom', 'nav_msgs/msg/Odometry', '--seconds', '30', name='echo')
+    graph.wait_for(echo, 'ready')
+    play = graph.bagfault('play', str(scenario), str(bag), '--delay', '1', '--record', str(played), name='play')
+    described = graph.call('describe-params', '/bagfault_player', 'bias.')
+    assert described['bias.active']['value'] is False and described['bias.x_bias']['value'] == 0.5
+    graph.wait_for_line(echo)  # playing: the switch comes after the first messages
+    switched = graph.call('set-param', '/bagfault_player', 'bias.active', 'true')
+    assert switched['successful'] is True
+    refused = graph.call('set-param', '/bagfault_player', 'bias.nope', '1.0')
+    assert refused['successful'] is False and "'nope' is not a key" in refused['reason']
+    assert play.wait(timeout=60) == 0, play.err_path.read_text()
+    from helpers import decoded
+
+    [(switch_time, event)] = decoded(played, ['/fault_injection/events'])['/fault_injection/events']
+    assert (event.fault_id, event.state, event.source) == ('bias', 'active', 'manual')
+    raw = {t: _x(d) for t, _, d in raw_messages(bag)['/odom_raw']}
+    shifted = {t: round(_x(d) - raw[t], 9) for t, _, d in raw_messages(played)['/odom']}
+    assert {d for t, d in shifted.items() if t < switch_time} == {0.0}
+    assert {d for t, d in shifted.items() if t >= switch_time} == {0.5}
