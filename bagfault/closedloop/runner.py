@@ -70,6 +70,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                 process = None
                 link = None
                 view = None
+                view_notes: list[str] = []
                 try:
                     if foxglove is not None:
                         from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
@@ -103,6 +104,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                     raise
                 finally:
                     if view is not None:
+                        view_notes = view.notes()
                         view.close()
                     if link is not None:
                         link.close()
@@ -115,6 +117,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
             input_set.close()
     assert link is not None
     result = run.result('test', inputs, output, seed)
+    result.notes += view_notes
     if link.alive_result is not None:
         result.assertions.insert(0, link.alive_result)
     report.ready_seconds = link.ready_seconds

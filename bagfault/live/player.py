@@ -74,6 +74,7 @@ def run_play(
         recording = (McapSink(record, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
                      if record is not None else None)
         view: FoxgloveView | None = None
+        view_notes: list[str] = []
         try:
             if recording is not None:
                 recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'})
@@ -126,6 +127,7 @@ def run_play(
             raise
         finally:
             if view is not None:
+                view_notes = view.notes()
                 view.close()
     assert last is not None
     result = last.result('play', inputs, record, seed, total)
@@ -136,6 +138,7 @@ def run_play(
                             f'within {ack_wait:g} s (they may have missed them)')
     if passes > 1:
         result.notes.append(f'verdicts are those of the last pass ({passes} passes)')
+    result.notes += view_notes
     if getattr(sink, 'clock_left_out', False):
         result.notes.append(CLOCK_NOTE)
     for topic, msgtype in sorted(getattr(sink, 'skipped', {}).items()):

@@ -56,6 +56,10 @@ def parse_address(text: str) -> tuple[str, int]:
     return host or '127.0.0.1', number
 
 
+SUBPROTOCOL = 'foxglove.sdk.v1'  # the only one the SDK's server accepts (README, Foxglove view)
+HIDDEN_NOTE = '{topic} not shown in the Foxglove view: no definition of {msgtype} (give one with --msg-path)'
+
+
 class FoxgloveView:
     """The WebSocket server of one command, shared by its passes."""
 
@@ -68,7 +72,8 @@ class FoxgloveView:
         self.playback = playback
         self.context = foxglove.Context()
         self.active: set[str] = set()
-        self._channels: list[foxglove.Channel] = []
+        self._channels: list[foxglove.Channel | None] = []
+        self.hidden: dict[str, str] = {}  # topics not shown (no definition of their type) and their types
         self._run: Run | None = None
         self._last_time = 0.0
         self._lock = threading.Lock()
@@ -92,6 +97,10 @@ class FoxgloveView:
             raise BagfaultError(f'--foxglove {address}: cannot start the server: {exc}') from None
         self._events = foxglove.Channel(EVENTS_JSON_TOPIC, message_encoding='json', context=self.context)
 
+    def notes(self) -> list[str]:
+        """What the view could not show, for the run's summary."""
+        return [HIDDEN_NOTE.format(topic=t, msgtype=m) for t, m in sorted(self.hidden.items())]
+
     @property
     def url(self) -> str:
         """ws:// address clients connect to."""
@@ -101,15 +110,20 @@ class FoxgloveView:
     def add_channel(self, topic: str, msgtype: str, schema_encoding: str, schema_text: str,
                     message_encoding: str = 'cdr') -> int:
         """A channel with the recorded schema."""
-        schema = foxglove.Schema(name=msgtype, encoding=schema_encoding or 'ros2msg', data=schema_text.encode()) \
-            if schema_text else None
+        if not schema_text:  # a type nobody defined: Foxglove could not decode it, so it is not shown
+            self.hidden[topic] = msgtype
+            self._channels.append(None)
+            return len(self._channels) - 1
+        schema = foxglove.Schema(name=msgtype, encoding=schema_encoding or 'ros2msg', data=schema_text.encode())
         self._channels.append(foxglove.Channel(topic, schema=schema, message_encoding=message_encoding,
                                                context=self.context))
         return len(self._channels) - 1
 
     def write(self, channel_id: int, log_time: int, data: bytes | memoryview) -> None:
         """One record, as recorded."""
-        self._channels[channel_id].log(data if isinstance(data, bytes) else bytes(data), log_time=log_time)
+        channel = self._channels[channel_id]
+        if channel is not None:
+            channel.log(data if isinstance(data, bytes) else bytes(data), log_time=log_time)
 
     def attach(self, run: Run) -> None:
         """A pass: its events go out as JSON and move the parameters."""

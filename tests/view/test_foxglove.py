@@ -152,3 +152,59 @@ def test_proxy_in_foxglove_switches_faults_for_ros_too(client_dir: Path, graph, 
                          for m in later)  # the publisher's value plus the fault's 0.05
     statuses = [r['message'] for r in rows if r['kind'] == 'status']
     assert statuses and 'imu_dropout.drop_probability' in statuses[0] and 'maximum' in statuses[0]
+
+
+def _handshake(port: int, subprotocols: str) -> str:
+    """The status line a WebSocket upgrade offering `subprotocols` gets (RFC 6455 handshake, by hand)."""
+    request = (f'GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n'
+               f'Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n'
+               f'Sec-WebSocket-Protocol: {subprotocols}\r\n\r\n')
+    with socket.create_connection(('127.0.0.1', port), timeout=10) as connection:
+        connection.sendall(request.encode())
+        return connection.recv(4096).decode(errors='replace').split('\r\n')[0]
+
+
+def test_the_server_speaks_foxglove_sdk_v1_only_as_the_readme_says() -> None:
+    """The SDK's server (foxglove-sdk 0.30) accepts `foxglove.sdk.v1`; a client offering only the older
+    `foxglove.websocket.v1` (ws-protocol 0.8.0's SUPPORTED_SUBPROTOCOL) is refused with HTTP 400."""
+    from bagfault.scenario import parse_scenario
+    from bagfault.view.foxglove import SUBPROTOCOL, FoxgloveView
+
+    view = FoxgloveView(f'127.0.0.1:{free_port()}', parse_scenario(SCENARIO))
+    try:
+        port = view.server.port
+        assert SUBPROTOCOL == 'foxglove.sdk.v1'
+        assert ' 101 ' in _handshake(port, 'foxglove.sdk.v1') + ' '
+        assert ' 101 ' in _handshake(port, 'foxglove.websocket.v1, foxglove.sdk.v1') + ' '  # the app offers both
+        assert ' 400 ' in _handshake(port, 'foxglove.websocket.v1') + ' '
+    finally:
+        view.close()
+    readme = (ROOT / 'README.md').read_text()
+    assert 'foxglove.sdk.v1' in readme and 'foxglove.websocket.v1' in readme
+
+
+def test_play_in_foxglove_leaves_out_a_type_nobody_defined(client_dir: Path, quirks_bag: Path, tmp_path: Path) -> None:
+    blocked = tmp_path / 'no_ros' / 'rclpy'
+    blocked.mkdir(parents=True)
+    (blocked / '__init__.py').write_text("raise ImportError('no ROS on this machine')\n")
+    env = {**os.environ, 'PYTHONPATH': os.pathsep.join([str(blocked.parent), str(ROOT)])}
+    port = free_port()
+    play = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'play', str(quirks_bag), '--foxglove',
+                             f'127.0.0.1:{port}'], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = play.stdout.readline()  # type: ignore[union-attr]
+        assert f'Foxglove view on ws://127.0.0.1:{port}' in line, line + play.stderr.read()  # type: ignore[union-attr]
+        plan = {'subscribe': ['/imu'], 'count_topic': '/imu', 'stop_at': 50, 'timeout_s': 60}
+        client = subprocess.run(['node', 'client.mjs', f'ws://127.0.0.1:{port}', json.dumps(plan)], cwd=client_dir,
+                                capture_output=True, text=True, check=False, timeout=120)
+        rows = [json.loads(line) for line in client.stdout.splitlines() if line.startswith('{')]
+        assert rows and rows[-1]['kind'] == 'done' and client.returncode == 0, client.stdout[-2000:] + client.stderr
+    finally:
+        play.send_signal(2)
+        out, err = play.communicate(timeout=30)
+    assert play.returncode == 0, err
+    channels = {r['topic'] for r in rows if r['kind'] == 'channel'}
+    assert {'/imu', '/odom', '/scan', '/clock', 'robot_status'} <= channels
+    assert '/performance_metrics' not in channels
+    assert ('/performance_metrics not shown in the Foxglove view: no definition of '
+            'gazebo_msgs/msg/PerformanceMetrics') in out
