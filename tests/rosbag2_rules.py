@@ -137,7 +137,7 @@ def decode_bag_metadata(text: str, distro: str = 'jazzy') -> dict[str, Any]:
     return info
 
 
-def check_mcap(path: Any) -> dict[str, Any]:
+def check_mcap(path: Any, distros: tuple[str, ...] = DISTROS) -> dict[str, Any]:
     """Open an MCAP as `ros2 bag info` of each distro would: every channel's QoS for humble, iron and jazzy,
     the last `rosbag2` record for jazzy. Returns jazzy's BagMetadata; raises Rosbag2Error where one throws."""
     from mcap.reader import make_reader
@@ -148,7 +148,7 @@ def check_mcap(path: Any) -> dict[str, Any]:
         assert summary is not None
         records = [m for m in reader.iter_metadata() if m.name == 'rosbag2']
     for channel in summary.channels.values():
-        for distro in DISTROS:
+        for distro in distros:
             decode_qos(channel.metadata.get('offered_qos_profiles', ''), distro)
     if not records:
         raise Rosbag2Error('no rosbag2 metadata record')
@@ -158,3 +158,20 @@ def check_mcap(path: Any) -> dict[str, Any]:
             raise Rosbag2Error('rosbag2 record without serialized_metadata')
         info = decode_bag_metadata(record.metadata['serialized_metadata'])
     return info
+
+
+def distros_reading(path: Any) -> tuple[str, ...]:
+    """The distros whose players read every channel's QoS of an MCAP (a Jazzy recording's names: jazzy only)."""
+    from mcap.reader import make_reader
+
+    with open(path, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    found = []
+    for distro in DISTROS:
+        try:
+            for channel in summary.channels.values():
+                decode_qos(channel.metadata.get('offered_qos_profiles', ''), distro)
+        except Rosbag2Error:
+            continue
+        found.append(distro)
+    return tuple(found)
