@@ -15,6 +15,7 @@ import pytest
 from loop import EXAMPLE, SCENARIO, LoopRunner, running_with
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from toolchain import assert_toolchain_opens
 
 NS = 1_000_000_000
 
@@ -55,6 +56,9 @@ def test_the_example_passes_and_its_recording_holds_the_whole_loop(tester: LoopR
 
     topics = decoded(out)
     assert {'/imu', '/odom', '/diagnostics', '/fault_injection/events', '/fault_manager/events'} <= set(topics)
+    info = assert_toolchain_opens(out, tmp_path, distro='jazzy')  # recorded by the running rclpy
+    hashes = {topic['name']: topic['type_description_hash'] for topic, _ in info['topics']}
+    assert hashes['/diagnostics'].startswith('RIHS01_')  # the system's publisher, as rclpy reports it
     origin = topics['/imu'][0][0]
     # the played streams as the system received them: the bias only inside [3, 7) s
     for time, imu in topics['/imu']:

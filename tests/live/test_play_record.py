@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from helpers import NS, counts, make_bag, raw_messages
+from toolchain import assert_toolchain_opens
 
 STREAMS = [('/sensors/imu_raw', 'sensor_msgs/msg/Imu', 100.0), ('/odom_raw', 'nav_msgs/msg/Odometry', 50.0),
            ('/scan_raw', 'sensor_msgs/msg/LaserScan', 10.0)]
@@ -33,6 +34,9 @@ def test_play_with_clock_into_a_subscriber_and_record_reads_back_the_same_counts
     expected = counts(bag)
     assert {topic: found[topic] for topic in expected} == dict(expected)
     assert found['/clock'] > 100
+    info = assert_toolchain_opens(recorded, tmp_path, distro='jazzy')  # the running rclpy's (ros-jazzy wheels)
+    hashes = {topic['name']: topic['type_description_hash'] for topic, _ in info['topics']}
+    assert hashes['/clock'].startswith('RIHS01_')  # as rclpy reports it for the publisher
 
 
 def test_play_applies_the_scenario_and_its_recording_equals_the_offline_run(graph, tmp_path: Path) -> None:
@@ -57,6 +61,8 @@ faults:
     assert set(live) == set(reference)
     for topic in reference:  # same bytes at the same bag times: the same injector code on the same clock
         assert live[topic] == reference[topic], topic
+    assert_toolchain_opens(played, tmp_path, distro='jazzy')
+    assert_toolchain_opens(offline, tmp_path, distro='')  # the bag names no distro
     echo.wait(timeout=30)
     seen = [row['pose.pose.position.x'] for row in graph.lines(echo)]
     published = [m for _, _, m in reference['/odom']]

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 from helpers import NS, decoded
+from toolchain import assert_toolchain_opens
 
 BASE_Z = 0.001  # the publisher sends angular_velocity.z = 0.001 * (k % 100), k in orientation_covariance[0]
 
@@ -67,6 +68,7 @@ def test_imu_bias_switched_on_through_a_parameter(graph, scenarios: Path, tmp_pa
     assert len(outputs) == len(topics['/sensors/imu_raw']) > 600
     assert all(round(delta_z(m), 9) == (0.05 if t >= event_time else 0.0) for t, m in outputs)
     assert any(t < event_time for t, _ in outputs) and any(t >= event_time for t, _ in outputs)
+    assert_toolchain_opens(record, tmp_path, distro='jazzy')
 
 
 def test_stop_by_sigterm_finalises_the_recording_and_bagfault_check_reads_it(graph, scenarios: Path,
@@ -131,7 +133,8 @@ def test_reload_service_applies_new_faults_and_refuses_layout_changes(graph, sce
 @pytest.mark.parametrize('case', ['late_publisher_and_restart', 'qos_mismatch', 'malformed'])
 def test_robust_against_publishers_that_come_go_mismatch_or_send_garbage(graph, tmp_path: Path, case: str) -> None:
     scenario = tmp_path / 'imu.yaml'
-    options = ', on_malformed: drop' if case == 'malformed' else ''
+    options = {'malformed': ', on_malformed: drop', 'qos_mismatch': ', reliability: reliable'}.get(case, '')
+    # (an injector that sets its reliability keeps it: a best-effort publisher cannot connect, and is named)
     scenario.write_text(f"""
 injector: {{id: imu, type: imu, input_topic: /imu_raw, output_topic: /imu{options}}}
 faults:

@@ -34,5 +34,32 @@ def test_unknown_profiles_give_none_and_written_profiles_read_back() -> None:
     again = recorded_qos(offered_yaml([profile, qos(3)]))  # the first publisher's profile is the one replayed
     assert (again.reliability, again.durability, again.depth) == (
         ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.TRANSIENT_LOCAL, 7)
+    # rmw's numbers and nine keys (rmw/types.h: KEEP_LAST 1, RELIABLE 1, VOLATILE 2; a profile made in rclpy
+    # leaves deadline, lifespan and liveliness at their defaults, 0 = system default)
+    zero = {'sec': 0, 'nsec': 0}
     assert yaml.safe_load(offered_yaml([profile, qos(3)]))[1] == {
-        'history': 'keep_last', 'depth': 3, 'reliability': 'reliable', 'durability': 'volatile'}
+        'history': 1, 'depth': 3, 'reliability': 1, 'durability': 2, 'deadline': zero, 'lifespan': zero,
+        'liveliness': 0, 'liveliness_lease_duration': zero, 'avoid_ros_namespace_conventions': False}
+
+
+def test_adapted_qos_follows_rosbag2s_adapt_request_to_offers() -> None:
+    """rosbag2_storage/src/rosbag2_storage/qos.cpp, Rosbag2QoS::adapt_request_to_offers: reliable only when
+    every publisher offers it, transient local only when every one does; the default when there is none."""
+    from types import SimpleNamespace
+
+    from bagfault.live.ros import adapted_qos
+
+    def offers(*profiles):
+        return [SimpleNamespace(qos_profile=p) for p in profiles]
+
+    latched = qos(1, 'reliable', 'transient_local')
+    mixed = adapted_qos(10, offers(qos(5), qos(5, 'best_effort')))
+    assert (mixed.reliability, mixed.durability, mixed.depth) == (
+        ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 10)
+    both_latched = adapted_qos(10, offers(latched, latched))
+    assert (both_latched.reliability, both_latched.durability) == (
+        ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL)
+    one_latched = adapted_qos(10, offers(latched, qos(5)))
+    assert one_latched.durability == DurabilityPolicy.VOLATILE
+    none = adapted_qos(10, [])
+    assert (none.reliability, none.durability) == (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE)

@@ -171,7 +171,7 @@ def test_record_keeps_the_qos_the_publisher_offered(graph, tmp_path: Path) -> No
         summary = make_reader(stream).get_summary()
     [channel] = [c for c in summary.channels.values() if c.topic == '/imu_be']
     [offered] = yaml.safe_load(channel.metadata['offered_qos_profiles'])
-    assert offered['reliability'] == 'best_effort'
+    assert offered['reliability'] == 2  # RMW_QOS_POLICY_RELIABILITY_BEST_EFFORT, the form every distro reads
     assert offered['depth'] != 100  # not the recorder's own subscription depth
 
 
