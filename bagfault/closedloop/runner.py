@@ -118,6 +118,8 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
     assert link is not None
     result = run.result('test', inputs, output, seed)
     result.notes += view_notes
+    if run.stats.input_messages == 0:
+        result.notes.append('the input holds no messages: nothing was played to the system under test')
     if link.alive_result is not None:
         result.assertions.insert(0, link.alive_result)
     report.ready_seconds = link.ready_seconds
@@ -130,8 +132,8 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                                'scenario does not give its message_type; not heard')
     if link.clock_left_out:
         result.notes.append(CLOCK_NOTE)
-    for topic, msgtype in sorted(link.skipped.items()):
-        result.notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
+    for topic, why in sorted(link.skipped.items()):
+        result.notes.append(f'{topic} not published: {why} (recorded only)')
     return result
 
 

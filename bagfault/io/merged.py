@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING, Protocol
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator, Sequence
 
+    from typing_extensions import Self
+
     from bagfault.io.channel import Channel, Data, InputMessage
 
 
@@ -109,6 +111,12 @@ class MergedSource:
         """Close every part (their losses and warnings stay readable)."""
         for part in self.parts:
             part.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
 
 
 def _keyed(source: Source, number: int, mapping: list[int]) -> Iterator[tuple[int, int, int, int, Data]]:

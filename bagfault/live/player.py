@@ -141,8 +141,8 @@ def run_play(
     result.notes += view_notes
     if getattr(sink, 'clock_left_out', False):
         result.notes.append(CLOCK_NOTE)
-    for topic, msgtype in sorted(getattr(sink, 'skipped', {}).items()):
-        result.notes.append(f'{topic} not published: {msgtype} has no Python bindings here (recorded only)')
+    for topic, why in sorted(getattr(sink, 'skipped', {}).items()):
+        result.notes.append(f'{topic} not published: {why} (recorded only)')
     if not ros:
         result.notes.append('played into the Foxglove view only (rclpy is not installed here)')
     return result

@@ -13,6 +13,8 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, Any
 
+from rclpy.exceptions import InvalidTopicNameException
+
 from bagfault.engine.stop import Stopped
 from bagfault.errors import LiveError
 from bagfault.live.pacer import CLOCK_PERIOD, CLOCK_TOPIC, Pacer
@@ -49,7 +51,7 @@ class LiveSink(Pacer):
             clock_type = interface_class('rosgraph_msgs/msg/Clock')
             self._clock = node.create_publisher(clock_type, CLOCK_TOPIC, qos(1))
             self._clock_message = clock_type()
-        self.skipped: dict[str, str] = {}
+        self.skipped: dict[str, str] = {}  # topic -> why it is recorded but not published
         self.clock_left_out = False  # the bag's own /clock was recorded, not published (bagfault's is the clock)
 
     def _publisher(self, topic: str, msgtype: str, metadata: dict[str, str] | None) -> Any:
@@ -61,11 +63,15 @@ class LiveSink(Pacer):
             return None
         if has_interface(msgtype):
             profile = recorded_qos((metadata or {}).get('offered_qos_profiles', '')) or qos(10)
-            publisher = self.node.create_publisher(interface_class(msgtype), topic, profile)
+            try:
+                publisher = self.node.create_publisher(interface_class(msgtype), topic, profile)
+            except InvalidTopicNameException:  # a ROS 1 name such as 'ORB-SLAM' has no ROS 2 form
+                self.skipped[topic] = 'not a valid ROS 2 topic name'
+                return None
             self._publishers[topic] = publisher
             return publisher
         if not topic.startswith(('/fault_injection/', '/fault_manager/')):
-            self.skipped[topic] = msgtype
+            self.skipped[topic] = f'{msgtype} has no Python bindings here'
         return None
 
     # -- pass hooks -------------------------------------------------------------------------------
