@@ -22,7 +22,8 @@ class FaultStatusAssertion(AssertionType):
 
     type_name = 'fault_status'
     description = ('A fault code reaches PREFAILED/CONFIRMED/HEALED/CLEARED within `within` s after the fault '
-                   '`after` activates (from time zero without `after`), or `never` does.')
+                   '`after` activates (from time zero without `after`), or `never` does. A status that already '
+                   'held when `after` activated is no detection: the assertion fails, naming when it began.')
     fields: ClassVar[tuple[ConfigField, ...]] = (
         ConfigField('code', 'non_empty_string', 'Fault code in the fault manager.', required=True),
         ConfigField('status', 'non_empty_string', 'PREFAILED, PREPASSED, CONFIRMED, HEALED or CLEARED.',
@@ -47,6 +48,7 @@ class FaultStatusAssertion(AssertionType):
     def __init__(self, spec: AssertionSpec, runner: AssertionRunner) -> None:
         super().__init__(spec, runner)
         self.armed: int | None = None
+        self.held_since: int | None = None  # when the code last reached the status, while it still holds
 
     def prepare(self) -> None:
         """Needs the fault manager."""
@@ -62,7 +64,11 @@ class FaultStatusAssertion(AssertionType):
         self.armed = time
         fault = self.runner.fault_manager.manager.faults.get(self.params['code'])
         if fault is not None and fault.status == self.params['status']:
-            self.on_fault_status(self.params['code'], self.params['status'], time)
+            # a detection is a transition after its cause: a status that already held is none
+            since = self.held_since if self.held_since is not None else fault.first_occurred
+            text = (f"{self.params['code']} was already {self.params['status']} at {self.runner.t(since)}, "
+                    f"before {self.params['after']} activated at {self.runner.t(time)}")
+            self.fail(time, text, (since - time) / NS, 's')
         elif self.spec.within is not None and self.pending:
             self.runner.schedule(self, time + round(self.spec.within * NS))
 
@@ -73,9 +79,13 @@ class FaultStatusAssertion(AssertionType):
 
     def on_fault_status(self, code: str, status: str, time: int) -> None:
         """The fault manager changed a status."""
-        if code != self.params['code'] or status != self.params['status']:
+        if code != self.params['code']:
+            return
+        if status != self.params['status']:
+            self.held_since = None
             return
         if 'after' in self.params and self.armed is None:
+            self.held_since = time
             return
         since = f", {(time - self.armed) / NS:.3f} s after {self.params['after']} activated" if self.armed else ''
         text = f'{code} reached {status} at {self.runner.t(time)}{since}'

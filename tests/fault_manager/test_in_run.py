@@ -228,3 +228,14 @@ def test_failed_run_leaves_no_black_box(tmp_path):
     """)
     assert main(['run', str(_write(tmp_path, text)), str(bag), '-o', str(tmp_path / 'out.mcap')]) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ['in.mcap', 'scenario.yaml']
+
+
+def test_a_status_that_held_before_the_trigger_is_no_detection(tmp_path):
+    """IMU_DRIFT is CONFIRMED from the first ERROR report at 2.0 s (10 Hz diagnostics, confirmation at the first
+    FAILED by default); imu_bias activates at 5.0 s. Nothing was detected after the fault: the assertion fails
+    at 5.0 s naming the earlier time, where it used to pass with '0.000 s after'."""
+    early = diagnostics_bag(tmp_path / 'early.mcap', error_from=2.0)
+    result = api.run(parse_scenario(scenario(1.0)), [early], tmp_path / 'out.mcap')
+    detected = {a.id: a for a in result.assertions}['detected']
+    assert detected.state == 'failed' and detected.time == START + 5_000_000_000
+    assert detected.message == 'IMU_DRIFT was already CONFIRMED at 2.000 s, before imu_bias activated at 5.000 s'
