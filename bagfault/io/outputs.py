@@ -62,3 +62,20 @@ def current_umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+def written_by_bagfault(path: Path) -> bool:
+    """Whether a file is an MCAP whose header names bagfault as its writer (a file bagfault may replace)."""
+    try:
+        with path.open('rb') as stream:
+            head = stream.read(8 + 9 + 4 + 256 + 4 + 64)
+    except OSError:
+        return False
+    if head[:8] != b'\x89MCAP0\r\n' or len(head) < 21 or head[8] != 0x01:
+        return False
+    profile_length = int.from_bytes(head[17:21], 'little')
+    at = 21 + profile_length
+    if at + 4 > len(head):
+        return False
+    library_length = int.from_bytes(head[at:at + 4], 'little')
+    return head[at + 4:at + 4 + library_length].startswith(b'bagfault ')  # as McapSink names itself

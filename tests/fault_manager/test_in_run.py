@@ -239,3 +239,31 @@ def test_a_status_that_held_before_the_trigger_is_no_detection(tmp_path):
     detected = {a.id: a for a in result.assertions}['detected']
     assert detected.state == 'failed' and detected.time == START + 5_000_000_000
     assert detected.message == 'IMU_DRIFT was already CONFIRMED at 2.000 s, before imu_bias activated at 5.000 s'
+
+
+BLACK_BOX_SCENARIO = """
+injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}
+faults:
+  - {id: spike, injector_id: imu, start: 1.0, duration: 1.0, config: {linear_acceleration_z_bias: 10.0}}
+fault_manager:
+  conditions:
+    - {topic: /imu_out, when: {field: linear_acceleration.z, above: 15.0}, code: IMU_SPIKE}
+  snapshots: {default_topics: [/imu_out], duration_sec: 0.5, duration_after_sec: 0.2}
+"""
+
+
+def test_a_black_box_never_replaces_a_file_bagfault_did_not_write(tmp_path, capsys):
+    """The black box of `-o out.mcap` is out.blackbox.IMU_SPIKE.1.mcap: an input of that name (or anyone's file)
+    is not replaced; the run stops with one line and writes nothing. A black box of an earlier run is replaced."""
+    bag = make_bag(tmp_path / 'out.blackbox.IMU_SPIKE.1.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 3.0)
+    before = bag.read_bytes()
+    scenario = _write(tmp_path, BLACK_BOX_SCENARIO)
+    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and 'black box would replace' in error and 'bagfault did not write' in error
+    assert bag.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['out.blackbox.IMU_SPIKE.1.mcap', 'scenario.yaml']
+    moved = bag.rename(tmp_path / 'in.mcap')
+    for _ in range(2):  # the second run replaces the first run's black box, which bagfault wrote
+        assert main(['run', str(scenario), str(moved), '-o', str(tmp_path / 'out.mcap')]) == 0
+    assert (tmp_path / 'out.blackbox.IMU_SPIKE.1.mcap').exists()
