@@ -127,6 +127,12 @@ def live_env(tmp_path: Path):
     lease.release()
 
 
+def duration(bag: Path) -> float:
+    """Seconds from the bag's first to its last message."""
+    with InputSet([bag]) as inputs:
+        return ((inputs.end_time or 0) - (inputs.start_time or 0)) / 1e9
+
+
 def _own_domain(env: dict[str, str]) -> dict[str, str]:
     """`bagfault test` leases its domain and brings its Fast DDS profile."""
     return {k: v for k, v in env.items() if k not in ('ROS_DOMAIN_ID', 'FASTRTPS_DEFAULT_PROFILES_FILE')}
@@ -152,7 +158,8 @@ def test_play_with_record_and_with_foxglove(relative: str, bag: Path, tmp_path: 
     reference = tmp_path / 'reference.mcap'
     api.run(PASS, [bag], reference)
     recorded = tmp_path / 'played.mcap'
-    play = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'play', str(bag), '--rate', '50', '--delay', '0',
+    rate = f'{max(1.0, duration(bag) / 3):g}'  # about 3 s of play
+    play = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'play', str(bag), '--rate', rate, '--delay', '0',
                            '--record', str(recorded)], env=live_env, capture_output=True, text=True, timeout=180,
                           check=False)
     assert play.returncode == 0, play.stdout + play.stderr
@@ -160,7 +167,7 @@ def test_play_with_record_and_with_foxglove(relative: str, bag: Path, tmp_path: 
     opens(recorded, tmp_path, relative, bag)
     pytest.importorskip('foxglove')
     port = _free_port()
-    shown = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'play', str(bag), '--rate', '50', '--delay', '0',
+    shown = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'play', str(bag), '--rate', rate, '--delay', '0',
                               '--foxglove', f'127.0.0.1:{port}'], env=live_env, stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True)
     try:
@@ -189,9 +196,8 @@ injectors: []
 """)
     out = tmp_path / 'loop.mcap'
     report = tmp_path / 'loop.json'
-    with InputSet([bag]) as inputs:  # a long bag at 20x, a short one as recorded (its heartbeats need time)
-        seconds = ((inputs.end_time or 0) - (inputs.start_time or 0)) / 1e9
-    rate = '20' if seconds > 10 else '1'
+    seconds = duration(bag)
+    rate = f'{max(1.0, seconds / 5):g}'  # about 5 s of play; a short bag as recorded (its heartbeats need time)
     done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'test', str(scenario), str(bag), '--rate', rate,
                            '-o', str(out), '--json', str(report)], env=_own_domain(live_env),
                           capture_output=True, text=True, timeout=300, check=False, cwd=tmp_path)

@@ -205,7 +205,7 @@ keep: failed
     # the monitor flags a mean residual (IMU - odometry yaw rate) above 0.05 rad/s (monitor.py); the bag's IMU
     # and odometry agree, so the residual is the bias
     assert [(r['faults.gyro_drift.config.angular_velocity_z_bias'], r['drift_detected']) for r in
-            result.table.rows] == [(0.02, 'failed'), (0.2, 'passed')]
+            result.table.rows] == [(0.02, 'failed'), (0.2, 'passed')], result.table.rows
     assert [r['seed'] for r in result.table.rows] == [7, 7]  # the scenario's seed when the campaign names none
     assert all(r['odom_blackout_detected'] == 'passed' for r in result.table.rows)
     assert result.table.rows[0]['output'] and not result.table.rows[1]['output']  # keep: failed
