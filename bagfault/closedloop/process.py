@@ -14,7 +14,9 @@ import contextlib
 import os
 import signal
 import subprocess
+import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Literal
@@ -85,6 +87,21 @@ def family(leader: int, known: dict[int, int]) -> dict[int, int]:
     return {pid: table[pid].start for pid in members}
 
 
+@contextlib.contextmanager
+def _interruptible_children() -> Iterator[None]:
+    """A process started with SIGINT ignored (a shell's background job, nohup) passes that on to the system, which
+    SIGINT could then never stop. While it starts, SIGINT has a handler here (doing nothing, as ignoring did),
+    and exec gives the child the default action for a handled signal."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) != signal.SIG_IGN:
+        yield
+        return
+    signal.signal(signal.SIGINT, lambda _number, _frame: None)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 class SystemProcess:
     """A running system under test with its stdout and stderr in files."""
 
@@ -99,8 +116,9 @@ class SystemProcess:
         self._err: IO[bytes] = self.stderr_path.open('wb')
         argv: str | list[str] = command[0] if shell else command
         try:
-            self.popen = subprocess.Popen(argv, shell=shell, env=env, cwd=cwd, stdin=subprocess.DEVNULL,
-                                          stdout=self._out, stderr=self._err, start_new_session=True)
+            with _interruptible_children():
+                self.popen = subprocess.Popen(argv, shell=shell, env=env, cwd=cwd, stdin=subprocess.DEVNULL,
+                                              stdout=self._out, stderr=self._err, start_new_session=True)
         except OSError as exc:
             self._close_logs()
             raise ClosedLoopError(f'system under test: cannot start {" ".join(command)}: '

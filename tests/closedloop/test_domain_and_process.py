@@ -88,6 +88,22 @@ def test_sigint_ends_a_well_behaved_group(tmp_path: Path) -> None:
     assert tail[-1] == 'KeyboardInterrupt'
 
 
+def test_a_system_started_while_sigint_is_ignored_still_stops_on_sigint(tmp_path: Path) -> None:
+    """bagfault run as a shell's background job (or under nohup) has SIGINT ignored, and a child inherits that:
+    the system must still get SIGINT's default action, or every stop would wait for SIGTERM."""
+    import signal
+
+    token = uuid.uuid4().hex
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        process = start(tmp_path, f'exec {READY_SLEEP} {token}', token)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    wait_for(lambda: process.tail().count('sleeping') == 1)
+    assert process.stop(timeout=5.0) == 'SIGINT'
+    assert running_with(token) == [] and process.tail()[-1] == 'KeyboardInterrupt'
+
+
 def test_escalation_to_sigterm_and_sigkill(tmp_path: Path) -> None:
     token = uuid.uuid4().hex
     process = start(tmp_path, f"trap '' INT; {SLEEP} {token} & wait; wait", token)
