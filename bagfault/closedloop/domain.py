@@ -1,8 +1,11 @@
 """A free ROS_DOMAIN_ID held for a run, so concurrent tests on one machine never see each other.
 
 A lease is an exclusive `flock` on a file named after the id in a folder
-shared by every bagfault process of the user; the kernel releases it when
-the process dies, so a crashed run never leaks a domain.
+shared by every bagfault process of the user, and the TCP port 32768 + id
+bound on 127.0.0.1, as ROS's `domain_coordinator` (colcon's isolated tests,
+launch_testing) claims a domain: each sees the other's claims, whatever the
+user or `TMPDIR`. The kernel releases both when the process dies, so a
+crashed run never leaks a domain.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import socket
 import tempfile
 from pathlib import Path
 from typing import IO
@@ -17,6 +21,23 @@ from typing import IO
 from bagfault.errors import ClosedLoopError
 
 FIRST, LAST = 30, 101  # ids whose Fast DDS ports stay below Linux's ephemeral range (32768)
+COORDINATOR_PORT_BASE = 32768  # domain_coordinator's claim on domain N is this port + N, bound
+
+
+def port_base() -> int:
+    """domain_coordinator's base port (`BAGFAULT_DOMAIN_PORT_BASE` overrides, for tests of leases alone)."""
+    return int(os.environ.get('BAGFAULT_DOMAIN_PORT_BASE', COORDINATOR_PORT_BASE))
+
+
+def claim_port(domain: int) -> socket.socket | None:
+    """Bind domain_coordinator's port of a domain (never listened on); None when someone holds it."""
+    claim = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        claim.bind(('127.0.0.1', port_base() + domain))
+    except OSError:
+        claim.close()
+        return None
+    return claim
 
 
 def lock_folder() -> Path:
@@ -37,6 +58,7 @@ class DomainLease:
         ids = list(range(first, last + 1))
         start = os.getpid() % len(ids)  # processes start their search at different places
         self._file: IO[bytes] | None = None
+        self._claim: socket.socket | None = None
         for domain in ids[start:] + ids[:start]:
             if str(domain) == avoid:
                 continue
@@ -46,11 +68,16 @@ class DomainLease:
             except OSError:
                 handle.close()
                 continue
+            claim = claim_port(domain)
+            if claim is None:  # a colcon test (domain_coordinator) or a bagfault of another TMPDIR has it
+                handle.close()
+                continue
             self.domain = domain
-            self._file = handle
+            self._file, self._claim = handle, claim
             return
-        raise ClosedLoopError(f'no free ROS domain id between {first} and {last}: {last - first + 1} runs '
-                              f'hold one already (locks in {folder})')
+        raise ClosedLoopError(f'no free ROS domain id between {first} and {last}: each is held by another bagfault '
+                              f'run (locks in {folder}) or a domain_coordinator (ports '
+                              f'{port_base() + first}-{port_base() + last} on 127.0.0.1)')
 
     def release(self) -> None:
         """Give the id back."""
@@ -59,6 +86,9 @@ class DomainLease:
                 fcntl.flock(self._file, fcntl.LOCK_UN)
             self._file.close()
             self._file = None
+        if self._claim is not None:
+            self._claim.close()
+            self._claim = None
 
     def __enter__(self) -> DomainLease:
         return self

@@ -84,6 +84,9 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                                                  input_set.start_time or 0)
                     process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
                                             shell=system.shell, logs=folder)
+                    print(f'bagfault: system under test started on ROS domain {lease.domain}; to watch it: '
+                          f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}',
+                          file=sys.stderr, flush=True)
                     link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
                                       catalog=catalog, rate=rate, stop=stop, recording=recording)
                     link.view = view

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
 import os
+import random
 import subprocess
 import sys
 import time
@@ -19,10 +21,30 @@ from bagfault.errors import ClosedLoopError
 
 @pytest.fixture
 def locks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Lock files and claim ports of this test alone (a second suite beside it runs the same ids)."""
     folder = tmp_path / 'locks'
     monkeypatch.setenv('BAGFAULT_DOMAIN_LOCKS', str(folder))
+    monkeypatch.setenv('BAGFAULT_DOMAIN_PORT_BASE', str(random.Random().randrange(40000, 60000, 200)))
     monkeypatch.setenv('ROS_DOMAIN_ID', '0')
     return folder
+
+
+def test_leases_and_ros_domain_coordinator_never_share_a_domain(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """colcon's isolated tests and launch_testing claim a domain with domain_coordinator (the
+    ros-jazzy-domain-coordinator wheel): the TCP port 32768 + id, bound. A lease skips theirs, theirs skips ours."""
+    domain_coordinator = pytest.importorskip('domain_coordinator')
+    monkeypatch.setenv('BAGFAULT_DOMAIN_LOCKS', str(tmp_path / 'locks'))  # our locks are free: only ports count
+    monkeypatch.delenv('BAGFAULT_DOMAIN_PORT_BASE', raising=False)
+    monkeypatch.setenv('ROS_DOMAIN_ID', '0')
+    with domain_coordinator.domain_id(selector=itertools.cycle(range(30, 101)).__next__) as theirs, \
+            pytest.raises(ClosedLoopError) as refused:
+        DomainLease(theirs, theirs)
+    assert f'no free ROS domain id between {theirs} and {theirs}' in str(refused.value)
+    with DomainLease() as mine:
+        first_choice = itertools.chain([mine.domain], itertools.cycle(range(30, 101)))
+        with domain_coordinator.domain_id(selector=first_choice.__next__) as theirs:
+            assert theirs != mine.domain
 
 
 def test_leases_are_exclusive_and_given_back(locks: Path) -> None:
