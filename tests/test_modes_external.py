@@ -26,6 +26,7 @@ from toolchain import assert_toolchain_opens
 from bagfault import api
 from bagfault.cli import main
 from bagfault.io.sources import InputSet
+from bagfault.live import rclpy_available
 from bagfault.scenario import parse_scenario
 
 BAGS = [*ROSBAG2_DIRS, 'evo/test/data/nav2_turtlebot.mcap', 'evo/test/data/ROS_example.bag',
@@ -115,7 +116,7 @@ def test_a_campaign_job_per_bag(tmp_path: Path) -> None:
 
 @pytest.fixture
 def live_env(tmp_path: Path):
-    if not _rclpy():
+    if not rclpy_available():
         pytest.skip("rclpy not installed (pip install '.[live]')")
     import bagfault.live
     from bagfault.closedloop.domain import DomainLease
@@ -136,14 +137,6 @@ def duration(bag: Path) -> float:
 def _own_domain(env: dict[str, str]) -> dict[str, str]:
     """`bagfault test` leases its domain and brings its Fast DDS profile."""
     return {k: v for k, v in env.items() if k not in ('ROS_DOMAIN_ID', 'FASTRTPS_DEFAULT_PROFILES_FILE')}
-
-
-def _rclpy() -> bool:
-    try:
-        import rclpy  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def _free_port() -> int:

@@ -57,25 +57,19 @@ def free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def test_play_in_foxglove_without_ros(client_dir: Path, tmp_path: Path) -> None:
-    bag = make_bag(tmp_path / 'imu.mcap', [('/imu', IMU, 100.0)], 12.0)
-    scenario = tmp_path / 'bias.yaml'
-    scenario.write_text(SCENARIO)
+def play_without_ros(client_dir: Path, tmp_path: Path, args: list[str], plan: dict) -> tuple[list[dict], str]:
+    """`bagfault play ARGS --foxglove` where rclpy cannot be imported, driven by the official client with `plan`:
+    the client's rows and the play's stdout (after a SIGINT once the client is done)."""
     blocked = tmp_path / 'no_ros' / 'rclpy'
     blocked.mkdir(parents=True)
     (blocked / '__init__.py').write_text("raise ImportError('no ROS on this machine')\n")
     env = {**os.environ, 'PYTHONPATH': os.pathsep.join([str(blocked.parent), str(ROOT)])}
     port = free_port()
-    play = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'play', str(scenario), str(bag), '--foxglove',
-                             f'127.0.0.1:{port}'], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    play = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'play', *args, '--foxglove', f'127.0.0.1:{port}'],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = play.stdout.readline()  # type: ignore[union-attr]
         assert f'Foxglove view on ws://127.0.0.1:{port}' in line, line + play.stderr.read()  # type: ignore[union-attr]
-        start = synthetic.DEFAULT_START
-        plan = {'subscribe': ['/imu_out', '/bagfault/events'], 'count_topic': '/imu_out', 'switch_at': 100,
-                'switch': {'name': 'bias.active', 'value': True}, 'refuse_at': 200,
-                'refuse': {'name': 'bias.angular_velocity_z_bias', 'value': 'fast'}, 'seek_at': 300,
-                'seek_to': start + NS // 2, 'after_seek': 20, 'timeout_s': 60}
         client = subprocess.run(['node', 'client.mjs', f'ws://127.0.0.1:{port}', json.dumps(plan)], cwd=client_dir,
                                 capture_output=True, text=True, check=False, timeout=120)
         rows = [json.loads(line) for line in client.stdout.splitlines() if line.startswith('{')]
@@ -84,6 +78,19 @@ def test_play_in_foxglove_without_ros(client_dir: Path, tmp_path: Path) -> None:
         play.send_signal(2)
         out, err = play.communicate(timeout=30)
     assert play.returncode == 0, err
+    return rows, out
+
+
+def test_play_in_foxglove_without_ros(client_dir: Path, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'imu.mcap', [('/imu', IMU, 100.0)], 12.0)
+    scenario = tmp_path / 'bias.yaml'
+    scenario.write_text(SCENARIO)
+    start = synthetic.DEFAULT_START
+    plan = {'subscribe': ['/imu_out', '/bagfault/events'], 'count_topic': '/imu_out', 'switch_at': 100,
+            'switch': {'name': 'bias.active', 'value': True}, 'refuse_at': 200,
+            'refuse': {'name': 'bias.angular_velocity_z_bias', 'value': 'fast'}, 'seek_at': 300,
+            'seek_to': start + NS // 2, 'after_seek': 20, 'timeout_s': 60}
+    rows, out = play_without_ros(client_dir, tmp_path, [str(scenario), str(bag)], plan)
     assert 'played into the Foxglove view only (rclpy is not installed here)' in out
 
     info = next(r for r in rows if r['kind'] == 'serverInfo')
@@ -184,25 +191,8 @@ def test_the_server_speaks_foxglove_sdk_v1_only_as_the_readme_says() -> None:
 
 
 def test_play_in_foxglove_leaves_out_a_type_nobody_defined(client_dir: Path, quirks_bag: Path, tmp_path: Path) -> None:
-    blocked = tmp_path / 'no_ros' / 'rclpy'
-    blocked.mkdir(parents=True)
-    (blocked / '__init__.py').write_text("raise ImportError('no ROS on this machine')\n")
-    env = {**os.environ, 'PYTHONPATH': os.pathsep.join([str(blocked.parent), str(ROOT)])}
-    port = free_port()
-    play = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'play', str(quirks_bag), '--foxglove',
-                             f'127.0.0.1:{port}'], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        line = play.stdout.readline()  # type: ignore[union-attr]
-        assert f'Foxglove view on ws://127.0.0.1:{port}' in line, line + play.stderr.read()  # type: ignore[union-attr]
-        plan = {'subscribe': ['/imu'], 'count_topic': '/imu', 'stop_at': 50, 'timeout_s': 60}
-        client = subprocess.run(['node', 'client.mjs', f'ws://127.0.0.1:{port}', json.dumps(plan)], cwd=client_dir,
-                                capture_output=True, text=True, check=False, timeout=120)
-        rows = [json.loads(line) for line in client.stdout.splitlines() if line.startswith('{')]
-        assert rows and rows[-1]['kind'] == 'done' and client.returncode == 0, client.stdout[-2000:] + client.stderr
-    finally:
-        play.send_signal(2)
-        out, err = play.communicate(timeout=30)
-    assert play.returncode == 0, err
+    plan = {'subscribe': ['/imu'], 'count_topic': '/imu', 'stop_at': 50, 'timeout_s': 60}
+    rows, out = play_without_ros(client_dir, tmp_path, [str(quirks_bag)], plan)
     channels = {r['topic'] for r in rows if r['kind'] == 'channel'}
     assert {'/imu', '/odom', '/scan', '/clock', 'robot_status'} <= channels
     assert '/performance_metrics' not in channels
