@@ -20,7 +20,7 @@ from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
-    from bagfault.scenario.model import Scenario
+    from bagfault.scenario.model import FaultSpec, Scenario
 
 
 def validate_scenario(scenario: Scenario, out: _Collector) -> None:
@@ -139,22 +139,32 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
 
 
 def _check_chains(scenario: Scenario, out: _Collector) -> None:
+    """Unknown `after` faults, and each loop of `after` chains once, at its first fault in the file."""
+    by_id: dict[str, FaultSpec] = {}
     for fault in scenario.faults:
-        if fault.after is None:
+        by_id.setdefault(fault.id, fault)
+    position = {fault.id: number for number, fault in reversed(list(enumerate(scenario.faults)))}
+    for fault in scenario.faults:
+        if fault.after is not None and fault.after.fault not in by_id:
+            out.add((*fault.path, 'after', 'fault'), f'unknown fault {fault.after.fault!r}')
+    followed: set[str] = set()  # faults whose chain was walked already (a loop is found once)
+    for fault in scenario.faults:
+        walk: list[str] = []
+        probe: FaultSpec | None = fault
+        while probe is not None and probe.id not in followed and probe.id not in walk:
+            walk.append(probe.id)
+            probe = by_id.get(probe.after.fault) if probe.after is not None else None
+        followed.update(walk)
+        if probe is None or probe.id not in walk:
             continue
-        path = (*fault.path, 'after', 'fault')
-        if scenario.fault(fault.after.fault) is None:
-            out.add(path, f'unknown fault {fault.after.fault!r}')
-            continue
-        seen, probe = {fault.id}, scenario.fault(fault.after.fault)
-        while probe is not None and probe.after is not None:
-            if probe.id in seen:
-                out.add(path, f'chain of "after" faults loops back to {probe.id!r}')
-                break
-            seen.add(probe.id)
-            probe = scenario.fault(probe.after.fault)
-        if probe is not None and probe.id == fault.id:
+        loop = walk[walk.index(probe.id):]
+        first = min(loop, key=position.__getitem__)
+        loop = loop[loop.index(first):] + loop[:loop.index(first)]
+        path = (*by_id[first].path, 'after', 'fault')
+        if len(loop) == 1:
             out.add(path, 'a fault cannot be chained after itself')
+        else:
+            out.add(path, f'chain of "after" faults loops: {" -> ".join([*loop, first])}')
 
 
 def _check_fault_manager(scenario: Scenario, out: _Collector) -> None:

@@ -247,6 +247,23 @@ def test_extended_schedules_parse_and_validate():
     assert ('faults[3].after.fault', "unknown fault 'ghost'") in messages
 
 
+def test_a_loop_of_after_chains_is_one_problem_naming_the_loop():
+    """f3 -> f4 -> f3 is one loop: one line at its first fault, whatever chains lead into it (f5 follows f3)."""
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(textwrap.dedent("""
+            injector: {id: imu, type: imu, input_topic: /a, output_topic: /b}
+            faults:
+              - {id: f1, injector_id: imu, start: 1.0, config: {}}
+              - {id: f5, injector_id: imu, after: {fault: f3}, config: {}}
+              - {id: f3, injector_id: imu, after: {fault: f4}, config: {}}
+              - {id: f4, injector_id: imu, after: {fault: f3}, config: {}}
+              - {id: f6, injector_id: imu, after: {fault: f6}, config: {}}
+        """))
+    assert [(p.path, p.message) for p in info.value.problems] == [
+        ('faults[2].after.fault', 'chain of "after" faults loops: f3 -> f4 -> f3'),
+        ('faults[4].after.fault', 'a fault cannot be chained after itself')]
+
+
 def test_live_injector_keys_are_checked_like_the_rest():
     with pytest.raises(ScenarioError) as info:
         parse_scenario(textwrap.dedent("""
