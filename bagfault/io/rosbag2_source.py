@@ -99,6 +99,8 @@ class Rosbag2Source(MergedSource):
         return files
 
     def _open_part(self, file: Path) -> McapSource | SqliteSource:
+        if file.exists() and not file.is_file():  # listed in metadata.yaml: a FIFO there would block for ever
+            raise InputError(f'{file}: not a regular file (a FIFO, device or socket is not a bag file)')
         if file.name.endswith('.zstd'):
             file = self._expand(file)
         with file.open('rb') as stream:

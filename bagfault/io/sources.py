@@ -35,6 +35,7 @@ def open_source(path: Path, *, salvage: bool = False) -> Source:
         raise InputError(f'{path}: no such file or directory')
     if path.is_dir():
         return Rosbag2Source(path, salvage=salvage)
+    require_regular(path)
     try:
         with path.open('rb') as stream:
             head = stream.read(16)
@@ -56,10 +57,17 @@ def open_source(path: Path, *, salvage: bool = False) -> Source:
     raise InputError(f'{path}: not a bag (expected MCAP, rosbag2 .db3, a rosbag2 directory or a ROS 1 .bag)')
 
 
+def require_regular(path: Path) -> None:
+    """InputError for a FIFO, device or socket: reading one would block the run (or never end)."""
+    if path.exists() and not path.is_file() and not path.is_dir():
+        raise InputError(f'{path}: not a regular file (a FIFO, device or socket is not a bag)')
+
+
 def input_files(path: Path) -> list[Path]:
-    """The files that make up an input, in a stable order."""
+    """The files that make up an input, in a stable order (regular files only: InputError for others)."""
     if path.is_dir():
         return sorted(x for x in path.iterdir() if x.is_file() and not x.name.endswith(('-shm', '-wal')))
+    require_regular(path)
     return [path]
 
 

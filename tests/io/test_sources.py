@@ -187,3 +187,27 @@ def test_input_digests_are_blake3_over_every_window_and_stop_when_asked(tmp_path
         sources.fingerprint(path, stop)
     with pytest.raises(InputError, match=r'missing\.bin: cannot read: No such file'):
         sources.fingerprint(tmp_path / 'missing.bin')
+
+
+def test_a_fifo_is_refused_before_it_is_read(tmp_path):
+    """A FIFO as the input, or listed in metadata.yaml, blocked the run for ever (SIGTERM did not end it)."""
+    import os
+    import subprocess
+    import sys
+
+    fifo = tmp_path / 'in.mcap'
+    os.mkfifo(fifo)
+    scenario = tmp_path / 'pass.yaml'
+    scenario.write_text('injectors: []\n')
+    folder = tmp_path / 'bag'
+    folder.mkdir()
+    os.mkfifo(folder / 'bag_0.db3')
+    (folder / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: sqlite3\n'
+        '  relative_file_paths: [bag_0.db3]\n  message_count: 0\n  topics_with_message_count: []\n')
+    for bag, name in ((fifo, 'in.mcap'), (folder, 'bag_0.db3')):
+        done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'run', str(scenario), str(bag), '-o',
+                               str(tmp_path / 'out.mcap')], capture_output=True, text=True, timeout=60, check=False)
+        assert done.returncode == 2 and done.stderr.count('\n') == 1, done.stderr
+        assert f'{name}: not a regular file' in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag', 'in.mcap', 'pass.yaml']
