@@ -8,8 +8,12 @@ Files named `test_*.bagfault.yaml` are collected: the scenario runs once
 (`bagfault test` when it has a `system_under_test`, else `bagfault run`,
 on the bags it names under `bags:`) and each assertion is one test item,
 located at its line, so `pytest --junitxml` gives CI one testcase per
-assertion. A scenario that cannot run fails every item with the reason.
-`--bagfault-out DIR` keeps the recordings and logs of collected scenarios.
+assertion. A scenario that cannot run is an error of every item (pytest's
+word for broken setup), with the reason, never a failure. Items carry the
+markers `bagfault` and `closed_loop` (a `system_under_test`) or `offline`,
+registered so `--strict-markers` passes: `pytest -m offline` runs the
+scenarios that need no ROS graph. `--bagfault-out DIR` keeps the
+recordings and logs of collected scenarios.
 """
 
 from __future__ import annotations
@@ -38,6 +42,19 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup('bagfault')
     group.addoption('--bagfault-out', metavar='DIR', default=None,
                     help='keep the recordings and system logs of collected scenario files here')
+
+
+MARKERS = {
+    'bagfault': 'a bagfault scenario or a test using the bagfault fixture',
+    'closed_loop': 'a bagfault scenario with a system_under_test (needs rclpy and a ROS graph)',
+    'offline': 'a bagfault scenario run on its bags alone (no ROS needed)',
+}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Register the markers (so `--strict-markers` accepts them)."""
+    for name, text in MARKERS.items():
+        config.addinivalue_line('markers', f'{name}: {text}')
 
 
 class ScenarioAssertionError(AssertionError):
@@ -160,6 +177,22 @@ class ScenarioItem(pytest.Item):
         self.assertion_id = assertion_id
         self.line = line
         self.user_properties += [('scenario_file', str(self.path)), ('scenario_line', str(line))]
+        self.add_marker('bagfault')
+        scenario = getattr(self.parent, 'scenario', None)
+        if scenario is not None:
+            self.add_marker('closed_loop' if scenario.system is not None else 'offline')
+
+    def setup(self) -> None:
+        """The scenario runs here (once per file): a scenario that cannot run is a setup error, not a failure."""
+        from bagfault.errors import BagfaultError  # noqa: PLC0415
+
+        assert isinstance(self.parent, ScenarioFile)
+        try:
+            self.parent.outcome()
+        except BagfaultError as exc:
+            tail = getattr(exc, 'tail', None) or []
+            pytest.fail('\n'.join([f'{self.path.name}: could not run: {exc}', *(f'  | {line}' for line in tail)]),
+                        pytrace=False)
 
     def runtest(self) -> None:
         """Pass when the assertion passed."""
@@ -183,9 +216,8 @@ class ScenarioItem(pytest.Item):
         value = excinfo.value
         if isinstance(value, ScenarioAssertionError):
             return str(value)
-        if isinstance(value, BagfaultError):
-            tail = getattr(value, 'tail', None) or []
-            return '\n'.join([f'{self.path.name}: could not run: {value}', *(f'  | {line}' for line in tail)])
+        if isinstance(value, BagfaultError):  # (setup reports these as errors; a rerun of runtest alone lands here)
+            return f'{self.path.name}: could not run: {value}'
         return super().repr_failure(excinfo)
 
     def reportinfo(self) -> tuple[Path, int, str]:

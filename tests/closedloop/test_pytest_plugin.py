@@ -89,13 +89,28 @@ def test_junit_xunit1_carries_file_and_line_attributes(project: pytest.Pytester)
     assert int(activates.get('line') or -1) == line_of(written, 'id: bias_activates') - 1  # pytest counts from 0
 
 
-def test_a_scenario_that_cannot_run_fails_each_item_with_the_reason(pytester: pytest.Pytester) -> None:
+def test_a_scenario_that_cannot_run_is_an_error_of_each_item_with_the_reason(pytester: pytest.Pytester) -> None:
+    """Broken setup is a pytest error, a failed assertion a failure, so CI tells the two apart."""
     pytester.makefile('.bagfault.yaml', test_nobag=GOOD.replace('imu.mcap', 'missing.mcap'),
                       test_broken='injector: {id: imu, type: imu\n')
-    result = pytester.runpytest_subprocess('-p', 'no:cacheprovider')
-    result.assert_outcomes(failed=3)
+    result = pytester.runpytest_subprocess('-p', 'no:cacheprovider', '--junitxml=report.xml')
+    result.assert_outcomes(errors=3)
     result.stdout.fnmatch_lines(['*test_nobag.bagfault.yaml: could not run: *missing.mcap*'])
     result.stdout.fnmatch_lines(['*test_broken.bagfault.yaml: could not run: *'])
+    assert 'Traceback' not in result.stdout.str()
+    cases = list(ET.parse(pytester.path / 'report.xml').getroot().iter('testcase'))
+    assert len(cases) == 3 and all(c.find('error') is not None and c.find('failure') is None for c in cases)
+
+
+def test_markers_select_scenarios_and_pass_strict_markers(project: pytest.Pytester) -> None:
+    offline = project.runpytest_subprocess('-p', 'no:cacheprovider', '--strict-markers', '-m', 'offline')
+    offline.assert_outcomes(passed=3, failed=1, deselected=3)  # the four assertions of the two scenario files
+    both = project.runpytest_subprocess('-p', 'no:cacheprovider', '--strict-markers', '-m', 'bagfault and not offline')
+    both.assert_outcomes(deselected=7)
+    loops = project.runpytest_subprocess('-p', 'no:cacheprovider', '--strict-markers', '-m', 'closed_loop')
+    loops.assert_outcomes(deselected=7)
+    listed = project.runpytest_subprocess('-p', 'no:cacheprovider', '--markers')
+    listed.stdout.fnmatch_lines(['@pytest.mark.closed_loop: *', '@pytest.mark.offline: *'])
 
 
 @pytest.mark.skipif(not rclpy_available(), reason="rclpy not installed (pip install '.[live]')")
