@@ -86,7 +86,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                                             shell=system.shell, logs=folder)
                     print(f'bagfault: system under test started on ROS domain {lease.domain}; to watch it: '
                           f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}',
-                          file=sys.stderr, flush=True)
+                          flush=True)  # (stdout, as the view's address: stderr keeps one line per problem)
                     link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
                                       catalog=catalog, rate=rate, stop=stop, recording=recording)
                     link.view = view

@@ -49,7 +49,7 @@ def judge(tester: LoopRunner, bag: Path, tmp_path: Path) -> None:
         'system_alive': 'passed', 'no_false_alarm': 'passed', 'diagnostics_heard': 'passed'}
     system = report['system_under_test']
     domain = system['ros_domain_id']  # said when the system started, so a tool can be attached while it runs
-    assert f'started on ROS domain {domain}; to watch it: ROS_DOMAIN_ID={domain} ' in result.stderr
+    assert f'started on ROS domain {domain}; to watch it: ROS_DOMAIN_ID={domain} ' in result.stdout
     assert '/clock' not in system['played_per_topic'] and system['played_per_topic']['/odom'] > 0
     assert set(system['heard_per_topic']) == {'/diagnostics'}  # bagfault's own topics are not the system's
     assert any("bag's own /clock was not published" in note for note in report['notes'])
