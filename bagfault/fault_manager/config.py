@@ -321,8 +321,12 @@ def _snapshots(node: object, path: tuple[Any, ...], problem: Problem) -> Snapsho
     for key in node:
         if key not in known:
             problem((*path, key), f'unknown snapshots key {key!r}')
-    if 'enabled' in node:
-        values['enabled'] = bool(node['enabled'])
+    if 'enabled' in node:  # a ROS parameter in medkit (declare_parameter<bool>): rcl's YAML keeps 'false' a string
+        if isinstance(node['enabled'], bool):
+            values['enabled'] = node['enabled']
+        else:
+            problem((*path, 'enabled'), f"{node['enabled']!r} must be true or false (medkit declares "
+                                        'snapshots.enabled as a bool parameter; a quoted value is a string there)')
     if 'default_topics' in node:
         values['default_topics'] = _topics(node['default_topics'], (*path, 'default_topics'), problem)
     if 'fault_specific' in node:

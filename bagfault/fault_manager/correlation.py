@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bagfault.fault_manager.model import CORRELATION_SEVERITY_NAMES, ClusterInfo, MutedFaultInfo
+from bagfault.yamlcpp import as_bool
 
 Problem = Callable[[tuple[Any, ...], str], None]
 REPRESENTATIVES = ('first', 'most_recent', 'highest_severity')
@@ -73,13 +74,27 @@ def _codes(value: object, path: tuple[Any, ...], problem: Problem, empty: Proble
     return [wildcard(v) for v in value]
 
 
+def medkit_bool(node: dict[str, Any], key: str, default: bool, path: tuple[Any, ...], problem: Problem) -> bool:
+    """medkit's `get_bool` (config_parser.cpp): yaml-cpp's `as<bool>()` of a scalar, the default when absent or
+    not a scalar; a scalar yaml-cpp cannot convert (where medkit throws) is a problem."""
+    value = node.get(key)
+    if key not in node or value is None or isinstance(value, (dict, list)):
+        return default
+    converted = as_bool(value)
+    if converted is None:
+        problem((*path, key), f"{value!r} is not a boolean as medkit's yaml-cpp reads one (true/false, yes/no, on/off, "
+                              'y/n)')
+        return default
+    return converted
+
+
 def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem = no_warning,
                       ) -> CorrelationConfig | None:
     """Parse and check; every problem reported, and what medkit's validator only warns about to `warn`."""
     if not isinstance(node, dict):
         problem(path, 'must be a mapping {enabled, default_window_ms, patterns, rules}')
         return None
-    config = CorrelationConfig(enabled=bool(node.get('enabled', False)))  # medkit: get_bool(..., "enabled", false)
+    config = CorrelationConfig(enabled=medkit_bool(node, 'enabled', False, path, problem))
     window = node.get('default_window_ms', 500)
     if isinstance(window, bool) or not isinstance(window, int) or window <= 0:
         problem((*path, 'default_window_ms'), f'{window!r} must be a positive integer (ms)')
@@ -174,8 +189,8 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
         else:
             rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
         rule.symptom_codes = refs(item.get('symptoms'), (*where, 'symptoms'), 'symptoms')
-        rule.mute_symptoms = bool(item.get('mute_symptoms', True))
-        rule.auto_clear_with_root = bool(item.get('auto_clear_with_root', True))
+        rule.mute_symptoms = medkit_bool(item, 'mute_symptoms', True, where, problem)
+        rule.auto_clear_with_root = medkit_bool(item, 'auto_clear_with_root', True, where, problem)
         return rule
     rule.match_codes = refs(item.get('match'), (*where, 'match'), 'match patterns')
     min_count = item.get('min_count', 3)
@@ -185,7 +200,7 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
         rule.min_count = min_count
         if min_count < 2:
             warn((*where, 'min_count'), f'{min_count} is under 2, which may cause false clusters')
-    rule.show_as_single = bool(item.get('show_as_single', True))
+    rule.show_as_single = medkit_bool(item, 'show_as_single', True, where, problem)
     written = item.get('representative', 'highest_severity')
     representative = REPRESENTATIVE_ALIASES.get(str(written).lower())
     if representative is None:
