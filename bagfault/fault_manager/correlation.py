@@ -147,7 +147,10 @@ class _References:
     problem: Problem
     warn: Problem
 
-    def __call__(self, items: object, where: tuple[Any, ...], what: str) -> list[re.Pattern[str]]:
+    def __call__(self, items: object, where: tuple[Any, ...], what: str, *,
+                 inline: bool = True) -> list[re.Pattern[str]]:
+        """The patterns of a symptoms or match list; `inline`: `{codes: [...]}` items count (symptoms), or are
+        read as medkit's parse_match_refs reads them in an auto_cluster match: not at all."""
         out: list[re.Pattern[str]] = []
         if items is None or items == []:
             self.warn(where, f'the rule has no {what} defined: it correlates nothing')
@@ -161,6 +164,9 @@ class _References:
                     self.problem((*where, number, 'pattern'), f"unknown pattern {item['pattern']!r}")
                 else:
                     out += self.patterns[item['pattern']]
+            elif isinstance(item, dict) and 'codes' in item and not inline:
+                self.warn((*where, number), 'medkit reads only {pattern: ID} items of an auto_cluster match: '
+                                            'these codes match nothing there (define a pattern for them)')
             elif isinstance(item, dict) and 'codes' in item:
                 out += _codes(item['codes'], (*where, number, 'codes'), self.problem)
             else:
@@ -192,7 +198,7 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
         rule.mute_symptoms = medkit_bool(item, 'mute_symptoms', True, where, problem)
         rule.auto_clear_with_root = medkit_bool(item, 'auto_clear_with_root', True, where, problem)
         return rule
-    rule.match_codes = refs(item.get('match'), (*where, 'match'), 'match patterns')
+    rule.match_codes = refs(item.get('match'), (*where, 'match'), 'match patterns', inline=False)
     min_count = item.get('min_count', 3)
     if isinstance(min_count, bool) or not isinstance(min_count, int) or min_count <= 0:
         problem((*where, 'min_count'), f'{min_count!r} must be a positive integer')

@@ -582,3 +582,26 @@ def test_the_lexicographically_first_matching_regex_wins(patterns: Any) -> None:
                                  lambda p, m: pytest.fail(m))
     assert config.snapshots.topics_for('MOTOR_A1') == ('/any',)
     assert config.snapshots.topics_for('SENSOR') == ('/d',)
+
+
+INLINE_CLUSTER = """
+correlation:
+  enabled: true
+  rules:
+    - id: inline_cluster
+      mode: auto_cluster
+      match:
+        - codes: [SENSOR_A, SENSOR_B, SENSOR_C]
+      min_count: 2
+      window_ms: 500
+"""
+
+
+def test_an_inline_codes_item_of_an_auto_cluster_match_matches_nothing() -> None:
+    """medkit's parse_match_refs (config_parser.cpp:111-121) keeps only `{pattern: ...}` items of a match list:
+    `{codes: [...]}` there gives a rule that matches nothing, so three failures form no cluster and mute none."""
+    _, errors, warnings = parse(INLINE_CLUSTER)
+    assert errors == [] and any('only {pattern: ID} items of an auto_cluster match' in w for w in warnings)
+    engine = Engine(INLINE_CLUSTER)
+    assert [engine.process_fault(code, 'ERROR') for code in ('SENSOR_A', 'SENSOR_B', 'SENSOR_C')] == [False] * 3
+    assert engine.cluster_count() == 0 and engine.muted_count() == 0
