@@ -330,9 +330,10 @@ class CorrelationEngine:
         cleared: list[str] = []
         symptoms = self.symptoms.pop(code, None)
         if symptoms is not None:
-            rule = next((r for r in self.config.rules if r.mode == 'hierarchical' and _matches(code, r.root_codes)),
-                        None)
-            if rule is not None and rule.auto_clear_with_root:
+            # medkit's process_clear: the pending root's own rule, then any hierarchical rule on this root with
+            # auto_clear_with_root (correlation_engine.cpp:95-119): one such rule is enough
+            if any(r.mode == 'hierarchical' and r.auto_clear_with_root and _matches(code, r.root_codes)
+                   for r in self.config.rules):
                 cleared = list(symptoms)
             for symptom in symptoms:
                 self.muted.pop(symptom, None)

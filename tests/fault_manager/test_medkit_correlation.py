@@ -605,3 +605,33 @@ def test_an_inline_codes_item_of_an_auto_cluster_match_matches_nothing() -> None
     engine = Engine(INLINE_CLUSTER)
     assert [engine.process_fault(code, 'ERROR') for code in ('SENSOR_A', 'SENSOR_B', 'SENSOR_C')] == [False] * 3
     assert engine.cluster_count() == 0 and engine.muted_count() == 0
+
+
+TWO_RULES_ON_ONE_ROOT = """
+correlation:
+  enabled: true
+  rules:
+    - id: keep_symptoms
+      mode: hierarchical
+      root_cause: {codes: [ESTOP_001]}
+      symptoms: [{codes: [MOTOR_COMM_FL]}]
+      window_ms: 500
+      auto_clear_with_root: false
+    - id: clear_symptoms
+      mode: hierarchical
+      root_cause: {codes: [ESTOP_001]}
+      symptoms: [{codes: [DRIVE_FAULT]}]
+      window_ms: 500
+      auto_clear_with_root: true
+"""
+
+
+def test_any_rule_on_the_root_with_auto_clear_clears_its_symptoms() -> None:
+    """medkit's process_clear (correlation_engine.cpp:95-119) asks the pending root's rule first and then every
+    hierarchical rule on that root: the second rule's auto_clear_with_root: true clears the symptom the first
+    rule muted, where bagfault used to consult only the first rule."""
+    engine = Engine(TWO_RULES_ON_ONE_ROOT)
+    engine.process_fault('ESTOP_001', 'CRITICAL')
+    assert engine.process_fault('MOTOR_COMM_FL', 'ERROR') is True
+    assert engine.engine.process_clear('ESTOP_001') == ['MOTOR_COMM_FL']
+    assert engine.muted_count() == 0
