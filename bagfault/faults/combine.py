@@ -25,12 +25,16 @@ def strongest(
     key: str,
     default: float = 0.0,
 ) -> tuple[float, ActiveFault | None]:
-    """Largest `key` over the active faults that set it, and the first fault holding it."""
+    """Largest `key` over the active faults that set it, and the first fault holding it. A nan is never the
+    largest: the anchor folds levels with `std::max(level, value)` from a finite fallback
+    (fault_injector_base.cpp, active_max_double), which keeps `level` when `value` is nan."""
     best: float | None = None
     owner = None
     for fault in active:
         if key in fault.config:
             value = fault.config[key]
+            if value != value:  # nan
+                continue
             if best is None or value > best:
                 best, owner = value, fault
     return (default, None) if best is None else (float(best), owner)

@@ -58,6 +58,20 @@ def test_odom_noise_uses_the_largest_stddev_and_is_gaussian(harness):
     assert np.all(dy == 0.0)
 
 
+@pytest.mark.parametrize('batch', [False, True])
+def test_a_nan_noise_level_adds_no_noise_as_the_anchors_max_keeps_the_other_level(harness, batch):
+    """ros2_fault_injection folds levels with std::max(level, value) from 0.0 (fault_injector_base.cpp:143-156,
+    active_max_double): std::max(0.0, nan) is 0.0, so a nan stddev alone adds nothing, and beside 0.2 the
+    noise is 0.2 -- never nan in the output."""
+    msgs = [synthetic.odometry(harness.ts, 0, 1.0) for _ in range(4000)]
+    alone, _ = harness.run(OdomInjector, ODOM, msgs, harness.faults({'x_noise_stddev': math.nan}), batch=batch)
+    assert all(o.pose.pose.position.x == m.pose.pose.position.x for (_, o), m in zip(alone, msgs, strict=True))
+    both, _ = harness.run(OdomInjector, ODOM, msgs, harness.faults({'x_noise_stddev': math.nan},
+                                                                 {'x_noise_stddev': 0.2}), batch=batch)
+    dx = np.array([o.pose.pose.position.x - m.pose.pose.position.x for (_, o), m in zip(both, msgs, strict=True)])
+    assert np.all(np.isfinite(dx)) and dx.std() == pytest.approx(0.2, rel=0.05)
+
+
 def test_drop_probability_uses_the_strongest_fault(harness):
     msgs = [synthetic.imu(harness.ts, 0, 0.0) for _ in range(5000)]
     active = harness.faults({'drop_probability': 0.1}, {'drop_probability': 0.6})

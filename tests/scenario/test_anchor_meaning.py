@@ -205,3 +205,20 @@ def test_api_run_with_a_scenario_object_and_strict_checks(tmp_path, odom_bag):
                               'faults: [{id: f, injector_id: o, active_on_startup: true, config: {x_bias: 1}}]\n')
     result = api.run(scenario, [odom_bag], tmp_path / 'o.mcap')
     assert not result.warnings and result.stats.input_messages == 500
+
+
+def test_a_nan_noise_level_is_accepted_with_a_true_warning_and_adds_nothing(tmp_path, odom_bag):
+    """fault_injector_base.cpp:143-156 (active_max_double): std::max(0.0, nan) keeps 0.0, so the anchor adds no
+    noise for a nan stddev, and says nothing; bagfault does the same and says why."""
+    text = textwrap.dedent("""
+        injector: {id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}
+        faults:
+          - {id: quiet, injector_id: odom, active_on_startup: true, config: {x_noise_stddev: nan}}
+    """)
+    out, result = run_inline(tmp_path, text, odom_bag)
+    assert any(w.endswith('nan adds no noise: a noise level is the largest of the active faults\' levels, and '
+                          'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
+               for w in result.warnings)
+    raw = decoded(odom_bag, ['/odom_raw'])['/odom_raw']
+    odom = decoded(out, ['/odom'])['/odom']
+    assert [m.pose.pose.position.x for _, m in odom] == [m.pose.pose.position.x for _, m in raw]
