@@ -216,7 +216,7 @@ def test_a_nan_noise_level_is_accepted_with_a_true_warning_and_adds_nothing(tmp_
           - {id: quiet, injector_id: odom, active_on_startup: true, config: {x_noise_stddev: nan}}
     """)
     out, result = run_inline(tmp_path, text, odom_bag)
-    assert any(w.endswith('nan adds no noise: a noise level is the largest of the active faults\' levels, and '
+    assert any(w.endswith("nan adds no noise: a noise level is the largest of the active faults' levels, and "
                           'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
                for w in result.warnings)
     raw = decoded(odom_bag, ['/odom_raw'])['/odom_raw']
