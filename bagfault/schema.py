@@ -203,8 +203,9 @@ def string(key: str, description: str, default: str = '', **kw: Any) -> ConfigFi
 
 
 def probability(key: str, description: str) -> ConfigField:
-    """Declare a probability in [0, 1]."""
-    return ConfigField(key, 'double', description, 0.0, min=0.0, max=1.0)
+    """Declare a probability in [0, 1] (nan accepted, as the anchor's range check lets it through; it never wins
+    the largest of the active faults, so it drops nothing)."""
+    return ConfigField(key, 'double', description, 0.0, min=0.0, max=1.0, finite=False)
 
 
 def stddev(key: str, description: str, **kw: Any) -> ConfigField:

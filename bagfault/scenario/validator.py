@@ -122,8 +122,8 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
             continue
         fault.config[key] = _coerce(field, value, path, out)
         coerced = fault.config[key]
-        if isinstance(coerced, float) and math.isnan(coerced) and key.endswith('_stddev'):
-            out.warn(path, "nan adds no noise: a noise level is the largest of the active faults' levels, and "
+        if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
+            out.warn(path, "nan has no effect: a level is the largest of the active faults' values, and "
                            'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
         elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double':
             out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '

@@ -216,9 +216,24 @@ def test_a_nan_noise_level_is_accepted_with_a_true_warning_and_adds_nothing(tmp_
           - {id: quiet, injector_id: odom, active_on_startup: true, config: {x_noise_stddev: nan}}
     """)
     out, result = run_inline(tmp_path, text, odom_bag)
-    assert any(w.endswith("nan adds no noise: a noise level is the largest of the active faults' levels, and "
+    assert any(w.endswith("nan has no effect: a level is the largest of the active faults' values, and "
                           'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
                for w in result.warnings)
     raw = decoded(odom_bag, ['/odom_raw'])['/odom_raw']
     odom = decoded(out, ['/odom'])['/odom']
     assert [m.pose.pose.position.x for _, m in odom] == [m.pose.pose.position.x for _, m in raw]
+
+
+def test_a_nan_drop_probability_is_accepted_and_drops_nothing(tmp_path, odom_bag):
+    """fault_config_schema.cpp:190-199 refuses a drop_probability outside [0, 1] by `< 0.0 || > 1.0`, which nan
+    passes; should_drop (fault_injector_base.cpp:222) takes active_max_double, 0.0 for nan: nothing dropped."""
+    text = textwrap.dedent("""
+        injector: {id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}
+        faults:
+          - {id: never, injector_id: odom, active_on_startup: true, config: {drop_probability: nan}}
+    """)
+    out, result = run_inline(tmp_path, text, odom_bag)
+    assert any(w.endswith('which keeps level') for w in result.warnings)
+    assert len(decoded(out, ['/odom'])['/odom']) == len(decoded(odom_bag, ['/odom_raw'])['/odom_raw'])
+    with pytest.raises(ScenarioError, match=r'above the maximum 1\.0'):
+        parse_scenario(text.replace('nan', 'inf'))
