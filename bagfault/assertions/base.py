@@ -37,6 +37,8 @@ class AssertionResult:
     unit: str = ''
     wall_ns: int = 0  # wall time spent evaluating it (JUnit's testcase time)
 
+TICK = 100_000_000  # ns: the anchor's assertion timer (fault_assertion_runner.cpp), looks every 100 ms
+
 
 class AssertionType:
     """One assertion type: its keys (besides id, type, within), its checks, its runtime."""

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, ClassVar
 
-from bagfault.assertions.base import AssertionType, fault_reference_problem
+from bagfault.assertions.base import TICK, AssertionType, fault_reference_problem
 from bagfault.schema import ConfigField
+
+NS = 1_000_000_000
 
 if TYPE_CHECKING:
     from bagfault.events import FaultEvent
@@ -30,6 +32,15 @@ class FaultEventAssertion(AssertionType):
         if state is not None and state not in {'active', 'inactive'}:
             problems.append(('state', f"{state!r} is not 'active' or 'inactive'"))
         return problems
+
+    def deadline(self) -> int | None:
+        """The anchor's 100 ms look that first finds `within` passed (fault_assertion_runner.cpp's timer calls
+        update(elapsed), which fails only when elapsed > within): an event between `within` and that look
+        still passes, as in the anchor."""
+        if self.spec.within is None:
+            return None
+        within = round(self.spec.within * NS)
+        return self.runner.origin + (within // TICK + 1) * TICK
 
     def on_event(self, event: FaultEvent) -> None:
         """Pass when the watched fault reaches the expected state."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from bagfault.assertions.base import AssertionType
+from bagfault.assertions.base import TICK, AssertionType
 from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
@@ -19,7 +19,6 @@ if TYPE_CHECKING:
     from bagfault.scenario.model import AssertionSpec, Scenario
 
 NS = 1_000_000_000
-TICK = 100_000_000  # the anchor's assertion timer, 100 ms
 
 
 class TopicHzAssertion(AssertionType):

@@ -169,3 +169,23 @@ def test_topic_hz_looks_every_100_ms_as_the_anchor_does(tmp_path, min_hz, state,
     _, result = run_inline(tmp_path, text, bag)
     [hz] = result.assertions
     assert (hz.state, (hz.time - START) / NS) == (state, at)  # failed at the first look after within (8.0 s)
+
+
+@pytest.mark.parametrize(('start', 'state', 'decided'), [
+    (1.05, 'passed', 1.05),  # after within (1.0) but before the look at 1.1 s: the anchor passes it
+    (1.0, 'passed', 1.0),
+    (1.15, 'failed', 1.1),   # the look at 1.1 s finds elapsed 1.1 > within
+])
+def test_fault_event_within_is_judged_at_the_anchors_100_ms_looks(tmp_path, start, state, decided):
+    """ros2_fault_injection's fault_assertion_runner.cpp looks every 100 ms of its timer and fails a pending
+    fault_event only when elapsed > within (fault_event_assertion.cpp:39-55); an event is observed at once."""
+    bag = make_bag(tmp_path / 'in.mcap', [('/imu', 'sensor_msgs/msg/Imu', 100.0)], 3.0)
+    _, result = run_inline(tmp_path, f"""
+        injector: {{id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}}
+        faults:
+          - {{id: bias, injector_id: imu, start: {start}, config: {{angular_velocity_z_bias: 0.1}}}}
+        assertions:
+          - {{id: on_time, type: fault_event, fault_id: bias, state: active, within: 1.0}}
+    """, bag)
+    [verdict] = result.assertions
+    assert (verdict.state, round((verdict.time - START) / NS, 3)) == (state, decided)

@@ -50,7 +50,7 @@ def test_anchor_assertions_pass_at_their_times(reports):
     assert len(statuses) == 7  # one per change and one at the end
 
 
-def test_changing_within_to_4_fails_at_4_seconds(tmp_path, scenarios, capsys):
+def test_changing_within_to_4_fails_at_the_look_after_4_seconds(tmp_path, scenarios, capsys):
     text = (scenarios / 'rover_multi.yaml').read_text()
     scenario = tmp_path / 'late.yaml'
     late = text.replace('state: active, within: 6.0', 'state: active, within: 4.0')
@@ -62,11 +62,13 @@ def test_changing_within_to_4_fails_at_4_seconds(tmp_path, scenarios, capsys):
     assert 'FAIL  odom_yaw_bias_activates' in capsys.readouterr().out
     data = json.loads((tmp_path / 'r.json').read_text())
     failed = next(a for a in data['assertions'] if a['id'] == 'odom_yaw_bias_activates')
-    assert (failed['state'], failed['t_s'], failed['stamp_ns']) == ('failed', 4.0, START + 4 * NS)
-    assert failed['message'] == 'fault odom_yaw_bias did not reach active within 4 s (deadline 4.000 s)'
+    # judged at the anchor's first 100 ms look past `within` (fault_assertion_runner.cpp): 4.1 s
+    assert (failed['state'], failed['t_s'], failed['stamp_ns']) == ('failed', 4.1, START + 41 * NS // 10)
+    assert failed['message'] == 'fault odom_yaw_bias did not reach active within 4 s (deadline 4.100 s)'
     assert data['verdict'] == 'failed' and data['final_status'] == 'failed'
     events = decoded(tmp_path / 'o.mcap', ['/fault_injection/assertion_events'])['/fault_injection/assertion_events']
-    assert [(t, m.state) for t, m in events if m.assertion_id == 'odom_yaw_bias_activates'] == [(START + 4 * NS, 'failed')]
+    assert [(t, m.state) for t, m in events if m.assertion_id == 'odom_yaw_bias_activates'] == [
+        (START + 41 * NS // 10, 'failed')]
 
 
 def test_end_of_bag_fails_what_is_pending(tmp_path):
