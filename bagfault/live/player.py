@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from bagfault.engine.result import RunResult
     from bagfault.engine.run import Run
     from bagfault.engine.stop import StopFlag
+    from bagfault.live.params import FaultParameters
     from bagfault.scenario.model import Scenario
     from bagfault.view.foxglove import FoxgloveView
 
@@ -173,19 +174,7 @@ def _node(ros: bool, stop: StopFlag, ros_args: list[str] | None,
         # the main thread creates while it spins)
         thread: threading.Thread | None = None
         try:
-            parameters = FaultParameters(node, ControlledFaults(control), lambda _topic, _data: None)
-            given, parameters.overrides = parameters.overrides, []
-            refused = parameters.check(given)
-            if not refused.successful:
-                raise LiveError(f'--ros-args: {refused.reason}')
-            start: list[tuple[str, str | None, Any]] = []
-            for value in given:
-                declared = parameters.parameters[value.name]
-                try:
-                    checked = check_change(control.scenario, declared.fault_id, declared.key, value.value)
-                except FieldValueError as exc:
-                    raise LiveError(f'--ros-args -p {value.name}: {exc}') from None
-                start.append((declared.fault_id, declared.key, checked))
+            start = _start_values(FaultParameters(node, ControlledFaults(control), lambda _topic, _data: None))
             executor.add_node(node)
             thread = threading.Thread(target=executor.spin, name='bagfault-player-parameters', daemon=True)
             thread.start()
@@ -195,6 +184,20 @@ def _node(ros: bool, stop: StopFlag, ros_args: list[str] | None,
             if thread is not None:
                 thread.join(timeout=5)
             node.destroy_node()
+
+
+def _start_values(parameters: FaultParameters) -> list[tuple[str, str | None, Any]]:
+    """The `-p` values as (fault, key or None for `active`, value), each checked by the scenario schema
+    (unknown names were refused when the parameters were declared); LiveError naming a refused one."""
+    start: list[tuple[str, str | None, Any]] = []
+    for value in parameters.overrides:
+        declared = parameters.parameters[value.name]
+        try:
+            checked = check_change(parameters.session.scenario, declared.fault_id, declared.key, value.value)
+        except FieldValueError as exc:
+            raise LiveError(f'--ros-args -p {value.name}: {exc}') from None
+        start.append((declared.fault_id, declared.key, checked))
+    return start
 
 
 @contextlib.contextmanager
@@ -242,8 +245,5 @@ def _pass(scenario: Scenario, inputs: list[Path], sink: Pacer, *, seed: int, rec
 
 def _time_range(inputs: list[Path]) -> tuple[int, int]:
     """The bag's first and last log times."""
-    input_set = InputSet(inputs)
-    try:
+    with InputSet(inputs) as input_set:
         return input_set.start_time or 0, input_set.end_time or 0
-    finally:
-        input_set.close()

@@ -14,12 +14,10 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
 from bagfault import __version__
 from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
-from bagfault.live.ros import has_interface, interface_class, make_node, offered_yaml
+from bagfault.live.ros import adapted_qos, has_interface, interface_class, make_node, offered_yaml
 from bagfault.live.runtime import make_executor, ros_context, running_distro
 
 if TYPE_CHECKING:
@@ -74,15 +72,6 @@ class Recorder:
         self.skipped: dict[str, str] = {}
         self.counts: dict[str, int] = {}
 
-    def _profile(self, topic: str) -> QoSProfile:
-        offered = self.node.get_publishers_info_by_topic(topic)
-        reliable = all(info.qos_profile.reliability == ReliabilityPolicy.RELIABLE for info in offered)
-        latched = bool(offered) and all(info.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                                        for info in offered)
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
-                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
-
     def discover(self) -> list[str]:
         """Subscribe to matching topics that appeared since the last look; the topics newly subscribed."""
         added = []
@@ -108,8 +97,8 @@ class Recorder:
 
     def subscribe(self, topic: str, msgtype: str) -> None:
         """Subscribe raw to one topic now (QoS from its current publishers, whose profiles are recorded)."""
-        profile = self._profile(topic)
         infos = self.node.get_publishers_info_by_topic(topic)
+        profile = adapted_qos(DEPTH, infos)
         hashes = {str(info.topic_type_hash) for info in infos if str(info.topic_type_hash).startswith('RIHS')}
         self.on_topic(topic, msgtype, {'offered_qos_profiles': offered_yaml([info.qos_profile for info in infos]),
                                        'topic_type_hash': hashes.pop() if len(hashes) == 1 else ''})
