@@ -32,7 +32,7 @@ from bagfault.events import AssertionEvent
 from bagfault.live.echoes import OwnEchoes
 from bagfault.live.graph import OWN_PREFIXES, oracle_topics, watched_topics
 from bagfault.live.recorder import Recorder
-from bagfault.live.sink import LiveSink
+from bagfault.live.sink import MATCH_SETTLE, LiveSink
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -95,6 +95,7 @@ class SystemLink(LiveSink):
         started = time.monotonic()
         for condition in self.system.conditions():
             self._await(condition)
+        time.sleep(MATCH_SETTLE)  # a publisher sees its subscriber first; the system's side matches a moment later
         self.ready_seconds = time.monotonic() - started
         own = {*self.played, *NOT_RECORDED}
         watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
