@@ -16,9 +16,12 @@ import os
 import socket
 import tempfile
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 from bagfault.errors import ClosedLoopError
+
+if TYPE_CHECKING:
+    from collections.abc import Collection
 
 FIRST, LAST = 30, 101  # ids whose Fast DDS ports stay below Linux's ephemeral range (32768)
 COORDINATOR_PORT_BASE = 32768  # domain_coordinator's claim on domain N is this port + N, bound
@@ -51,17 +54,15 @@ def lock_folder() -> Path:
 class DomainLease:
     """An exclusive claim on one ROS domain id; release it (or leave the `with`) when the run ends."""
 
-    def __init__(self, first: int = FIRST, last: int = LAST) -> None:
+    def __init__(self, first: int = FIRST, last: int = LAST, avoid: Collection[int] = ()) -> None:
         folder = lock_folder()
         folder.mkdir(parents=True, exist_ok=True)
-        avoid = os.environ.get('ROS_DOMAIN_ID', '0')
-        ids = list(range(first, last + 1))
-        start = os.getpid() % len(ids)  # processes start their search at different places
+        ours = os.environ.get('ROS_DOMAIN_ID', '0')
+        ids = [domain for domain in range(first, last + 1) if domain not in avoid and str(domain) != ours]
+        start = os.getpid() % max(1, len(ids))  # processes start their search at different places
         self._file: IO[bytes] | None = None
         self._claim: socket.socket | None = None
         for domain in ids[start:] + ids[:start]:
-            if str(domain) == avoid:
-                continue
             handle = (folder / f'{domain}.lock').open('a+b')
             try:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -37,6 +37,7 @@ from bagfault.live.sink import MATCH_SETTLE, LiveSink
 if TYPE_CHECKING:
     from collections.abc import Mapping
 
+    from bagfault.closedloop.isolation import DomainWatch
     from bagfault.closedloop.process import SystemProcess
     from bagfault.engine.oracles import Schema
     from bagfault.engine.routing import Routing
@@ -60,8 +61,9 @@ class SystemLink(LiveSink):
 
     def __init__(self, node: Any, listener: Any, executor: Any, *, system: SystemUnderTest,
                  process: SystemProcess, scenario: Scenario, catalog: TypeCatalog, rate: float, stop: StopFlag,
-                 recording: McapSink | None) -> None:
+                 recording: McapSink | None, watch: DomainWatch | None = None) -> None:
         super().__init__(node, rate=rate, clock=True, stop=stop, recording=recording)
+        self.watch = watch
         self.listener = listener
         self.executor = executor
         self.system = system
@@ -132,6 +134,8 @@ class SystemLink(LiveSink):
                                       f'before it was ready (waiting for {condition.describe()})',
                                       tail=self.process.tail())
             self.process.watch()
+            if self.watch is not None:
+                self.watch.look()
             if condition.kind == 'delay':
                 if time.monotonic() >= deadline:
                     return
@@ -226,6 +230,8 @@ class SystemLink(LiveSink):
             self._last_look = now
             if self._recorder is not None:
                 self._recorder.discover()
+            if self.watch is not None:
+                self.watch.look()
             self._check_alive(bag_time)
         self._hand_over(bag_time)
 
@@ -279,6 +285,8 @@ class SystemLink(LiveSink):
             self._tick(now)
             time.sleep(min(0.01, (end - now) / 1e9 / self.rate))
         self._reached(end)
+        if self.watch is not None:
+            self.watch.look(now=True)  # before any verdict: a stranger that joined late spoils them too
         self._hand_over(end)
         self._check_alive(end)
         if self.died_at is None:

@@ -139,6 +139,12 @@ class SystemProcess:
         """Remember the current descendants, so those that leave the group are still stopped."""
         self._known |= family(self.pid, self._known)
 
+    def pids(self) -> set[int]:
+        """Every process of the system seen so far (the group and its descendants, looked at again now)."""
+        if self.alive():
+            self.watch()
+        return {self.pid, *self._known}
+
     def stop(self, timeout: float) -> Ending:
         """SIGINT, SIGTERM, SIGKILL to the group and its descendants, `timeout` apart; how it ended."""
         if self.alive():

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
@@ -14,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bagfault.closedloop.domain import DomainLease
+from bagfault.closedloop.isolation import PRESTART, DomainWatch, first_strangers
 from bagfault.closedloop.link import SystemLink
 from bagfault.closedloop.process import SystemProcess
 from bagfault.engine.offline import finish, replay
@@ -30,8 +32,10 @@ from bagfault.live.runtime import make_executor, ros_context, running_distro
 from bagfault.scenario.system import command_line
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterator, Sequence
+    from typing import Any
 
+    from bagfault.closedloop.isolation import Stranger
     from bagfault.engine.result import RunResult
     from bagfault.engine.stop import StopFlag
     from bagfault.scenario.model import Scenario
@@ -46,13 +50,44 @@ def system_env(system: SystemUnderTest, domain: int) -> dict[str, str]:
             'ROS_DOMAIN_ID': str(domain), PROFILE_VARIABLE: str(LOOPBACK_PROFILE)}
 
 
+@contextlib.contextmanager
+def quiet_domain(stop: StopFlag, attempts: int = 3, wait: float = PRESTART,
+                 **lease: int) -> Iterator[tuple[DomainLease, Any]]:
+    """A leased domain with an rclpy context on it, on which no other process shows a node (looked at for
+    `wait` seconds: discovery takes ~0.2 s in a fresh process; the run's DomainWatch catches later ones);
+    another lease when one does, ClosedLoopError naming them after `attempts`."""
+    from rclpy.node import Node  # noqa: PLC0415
+
+    crowded: dict[int, list[Stranger]] = {}
+    for _ in range(attempts):
+        with contextlib.ExitStack() as stack:
+            try:
+                held = stack.enter_context(DomainLease(avoid=crowded, **lease))
+            except ClosedLoopError:
+                if not crowded:
+                    raise
+                break
+            context = stack.enter_context(ros_context(stop, domain_id=held.domain))
+            probe = Node('bagfault_domain_probe', context=context)
+            try:
+                found = first_strangers(probe, os.getpid(), wait)
+            finally:
+                probe.destroy_node()
+            if not found:
+                yield held, context
+                return
+            crowded[held.domain] = found
+    said = '; '.join(f'{domain}: {", ".join(s.describe() for s in found)}' for domain, found in crowded.items())
+    raise ClosedLoopError(f'no quiet ROS domain: other processes have nodes on each leased one ({said})')
+
+
 def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *, system: SystemUnderTest,
              seed: int, rate: float, logs: Path | None, stop: StopFlag, foxglove: str | None = None) -> RunResult:
     """One closed-loop run; the recording (if `output`) is complete on return, the system stopped."""
     from rclpy.node import Node  # noqa: PLC0415
 
     os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
-    with DomainLease() as lease, tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch:
+    with quiet_domain(stop) as (lease, context), tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch:
         folder = logs if logs is not None else Path(scratch)
         command = command_line(system, sys.executable)
         report = SystemReport(command=command, domain_id=lease.domain, logs=logs)
@@ -62,65 +97,67 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
             catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
             recording = (McapSink(output, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
                          if output is not None else None)
-            with ros_context(stop, domain_id=lease.domain) as context:
-                node = Node('bagfault_test_player', context=context)
-                listener = Node('bagfault_test_listener', context=context)
-                executor = make_executor(context)
-                executor.add_node(listener)
-                process = None
-                link = None
-                view = None
-                view_notes: list[str] = []
-                try:
-                    if foxglove is not None:
-                        from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
+            node = Node('bagfault_test_player', context=context)
+            listener = Node('bagfault_test_listener', context=context)
+            executor = make_executor(context)
+            executor.add_node(listener)
+            process = None
+            link = None
+            view = None
+            view_notes: list[str] = []
+            try:
+                if foxglove is not None:
+                    from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
 
-                        view = FoxgloveView(foxglove, scenario)  # read-only: a test's faults are its scenario's
-                        print(f'bagfault: Foxglove view on {view.url}', flush=True)
-                    if recording is not None:
-                        recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0),
-                                                            'mode': 'test', 'command': ' '.join(command)})
-                        recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
-                                                 input_set.start_time or 0)
-                    process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
-                                            shell=system.shell, logs=folder)
-                    print(f'bagfault: system under test started on ROS domain {lease.domain}; to watch it: '
-                          f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}',
-                          flush=True)  # (stdout, as the view's address: stderr keeps one line per problem)
-                    link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
-                                      catalog=catalog, rate=rate, stop=stop, recording=recording)
-                    link.view = view
-                    run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output,
-                                          hooks=link)
-                    if stopped:
-                        run.close(ok=False)
-                        raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '
-                                              'nothing judged', tail=process.tail())
-                    if recording is not None:
-                        record_origin(recording, run.stats.origin)
-                        finish(recording, run)
-                    else:
-                        run.close(ok=True)
-                except BaseException:
-                    if recording is not None:
-                        recording.abort()
-                    raise
-                finally:
-                    if view is not None:
-                        view_notes = view.notes()
-                        view.close()
-                    if link is not None:
-                        link.close()
-                    if process is not None:
-                        _stopped(process, system, report)
-                    executor.shutdown()
-                    listener.destroy_node()
-                    node.destroy_node()
+                    view = FoxgloveView(foxglove, scenario)  # read-only: a test's faults are its scenario's
+                    print(f'bagfault: Foxglove view on {view.url}', flush=True)
+                if recording is not None:
+                    recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0),
+                                                        'mode': 'test', 'command': ' '.join(command)})
+                    recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
+                                             input_set.start_time or 0)
+                process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
+                                        shell=system.shell, logs=folder)
+                print(f'bagfault: system under test started on ROS domain {lease.domain}; to watch it: '
+                      f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}',
+                      flush=True)  # (stdout, as the view's address: stderr keeps one line per problem)
+                watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid)
+                link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
+                                  catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)
+                link.view = view
+                run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output,
+                                      hooks=link)
+                if stopped:
+                    run.close(ok=False)
+                    raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '
+                                          'nothing judged', tail=process.tail())
+                if recording is not None:
+                    record_origin(recording, run.stats.origin)
+                    finish(recording, run)
+                else:
+                    run.close(ok=True)
+            except BaseException:
+                if recording is not None:
+                    recording.abort()
+                raise
+            finally:
+                if view is not None:
+                    view_notes = view.notes()
+                    view.close()
+                if link is not None:
+                    link.close()
+                if process is not None:
+                    _stopped(process, system, report)
+                executor.shutdown()
+                listener.destroy_node()
+                node.destroy_node()
         finally:
             input_set.close()
     assert link is not None
     result = run.result('test', inputs, output, seed)
     result.notes += view_notes
+    for described in link.watch.listeners.values() if link.watch is not None else ():
+        result.notes.append(f'on ROS domain {lease.domain} too, not part of the system: {described}')
     if run.stats.input_messages == 0:
         result.notes.append('the input holds no messages: nothing was played to the system under test')
     if link.alive_result is not None:

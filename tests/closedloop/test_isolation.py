@@ -1,0 +1,110 @@
+"""A leased domain is checked, not assumed: strangers before the start move the run on, during it void it."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from loop import SCENARIO, LoopRunner, running_with
+
+from bagfault.live import LOOPBACK_PROFILE
+
+TALKER = """
+import sys, time
+import rclpy
+from sensor_msgs.msg import Imu
+rclpy.init()
+node = rclpy.create_node(sys.argv[1])
+topic = sys.argv[2]
+publisher = node.create_publisher(Imu, topic, 10) if topic != '-' else None
+print('up', flush=True)
+while True:
+    if publisher is not None:
+        message = Imu()
+        message.angular_velocity.z = 5.0
+        publisher.publish(message)
+    time.sleep(0.02)
+"""
+
+
+def stranger(domain: int, name: str, topic: str, token: str) -> subprocess.Popen[str]:
+    """A plain rclpy node on `domain` in a process of its own (publishing on `topic`, or nothing for '-')."""
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(domain), 'FASTRTPS_DEFAULT_PROFILES_FILE': str(LOOPBACK_PROFILE)}
+    process = subprocess.Popen([sys.executable, '-c', TALKER, name, topic, token], env=env, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    assert process.stdout is not None and process.stdout.readline().strip() == 'up'
+    return process
+
+
+def ended(process: subprocess.Popen[str]) -> None:
+    process.kill()
+    process.wait(timeout=10)
+
+
+@pytest.mark.parametrize('attempt', [1, 2, 3])
+def test_a_foreign_publisher_on_the_leased_domain_voids_the_run(tester: LoopRunner, example_bag: Path,
+                                                                attempt: int) -> None:
+    token = tester.token()
+    process, report = tester.start(str(SCENARIO), str(example_bag), '-o', str(tester.tmp / 'out.mcap'), name=token)
+    assert process.stdout is not None
+    line = process.stdout.readline()
+    domain = int(re.search(r'on ROS domain (\d+)', line).group(1))  # type: ignore[union-attr]
+    intruder = stranger(domain, f'intruder_{attempt}', '/imu', token)
+    try:
+        outcome = tester.finish(process, report)
+    finally:
+        ended(intruder)
+    assert outcome.code == 2, (outcome.stdout, outcome.stderr)
+    (message,) = [line for line in outcome.stderr.splitlines() if line.startswith('bagfault')]
+    assert f'ROS domain {domain} is not isolated' in message
+    assert f'/intruder_{attempt} (pid {intruder.pid}) publishing /imu' in message
+    assert 'nothing judged' in message
+    assert not (tester.tmp / 'out.mcap').exists()  # no verdicts, no recording under the requested name
+    assert running_with(token) == []
+
+
+def test_a_listener_attached_to_watch_is_named_but_does_not_void_the_run(tester: LoopRunner, example_bag: Path) -> None:
+    token = tester.token()
+    process, report = tester.start(str(SCENARIO), str(example_bag), name=token)
+    assert process.stdout is not None
+    domain = int(re.search(r'on ROS domain (\d+)', process.stdout.readline()).group(1))  # type: ignore[union-attr]
+    watcher = stranger(domain, 'watching_engineer', '-', token)
+    try:
+        outcome = tester.finish(process, report)
+    finally:
+        ended(watcher)
+    assert outcome.code in (0, 1), outcome.stderr
+    assert outcome.report is not None
+    assert any(f'on ROS domain {domain} too' in n and f'/watching_engineer (pid {watcher.pid}) listening only' in n
+               for n in outcome.report['notes']), outcome.report['notes']
+
+
+def test_a_crowded_domain_is_passed_over_before_the_system_starts(tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip('rclpy')
+    from bagfault.closedloop.runner import quiet_domain
+    from bagfault.engine.stop import StopFlag
+    from bagfault.errors import ClosedLoopError
+
+    monkeypatch.setenv('BAGFAULT_DOMAIN_LOCKS', str(tmp_path / 'locks'))
+    monkeypatch.setenv('FASTRTPS_DEFAULT_PROFILES_FILE', str(LOOPBACK_PROFILE))
+    crowded, free, other = 110, 111, 112  # outside the leases' range, so no other run is there
+    sitters = [stranger(crowded, 'sitter', '/imu', 'x'), stranger(other, 'listener', '-', 'x')]
+    try:
+        # (a participant made again in one process can take a second to be seen: a long look here; a fresh
+        # `bagfault test` sees a node in ~0.2 s, and its DomainWatch catches any the first look missed)
+        with quiet_domain(StopFlag(), first=crowded, last=other, wait=3.0) as (lease, _context):
+            assert lease.domain == free  # one who only listens crowds a domain too, before the start
+        with pytest.raises(ClosedLoopError) as caught, quiet_domain(StopFlag(), first=crowded, last=crowded,
+                                                                    wait=3.0):
+            pass
+    finally:
+        for process in sitters:
+            ended(process)
+    sitter = sitters[0]
+    assert 'no quiet ROS domain' in str(caught.value)
+    assert f'{crowded}: /sitter (pid {sitter.pid}) publishing /imu' in str(caught.value)
