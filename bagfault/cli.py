@@ -382,7 +382,8 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     print(f'{campaign.name}: {sum(c.values())} jobs: {c["passed"]} passed, {c["failed"]} failed, {c["error"]} error'
           f'{search} ({result.ran} run now, on {result.engine})')
     for point in result.breaking_points:
-        where = f'holds from {point.value:g}' if point.value is not None else 'never holds'
+        where = f'holds from {point.value:g}' if point.value is not None else \
+            'never holds' if point.below is not None else 'undecided'
         print(f'breaking point {point.parameter} on {point.bag.name}: {where} ({point.note})')
     print(f'results   {args.output_dir / "results.parquet"}, {args.output_dir / "results.csv"}')
     print(f'report    {args.output_dir / "report.html"}')

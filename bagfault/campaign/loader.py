@@ -16,6 +16,7 @@ if TYPE_CHECKING:
 
 KEYS = {'campaign', 'scenario', 'mode', 'bags', 'sweep', 'seeds', 'design', 'search', 'keep', 'timeout'}
 MAX_RANGE = 100_000
+MAX_REPEAT = 100
 
 
 class _Problems:
@@ -138,7 +139,7 @@ def _design(node: object, campaign: Campaign, problems: _Problems) -> None:
 
 def _search(node: object, problems: _Problems) -> Search | None:
     if not isinstance(node, dict):
-        problems.add(('search',), 'must be a mapping: parameter, low, high, tolerance, until')
+        problems.add(('search',), 'must be a mapping: parameter, low, high, tolerance, until, repeat')
         return None
     numbers = {k: node.get(k) for k in ('low', 'high', 'tolerance')}
     bad = [k for k, v in numbers.items()
@@ -149,6 +150,10 @@ def _search(node: object, problems: _Problems) -> Search | None:
     parameter = node.get('parameter')
     if not isinstance(parameter, str) or not parameter:
         problems.add(('search', 'parameter'), 'must be a dotted scenario path')
+    repeat = node.get('repeat')
+    if repeat is not None and (isinstance(repeat, bool) or not isinstance(repeat, int) or not 1 <= repeat <= MAX_REPEAT):
+        problems.add(('search', 'repeat'), f'must be a whole number of samples per value, 1 to {MAX_REPEAT}')
+        repeat = None
     if not (isinstance(until, dict) and isinstance(until.get('assertion'), str)
             and until.get('state', 'passed') in ('passed', 'failed')):
         problems.add(('search', 'until'), 'must be {assertion: ID, state: passed|failed}')
@@ -158,7 +163,7 @@ def _search(node: object, problems: _Problems) -> Search | None:
     if not (low < high and tolerance > 0):
         problems.add(('search',), 'needs low < high and a tolerance above 0')
         return None
-    return Search(parameter, low, high, tolerance, Until(str(until['assertion']), until.get('state', 'passed')))
+    return Search(parameter, low, high, tolerance, Until(str(until['assertion']), until.get('state', 'passed')), repeat)
 
 
 def _check_scenario(campaign: Campaign, problems: _Problems, *, seeded: bool) -> None:

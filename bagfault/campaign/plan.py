@@ -32,8 +32,9 @@ class Job:
     values: dict[str, Any]
     seed: int
     scenario_text: str
-    key: str  # sha256 of bag content, expanded scenario, seed, mode and bagfault version
+    key: str  # sha256 of bag content, expanded scenario, seed, mode, sample and bagfault version
     kind: Kind = 'sweep'
+    sample: int = 0  # which run of the same value and seed (a search's repeat)
 
     @property
     def scenario_sha(self) -> str:
@@ -66,7 +67,8 @@ class Plan:
             'sweep': c.sweep, 'seeds': c.seeds, 'design': c.design, 'samples': c.samples, 'keep': c.keep,
             'search': asdict(c.search) if c.search is not None else None,
             'jobs': [{'index': j.index, 'bag': str(j.bag), 'values': j.values, 'seed': j.seed, 'key': j.key,
-                      'kind': j.kind, 'scenario': scenario_file(j, c)} for j in self.jobs],
+                      'kind': j.kind, 'scenario': scenario_file(j, c), **({'sample': j.sample} if j.sample else {})}
+                     for j in self.jobs],
         }
 
 
@@ -79,7 +81,8 @@ class Plan:
                  + (f', random design of {c.samples} points' if c.design == 'random' else '') + f'), mode {c.mode}']
         if c.search is not None:
             lines.append(f'then a search of {c.search.parameter} in [{c.search.low:g}, {c.search.high:g}] to '
-                         f'{c.search.tolerance:g}: at most {search_jobs(c)} jobs per bag')
+                         f'{c.search.tolerance:g}, {c.search.samples(c.mode)} samples per value and seed: at most '
+                         f'{search_jobs(c)} jobs per bag')
         for job in self.jobs:
             values = ', '.join(f'{k}={v!r}' for k, v in job.values.items())
             lines.append(f'  {job.index:>5}  {job.bag}  {values}  seed={job.seed}  key={job.key}')
@@ -97,7 +100,7 @@ def search_jobs(campaign: Campaign) -> int:
     s = campaign.search
     assert s is not None
     halvings = max(0, math.ceil(math.log2((s.high - s.low) / s.tolerance)))
-    return (2 + halvings) * len(campaign.seeds)
+    return (2 + halvings) * len(campaign.seeds) * s.samples(campaign.mode)
 
 
 def bags_of(campaign: Campaign) -> list[Path]:
@@ -128,10 +131,13 @@ def bag_digest(path: Path) -> str:
     return hashlib.sha256(json.dumps([asdict(f) for f in fingerprint(path)], sort_keys=True).encode()).hexdigest()
 
 
-def job_key(bag_sha: str, scenario_text: str, seed: int, mode: str) -> str:
-    """Where a job's result is stored: changes when the bag, the expanded scenario, the seed or bagfault does."""
-    text = json.dumps({'bag': bag_sha, 'scenario': scenario_text, 'seed': seed, 'mode': mode, 'version': __version__},
-                      sort_keys=True)
+def job_key(bag_sha: str, scenario_text: str, seed: int, mode: str, sample: int = 0) -> str:
+    """Where a job's result is stored: changes when the bag, the expanded scenario, the seed, the sample or bagfault
+    does."""
+    fields = {'bag': bag_sha, 'scenario': scenario_text, 'seed': seed, 'mode': mode, 'version': __version__}
+    if sample:
+        fields['sample'] = sample
+    text = json.dumps(fields, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -149,12 +155,13 @@ def make_plan(campaign: Campaign) -> Plan:
     return plan
 
 
-def search_job(plan: Plan, index: int, bag: Path, value: float, seed: int) -> Job:
-    """A job of the bisection: the searched parameter at `value` (with the first sweep point's other values)."""
+def search_job(plan: Plan, index: int, bag: Path, value: float, seed: int, sample: int = 0) -> Job:
+    """A job of the bisection: the searched parameter at `value` (with the first sweep point's other values), the
+    `sample`th run of that value and seed."""
     campaign = plan.campaign
     assert campaign.search is not None
     data = scenario_data(campaign.scenario.read_text(encoding='utf-8'))
     values = {campaign.search.parameter: value}
     text = expanded(data, values, campaign.scenario)[0]
-    return Job(index, bag, values, seed, text, job_key(plan.fingerprints[str(bag)], text, seed, campaign.mode),
-               'search')
+    return Job(index, bag, values, seed, text,
+               job_key(plan.fingerprints[str(bag)], text, seed, campaign.mode, sample), 'search', sample)

@@ -219,12 +219,13 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
         parts.append(f'<h2>Breaking point of <code>{html.escape(c.search.parameter)}</code> '
                      f'({html.escape(c.search.until.assertion)} {c.search.until.state}, tolerance '
                      f'{c.search.tolerance:g})</h2><table><tr><th class="l">bag</th><th>holds from</th>'
-                     '<th>not at</th><th>jobs</th><th class="l">note</th></tr>')
+                     '<th>not at</th><th>jobs</th><th class="l">note</th><th class="l">samples (value: held of runs)</th></tr>')
         for p in points:
             parts.append(f'<tr><td class="l">{html.escape(bag_name(plan, p.bag))}</td>'
                          f'<td>{"-" if p.value is None else _label(p.value)}</td>'
                          f'<td>{"-" if p.below is None else _label(p.below)}</td><td>{p.jobs}</td>'
-                         f'<td class="l">{html.escape(p.note)}</td></tr>')
+                         f'<td class="l">{html.escape(p.note)}</td>'
+                         f'<td class="l">{html.escape(", ".join(s.describe() for s in p.samples))}</td></tr>')
         parts.append('</table>')
         _flush(page, parts)
         _search_figure(page, c.search.parameter, [r for r in table.rows if r['kind'] == 'search'], points, plan)

@@ -197,7 +197,8 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     _write_scenarios(directory, plan)
     write_parquet(table, directory / 'results.parquet')
     write_csv(table, directory / 'results.csv')
-    write_atomic(directory / 'campaign.json', json.dumps(plan.describe(), indent=1, sort_keys=True) + '\n')
+    described = {**plan.describe(), 'breaking_points': [point.describe() for point in points]}
+    write_atomic(directory / 'campaign.json', json.dumps(described, indent=1, sort_keys=True) + '\n')
     write_atomic(directory / 'report.html', render_report(plan, table, points, description))
     rows = table.sweep_rows()
     counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}

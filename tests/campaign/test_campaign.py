@@ -173,6 +173,82 @@ def test_search_finds_the_breaking_point_known_from_the_thresholds(corpus: Path)
     assert all(0.02 + x > 0.1 for x in drawn['passed']['x']) and drawn['breaking point']['x'] == [point.value]
 
 
+def test_an_offline_search_gives_the_same_breaking_point_byte_for_byte(corpus: Path) -> None:
+    import json
+
+    (corpus / 'bags' / 'b.mcap').unlink()
+    text = f"""
+        campaign: again
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        search:
+          parameter: {BIAS}
+          low: 0.0
+          high: 0.5
+          tolerance: 0.01
+          until: {{assertion: drift_detected, state: passed}}
+        keep: none
+    """
+    found = []
+    for name in ('one', 'two'):
+        result = api.campaign(campaign_file(corpus, text), corpus / name, workers=2)
+        (point,) = result.breaking_points
+        found.append(json.dumps(json.loads((corpus / name / 'campaign.json').read_text())['breaking_points']))
+        # an offline run is the same for its seed: one sample per value by default, each 1 of 1 or 0 of 1
+        assert [(s.runs, s.held) for s in point.samples] == [(1, int(0.02 + s.value > 0.1)) for s in point.samples]
+    assert found[0] == found[1]
+    assert 'held in 1 of 1 runs at' in point.note
+
+
+def test_a_search_repeats_each_value_as_asked_and_needs_every_sample(corpus: Path) -> None:
+    (corpus / 'bags' / 'b.mcap').unlink()
+    path = campaign_file(corpus, f"""
+        campaign: repeated
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        seeds: [1, 2]
+        search:
+          parameter: {BIAS}
+          low: 0.0
+          high: 0.5
+          tolerance: 0.2
+          repeat: 2
+          until: {{assertion: drift_detected, state: passed}}
+        keep: none
+    """)
+    result = api.campaign(path, corpus / 'out', workers=2)
+    (point,) = result.breaking_points
+    # values 0.0, 0.5, then 0.25 and 0.125 (tolerance 0.2: two halvings); each run 2 seeds x 2 samples
+    assert [s.value for s in point.samples] == [0.0, 0.5, 0.25, 0.125]
+    assert all(s.runs == 4 for s in point.samples) and point.jobs == 16
+    assert (point.below, point.value) == (0.0, 0.125)  # detected iff 0.02 + bias > 0.1
+    search = [r for r in result.table.rows if r['kind'] == 'search']
+    assert len(search) == 16 and len({r['key'] for r in search}) == 16  # a sample is a job of its own
+    assert sorted((r['seed'], r[BIAS]) for r in search) == sorted(
+        (seed, value) for value in (0.0, 0.5, 0.25, 0.125) for seed in (1, 2) for _ in range(2))
+
+
+def test_a_search_value_that_could_not_run_decides_nothing(corpus: Path) -> None:
+    (corpus / 'bags' / 'c.mcap').write_bytes(b'\x89MCAP0\r\n' + bytes(64))
+    path = campaign_file(corpus, f"""
+        campaign: broken
+        scenario: drift.yaml
+        bags: [bags/c.mcap]
+        search:
+          parameter: {BIAS}
+          low: 0.0
+          high: 0.5
+          tolerance: 0.1
+          until: {{assertion: drift_detected, state: passed}}
+        keep: none
+    """)
+    result = api.campaign(path, corpus / 'out', workers=1)
+    (point,) = result.breaking_points
+    assert point.value is None and point.below is None
+    assert point.note.startswith('stopped: a run at 0 could not run (job ') and 'c.mcap' in point.note
+    assert [(s.value, s.held) for s in point.samples] == [(0.0, 0), (0.5, 0)]  # no bisection on errors
+
+
 def test_a_corrupt_bag_is_an_error_row_and_the_others_complete(corpus: Path) -> None:
     (corpus / 'bags' / 'c.mcap').write_bytes(b'\x89MCAP0\r\n' + os.urandom(64))
     path = campaign_file(corpus, f"""
