@@ -151,7 +151,8 @@ def _search(node: object, problems: _Problems) -> Search | None:
     if not isinstance(parameter, str) or not parameter:
         problems.add(('search', 'parameter'), 'must be a dotted scenario path')
     repeat = node.get('repeat')
-    if repeat is not None and (isinstance(repeat, bool) or not isinstance(repeat, int) or not 1 <= repeat <= MAX_REPEAT):
+    if repeat is not None and (isinstance(repeat, bool) or not isinstance(repeat, int)
+                               or not 1 <= repeat <= MAX_REPEAT):
         problems.add(('search', 'repeat'), f'must be a whole number of samples per value, 1 to {MAX_REPEAT}')
         repeat = None
     if not (isinstance(until, dict) and isinstance(until.get('assertion'), str)

@@ -219,7 +219,8 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
         parts.append(f'<h2>Breaking point of <code>{html.escape(c.search.parameter)}</code> '
                      f'({html.escape(c.search.until.assertion)} {c.search.until.state}, tolerance '
                      f'{c.search.tolerance:g})</h2><table><tr><th class="l">bag</th><th>holds from</th>'
-                     '<th>not at</th><th>jobs</th><th class="l">note</th><th class="l">samples (value: held of runs)</th></tr>')
+                     '<th>not at</th><th>jobs</th><th class="l">note</th>'
+                     '<th class="l">samples (value: held of runs)</th></tr>')
         for p in points:
             parts.append(f'<tr><td class="l">{html.escape(bag_name(plan, p.bag))}</td>'
                          f'<td>{"-" if p.value is None else _label(p.value)}</td>'

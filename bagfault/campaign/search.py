@@ -120,7 +120,8 @@ def _advance(bag: Path, bracket: _Bracket, outcome: dict[tuple[Path, float], Sam
     broken = next((s for (b, _), s in outcome.items() if b == bag and s.error), None)
     if broken is not None and bracket.phase != 'done':  # a run that could not run is no sample of the system
         bracket.phase, bracket.result = 'done', BreakingPoint(
-            bag, search.parameter, None, None, note=f'stopped: a run at {broken.value:g} could not run ({broken.error})')
+            bag, search.parameter, None, None,
+            note=f'stopped: a run at {broken.value:g} could not run ({broken.error})')
         return
     if bracket.phase == 'ends':
         low, high = outcome[(bag, bracket.low)], outcome[(bag, bracket.high)]
