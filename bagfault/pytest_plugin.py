@@ -12,7 +12,10 @@ assertion. A scenario that cannot run is an error of every item (pytest's
 word for broken setup), with the reason, never a failure. Items carry the
 markers `bagfault` and `closed_loop` (a `system_under_test`) or `offline`,
 registered so `--strict-markers` passes: `pytest -m offline` runs the
-scenarios that need no ROS graph. `--bagfault-out DIR` keeps the
+scenarios that need no ROS graph. The scenario runs in the setup of the
+file's first item (`--durations` shows it there; each item's call only
+reads its verdict). Under pytest-xdist (`-n 2`) a file's items go to one
+worker, so its scenario runs once. `--bagfault-out DIR` keeps the
 recordings and logs of collected scenarios.
 """
 
@@ -52,9 +55,30 @@ MARKERS = {
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the markers (so `--strict-markers` accepts them)."""
+    """Register the markers (so `--strict-markers` accepts them); under xdist, keep each scenario file together."""
     for name, text in MARKERS.items():
         config.addinivalue_line('markers', f'{name}: {text}')
+    if hasattr(config.hook, 'pytest_xdist_make_scheduler'):
+        config.pluginmanager.register(ScenarioFilesTogether(), 'bagfault-xdist')
+
+
+class ScenarioFilesTogether:
+    """pytest-xdist: under its default `--dist load`, the items of one scenario file go to one worker, so the
+    file's scenario runs once; every other test is scheduled alone, as `load` would."""
+
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_xdist_make_scheduler(self, config: pytest.Config, log: Any) -> Any:
+        """A LoadScopeScheduling whose scopes are scenario files and single items."""
+        if config.getvalue('dist') != 'load':
+            return None  # loadfile, loadscope and loadgroup keep a file together already; each/worksteal: asked for
+        from xdist.scheduler import LoadScopeScheduling  # type: ignore[import-untyped]  # noqa: PLC0415
+
+        class ByScenarioFile(LoadScopeScheduling):  # type: ignore[misc]
+            def _split_scope(self, nodeid: str) -> str:
+                path = nodeid.split('::', 1)[0]
+                return path if path.endswith(SUFFIXES) else nodeid
+
+        return ByScenarioFile(config, log)
 
 
 class ScenarioAssertionError(AssertionError):

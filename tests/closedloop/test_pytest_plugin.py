@@ -3,6 +3,7 @@ assertion, at its line), the `bagfault` fixture, and the JUnit XML CI reads."""
 
 from __future__ import annotations
 
+import os
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -113,6 +114,31 @@ def test_markers_select_scenarios_and_pass_strict_markers(project: pytest.Pytest
     listed.stdout.fnmatch_lines(['@pytest.mark.closed_loop: *', '@pytest.mark.offline: *'])
 
 
+MANY = GOOD.replace('name: good', 'name: many') + "".join(
+    f"  - {{id: bounded_{n}, type: field_range, topic: /imu_out, field: angular_velocity.z, min: 0.0, max: 0.5}}\n"
+    for n in range(6))
+
+
+def test_under_xdist_a_scenario_file_runs_on_one_worker_and_its_time_is_its_first_setup(
+        project: pytest.Pytester) -> None:
+    pytest.importorskip('xdist')
+    project.makefile('.bagfault.yaml', test_many=MANY)
+    project.makepyfile(test_plain="\n".join(f"def test_plain_{n}():\n    pass\n" for n in range(8)))
+    result = project.runpytest_subprocess('-p', 'no:cacheprovider', '-n', '2', '-v', 'test_many.bagfault.yaml',
+                                          'test_plain.py')
+    result.assert_outcomes(passed=16)
+    workers: dict[str, set[str]] = {}
+    for line in result.outlines:
+        if line.startswith('[gw') and 'PASSED' in line:
+            worker, item = line.split()[0], line.split()[-1]
+            workers.setdefault(item.split('::')[0], set()).add(worker)
+    assert workers['test_many.bagfault.yaml'] in ({'[gw0]'}, {'[gw1]'})  # the file's 8 items, one worker
+    # without xdist: the scenario's run is the setup of the file's first item, the slowest phase of the session
+    timed = project.runpytest_subprocess('-p', 'no:cacheprovider', '--durations=1', 'test_many.bagfault.yaml',
+                                         'test_plain.py')
+    timed.stdout.re_match_lines([r'.*s setup\s+test_many\.bagfault\.yaml::bias_activates$'])
+
+
 @pytest.mark.skipif(not rclpy_available(), reason="rclpy not installed (pip install '.[live]')")
 def test_closed_loop_scenario_file_and_fixture(pytester: pytest.Pytester) -> None:
     sys.path.insert(0, str(EXAMPLE))
@@ -134,3 +160,64 @@ def test_closed_loop_scenario_file_and_fixture(pytester: pytest.Pytester) -> Non
     result.assert_outcomes(passed=5)
     result.stdout.fnmatch_lines(['*test_loop.bagfault.yaml::system_alive PASSED*',
                                  '*test_loop.bagfault.yaml::drift_detected PASSED*'])
+
+
+ROVER_PACKAGE_XML = """<?xml version="1.0"?>
+<package format="3">
+  <name>rover_checks</name>
+  <version>0.0.1</version>
+  <description>A team's scenario folder</description>
+  <maintainer email="team@example.com">team</maintainer>
+  <license>Apache-2.0</license>
+  <test_depend>bagfault</test_depend>
+  <export><build_type>ament_python</build_type></export>
+</package>
+"""
+ROVER_SETUP_PY = """from setuptools import setup
+setup(name='rover_checks', version='0.0.1', packages=[], extras_require={'test': ['pytest']},
+      data_files=[('share/ament_index/resource_index/packages', ['resource/rover_checks']),
+                  ('share/rover_checks', ['package.xml'])])
+"""
+
+
+def test_bagfault_builds_in_a_colcon_workspace_and_a_packages_scenarios_run_under_colcon_test(
+        tmp_path: Path) -> None:
+    import shutil
+    import subprocess
+
+    colcon = Path(sys.executable).with_name('colcon')
+    if not colcon.exists():
+        pytest.skip("colcon not installed (pip install '.[test]')")
+    root = Path(__file__).resolve().parents[2]
+    src = tmp_path / 'ws' / 'src'
+    shutil.copytree(root / 'bagfault', src / 'bagfault' / 'bagfault', ignore=shutil.ignore_patterns('__pycache__'))
+    for name in ('pyproject.toml', 'setup.py', 'package.xml', 'README.md', 'LICENSE'):
+        shutil.copy(root / name, src / 'bagfault' / name)
+    shutil.copytree(root / 'resource', src / 'bagfault' / 'resource')
+    rover = src / 'rover_checks'
+    (rover / 'resource').mkdir(parents=True)
+    (rover / 'resource' / 'rover_checks').touch()
+    (rover / 'package.xml').write_text(ROVER_PACKAGE_XML)
+    (rover / 'setup.py').write_text(ROVER_SETUP_PY)
+    (rover / 'test').mkdir()
+    make_bag(rover / 'test' / 'imu.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 4.0)
+    (rover / 'test' / 'test_good.bagfault.yaml').write_text(GOOD)
+    (rover / 'test' / 'test_bad.bagfault.yaml').write_text(BAD)
+    workspace = tmp_path / 'ws'
+    env = {k: v for k, v in os.environ.items() if not k.startswith(('PYTEST', 'COLCON'))}
+    built = subprocess.run([str(colcon), 'build'], cwd=workspace, env=env, capture_output=True, text=True,
+                           timeout=300, check=False)
+    assert built.returncode == 0, built.stdout + built.stderr
+    assert (workspace / 'install' / 'bagfault' / 'share' / 'bagfault' / 'package.xml').exists()
+    assert list((workspace / 'install' / 'bagfault' / 'lib').glob('python3*/site-packages/bagfault/cli.py'))
+    tested = subprocess.run([str(colcon), 'test', '--packages-select', 'rover_checks'], cwd=workspace, env=env,
+                            capture_output=True, text=True, timeout=300, check=False)
+    assert tested.returncode == 0, tested.stdout + tested.stderr  # colcon test runs; test-result judges
+    results = subprocess.run([str(colcon), 'test-result', '--all'], cwd=workspace, env=env, capture_output=True,
+                             text=True, timeout=120, check=False)
+    # GOOD and BAD have two assertions each; BAD's yaw_rate_tight fails (0.2 rad/s against max 0.15)
+    assert results.returncode == 1, results.stdout + results.stderr
+    assert 'Summary: 4 tests, 0 errors, 1 failure, 0 skipped' in results.stdout, results.stdout
+    junit = ET.parse(workspace / 'build' / 'rover_checks' / 'pytest.xml').getroot()
+    failed = [c.get('name') for c in junit.iter('testcase') if c.find('failure') is not None]
+    assert failed == ['yaw_rate_tight']
