@@ -112,6 +112,7 @@ class SystemProcess:
         self.stdout_path = logs / 'system.stdout.log'
         self.stderr_path = logs / 'system.stderr.log'
         self.ending: Ending = 'running'
+        self.sent: list[tuple[str, float]] = []  # each signal sent while the main process ran, seconds into the stop
         self._out: IO[bytes] = self.stdout_path.open('wb')
         self._err: IO[bytes] = self.stderr_path.open('wb')
         argv: str | list[str] = command[0] if shell else command
@@ -146,9 +147,11 @@ class SystemProcess:
         return {self.pid, *self._known}
 
     def stop(self, timeout: float) -> Ending:
-        """SIGINT, SIGTERM, SIGKILL to the group and its descendants, `timeout` apart; how it ended."""
+        """SIGINT, SIGTERM, SIGKILL to the group and its descendants, `timeout` apart; how it ended (the last
+        signal the main process got, every one sent in `sent`)."""
         if self.alive():
             self.watch()
+        began = time.monotonic()
         for sig, name in ((signal.SIGINT, 'SIGINT'), (signal.SIGTERM, 'SIGTERM'), (signal.SIGKILL, 'SIGKILL')):
             remaining = self.leftovers()
             main_running = self.alive()
@@ -156,6 +159,7 @@ class SystemProcess:
                 break
             if main_running:
                 self.ending = name  # type: ignore[assignment]
+                self.sent.append((name, time.monotonic() - began))
             self._signal(sig, remaining)
             self._wait(timeout if sig != signal.SIGKILL else 5.0)
         else:

@@ -180,6 +180,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
 def _stopped(process: SystemProcess, system: SystemUnderTest, report: SystemReport) -> None:
     """Stop the system and note how; its output tail goes into the report."""
     report.ending = process.stop(system.stop_timeout)
+    report.signals = list(process.sent)
     report.returncode = process.returncode
     report.tail = process.tail()
     report.leftovers = sorted(process.leftovers())

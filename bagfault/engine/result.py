@@ -61,7 +61,15 @@ class SystemReport:
     command: list[str]
     domain_id: int
     ready_seconds: float = 0.0
-    ending: str = 'running'  # exited (on its own), SIGINT, SIGTERM or SIGKILL (how it was stopped)
+    ending: str = 'running'  # exited (on its own), SIGINT, SIGTERM or SIGKILL (the last signal it got)
+    signals: list[tuple[str, float]] = field(default_factory=list)  # each signal sent, seconds into the stop
+
+    def stopped_by(self) -> str:
+        """'exited', 'SIGINT' or 'SIGINT, then SIGTERM after 5.0 s': every signal that was sent."""
+        if not self.signals:
+            return self.ending
+        first, *later = self.signals
+        return ', then '.join([first[0], *(f'{name} after {at:.1f} s' for name, at in later)])
     returncode: int | None = None
     logs: Path | None = None  # the folder of system.stdout.log and system.stderr.log, when kept
     tail: list[str] = field(default_factory=list)  # its last lines of output

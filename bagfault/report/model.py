@@ -108,7 +108,9 @@ def system_section(result: RunResult) -> dict[str, Any]:
     assert system is not None
     return {
         'command': list(system.command), 'ros_domain_id': system.domain_id,
-        'ready_s': round(system.ready_seconds, 3), 'stopped_by': system.ending, 'exit_code': system.returncode,
+        'ready_s': round(system.ready_seconds, 3), 'stopped_by': system.ending,
+        'signals_sent': [{'signal': name, 't_s': round(at, 3)} for name, at in system.signals],
+        'exit_code': system.returncode,
         'logs': str(system.logs) if system.logs is not None else None, 'output_tail': list(system.tail),
         'played_per_topic': dict(sorted(system.played.items())),
         'heard_per_topic': dict(sorted(system.heard.items())),

@@ -65,7 +65,7 @@ def _print_system(result: RunResult, out: TextIO) -> None:
     assert system is not None
     print(f'system    {" ".join(system.command)}', file=out)
     print(f'          ROS domain {system.domain_id}, ready after {system.ready_seconds:.2f} s, stopped: '
-          f'{system.ending} (exit code {system.returncode})', file=out)
+          f'{system.stopped_by()} (exit code {system.returncode})', file=out)
     played = ', '.join(f'{t} {n}' for t, n in sorted(system.played.items())) or 'nothing'
     heard = ', '.join(f'{t} {n}' for t, n in sorted(system.heard.items())) or 'nothing'
     print(f'played    {played}', file=out)

@@ -50,6 +50,8 @@ def test_the_example_passes_and_its_recording_holds_the_whole_loop(tester: LoopR
     # 12 s at 100 Hz; odometry 50 Hz minus the 1.5 s blackout (75 messages, all dropped)
     assert system['played_per_topic'] == {'/imu': 1200, '/odom': 600 - 75}
     assert system['stopped_by'] == 'SIGINT' and system['exit_code'] == 0
+    assert [s['signal'] for s in system['signals_sent']] == ['SIGINT']
+    assert 'stopped: SIGINT (exit code 0)' in result.stdout
     assert system['leftover_pids'] == []
     assert running_with(token) == []
     assert 'monitoring /imu and /odom' in (tmp_path / 'logs' / 'system.stderr.log').read_text()

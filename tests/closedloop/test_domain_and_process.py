@@ -103,6 +103,7 @@ def test_sigint_ends_a_well_behaved_group(tmp_path: Path) -> None:
     process = start(tmp_path, f'echo started; {READY_SLEEP} {token}-a & {READY_SLEEP} {token}-b; wait', token)
     wait_for(lambda: len(running_with(token)) >= 3 and process.tail().count('sleeping') == 2)
     assert process.stop(timeout=5.0) == 'SIGINT'
+    assert [name for name, _ in process.sent] == ['SIGINT']  # the one signal sent, nothing more
     assert running_with(token) == []
     assert process.leftovers() == set()
     tail = process.tail()
@@ -134,6 +135,8 @@ def test_escalation_to_sigterm_and_sigkill(tmp_path: Path) -> None:
     assert process.stop(timeout=0.5) == 'SIGTERM'
     assert running_with(token) == []
     assert time.monotonic() - began < 5
+    assert [name for name, _ in process.sent] == ['SIGINT', 'SIGTERM']  # SIGINT was trapped: both were sent
+    assert 0.5 <= process.sent[1][1] < 2.0  # SIGTERM after the 0.5 s timeout
 
     stubborn = tmp_path / 'stubborn.py'
     stubborn.write_text('import signal, sys, time\nfor s in (signal.SIGINT, signal.SIGTERM):\n'
