@@ -114,8 +114,8 @@ def test_markers_select_scenarios_and_pass_strict_markers(project: pytest.Pytest
     listed.stdout.fnmatch_lines(['@pytest.mark.closed_loop: *', '@pytest.mark.offline: *'])
 
 
-MANY = GOOD.replace('name: good', 'name: many') + "".join(
-    f"  - {{id: bounded_{n}, type: field_range, topic: /imu_out, field: angular_velocity.z, min: 0.0, max: 0.5}}\n"
+MANY = GOOD.replace('name: good', 'name: many') + ''.join(
+    f'  - {{id: bounded_{n}, type: field_range, topic: /imu_out, field: angular_velocity.z, min: 0.0, max: 0.5}}\n'
     for n in range(6))
 
 
@@ -123,7 +123,7 @@ def test_under_xdist_a_scenario_file_runs_on_one_worker_and_its_time_is_its_firs
         project: pytest.Pytester) -> None:
     pytest.importorskip('xdist')
     project.makefile('.bagfault.yaml', test_many=MANY)
-    project.makepyfile(test_plain="\n".join(f"def test_plain_{n}():\n    pass\n" for n in range(8)))
+    project.makepyfile(test_plain='\n'.join(f'def test_plain_{n}():\n    pass\n' for n in range(8)))
     result = project.runpytest_subprocess('-p', 'no:cacheprovider', '-n', '2', '-v', 'test_many.bagfault.yaml',
                                           'test_plain.py')
     result.assert_outcomes(passed=16)
