@@ -456,6 +456,8 @@ def _cmd_latency(args: argparse.Namespace) -> int:
         if len(items) != 2:
             raise LatencyError('usage: bagfault latency validate ARCH.yaml')
         architecture = load_architecture(items[1])
+        for warning in architecture.warnings:
+            print(f'warning: {warning}', file=sys.stderr)
         print(render_validation(architecture))
         usable = all(p.usable for p in architecture.paths.values()) and not architecture.dropped
         return EXIT_OK if usable else EXIT_ERROR

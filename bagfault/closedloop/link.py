@@ -24,11 +24,13 @@ from typing import TYPE_CHECKING, Any
 from rclpy.qos import DurabilityPolicy
 
 from bagfault.assertions.base import AssertionResult
+from bagfault.closedloop.clocks import GRACE, HOLD, ClockCheck
 from bagfault.closedloop.process import describe_exit
 from bagfault.engine.run import OutputChannel
 from bagfault.engine.stop import Stopped
 from bagfault.errors import ClosedLoopError
 from bagfault.events import AssertionEvent
+from bagfault.faults.header import has_header
 from bagfault.live.echoes import OwnEchoes
 from bagfault.live.graph import OWN_PREFIXES, oracle_topics, watched_topics
 from bagfault.live.recorder import Recorder
@@ -64,6 +66,9 @@ class SystemLink(LiveSink):
                  recording: McapSink | None, watch: DomainWatch | None = None) -> None:
         super().__init__(node, rate=rate, clock=True, stop=stop, recording=recording)
         self.watch = watch
+        self.clocks = ClockCheck(rate)
+        self._hold = (0.0, 0.0)  # monotonic window in which the sim clock stands still (rate != 1)
+        self._stamped: set[str] = set()  # the system's topics whose type starts with a std_msgs/Header
         self.listener = listener
         self.executor = executor
         self.system = system
@@ -119,7 +124,18 @@ class SystemLink(LiveSink):
                 self._recorder.subscribe(topic, msgtype)  # advertised later (a monitor's first report)
         self._thread = threading.Thread(target=self._spin, name='bagfault-test-listener', daemon=True)
         self._thread.start()
+        if self.rate != 1:
+            self._hold_clock()
         return {topic: (msgtype, *self.catalog.schema(msgtype)) for topic, msgtype in watched.items()}
+
+    def _hold_clock(self) -> None:
+        """HOLD seconds before the first /clock: what the system publishes now, it publishes on wall time."""
+        began = time.monotonic()
+        self._hold = (began + GRACE, began + HOLD)
+        while time.monotonic() < began + HOLD:
+            if self.stop.is_set():
+                raise Stopped(self.stop.reason)
+            time.sleep(POLL)
 
     def _await(self, condition: ReadyCondition) -> None:
         """One ready condition, or ClosedLoopError when the system exits or the timeout passes."""
@@ -195,11 +211,17 @@ class SystemLink(LiveSink):
             self._echoes.listen(topic, tuple(self._latched.get(topic, ())))
         channel = self.record_only(topic, msgtype, *self.catalog.schema(msgtype),
                                    metadata=metadata)
+        codec = self.catalog.codec(msgtype)
+        if codec is not None and has_header(msgtype, codec.store):
+            self._stamped.add(topic)
         self._outputs[topic] = OutputChannel(channel, topic, msgtype)
 
     def _on_message(self, topic: str, data: bytes) -> None:
+        now = time.monotonic()
         with self._lock:
-            self._queue.append((topic, time.monotonic(), data))
+            self._queue.append((topic, now, data))
+            if self._hold[0] <= now <= self._hold[1]:
+                self.clocks.during_hold(topic)
 
     def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
         """Play one record; on a topic the system publishes on too, noted first so the listener drops it."""
@@ -244,11 +266,14 @@ class SystemLink(LiveSink):
             items = list(self._queue)
             self._queue.clear()
         origin = self._origin
+        wall, now = time.time_ns(), time.monotonic()
         for topic, arrived, data in items:
             stamp = upto if origin is None else origin[0] + round((arrived - origin[1]) * self.rate * 1e9)
             stamp = min(max(stamp, self._floor), upto)
             self._floor = stamp
             self.heard[topic] = self.heard.get(topic, 0) + 1
+            if topic in self._stamped and origin is not None:
+                self.clocks.stamp(topic, data, stamp, wall - round((now - arrived) * 1e9))
             run.message(self._outputs[topic], stamp, stamp, data)
 
     def _check_alive(self, bag_time: int) -> None:

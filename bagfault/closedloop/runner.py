@@ -167,6 +167,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
     report.heard = dict(link.heard)
     report.unwatched = list(link.unwatched)
     result.system = report
+    result.warnings += link.clocks.warnings()
     for topic in link.unwatched:
         result.warnings.append(f'{topic}: asserted, but the system under test never advertised it and the '
                                'scenario does not give its message_type; not heard')

@@ -70,9 +70,8 @@ def render_html(report: LatencyReport) -> str:
 
 
 def render_validation(architecture: Architecture) -> str:
-    """Paths, their hops and every problem, for `bagfault latency validate`."""
+    """Paths, their hops and every problem, for `bagfault latency validate` (its warnings go to stderr)."""
     lines = [f'architecture {architecture.source}: {len(architecture.paths)} paths, {len(architecture.nodes)} nodes']
-    lines += [f'warning: {w}' for w in architecture.warnings]
     for path in architecture.paths.values():
         lines.append(f'path {path.name}: {"usable" if path.usable else "UNUSABLE"}')
         for element in path.chain:

@@ -20,8 +20,10 @@ def _short(text: str, width: int) -> str:
 
 
 def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
-    """Inputs, output, fault timeline, notes, then one line per assertion and the verdict."""
+    """Inputs, output, fault timeline, notes, then one line per assertion and the verdict; warnings go to stderr
+    (as `validate` writes them) unless a `stream` takes everything."""
     out = stream or sys.stdout
+    err = stream or sys.stderr
     stats = result.stats
     print(f'scenario  {result.scenario.name}  (seed {result.seed})', file=out)
     live = ', '.join(sorted({i.input_topic for i in result.scenario.injectors if i.input_topic}))
@@ -46,7 +48,7 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
     for note in result.notes:
         print(f'note: {note}', file=out)
     for warning in result.warnings:
-        print(f'warning: {warning}', file=out)
+        print(f'warning: {warning}', file=err)
     if not result.assertions:
         return
     width = max(len(r.id) for r in result.assertions)

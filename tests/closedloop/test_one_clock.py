@@ -64,3 +64,63 @@ def test_the_quirks_bags_own_clock_is_left_out_and_the_watchdog_stays_quiet(test
 def test_the_turtlebot_bag_gives_no_false_alarm_five_times_of_five(tester: LoopRunner, tmp_path: Path,
                                                                    run: int) -> None:
     judge(tester, need(TURTLEBOT), tmp_path)
+
+
+WALL_CLOCK_SYSTEM = """
+import sys
+import time
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from sensor_msgs.msg import Imu, Temperature
+
+rclpy.init(args=sys.argv)
+node = rclpy.create_node('wall_clock_status')
+publisher = node.create_publisher(Temperature, '/temperature', 10)
+node.create_subscription(Imu, '/imu', lambda message: None, 10)
+
+
+def tick():
+    message = Temperature()
+    message.header.stamp.sec, message.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+    publisher.publish(message)
+
+
+node.create_timer(0.1, tick, clock=Clock(clock_type=ClockType.STEADY_TIME))  # wall time, whatever use_sim_time says
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
+
+
+def test_a_system_on_wall_time_is_named_when_the_rate_is_not_one(tester: LoopRunner, tmp_path: Path) -> None:
+    import sys
+
+    sys.path.insert(0, str(EXAMPLE))
+    try:
+        import make_bag
+    finally:
+        sys.path.remove(str(EXAMPLE))
+    bag = make_bag.write(tmp_path / 'rover.mcap', 3.0)  # bag time starts near zero, far from the wall clock
+    (tmp_path / 'wall.py').write_text(WALL_CLOCK_SYSTEM)
+    scenario = tmp_path / 'wall.bagfault.yaml'
+    scenario.write_text(f"""name: wall_clock
+bags: ['{bag}']
+system_under_test:
+  command: ['{{python}}', wall.py]
+  record: [/temperature]
+  stop_timeout: 10
+injectors: []
+faults: []
+assertions:
+  - {{id: status_heard, type: message_count, topic: /temperature, min: 1}}
+""")
+    result = tester.run(str(scenario), '--rate', '2')
+    assert result.code == 0, result.stdout + result.stderr
+    warnings = result.report['warnings']
+    # 10 Hz on a steady timer: heard about 8 times in the 0.8 s counted of the clock's 1 s standstill
+    assert any(w.startswith('/temperature: published ') and 'while the sim clock stood still' in w
+               and 'run with --rate 1' in w for w in warnings), warnings
+    assert any(w.startswith('/temperature: ') and 'header stamps follow the wall clock' in w for w in warnings)
+    assert 'while the sim clock stood still' in result.stderr  # warnings go to stderr as they do for every command

@@ -82,9 +82,9 @@ def test_seed_sample_with_type_warns_naming_the_node_and_loads(tmp_path, capsys)
     assert architecture.paths == {}
     assert architecture.dropped == {'target_path': 'node /ping_node does not publish /chatter'}
     assert main(['latency', 'validate', str(tmp_path / 'seed_sample.yaml')]) == 2
-    out = capsys.readouterr().out
-    assert 'warning: path target_path: node /ping_node does not publish /chatter; path dropped' in out
-    assert 'warning: node /ping_node' in out
+    err = capsys.readouterr().err  # warnings go to stderr in every command
+    assert 'warning: path target_path: node /ping_node does not publish /chatter; path dropped' in err
+    assert 'warning: node /ping_node' in err
     with pytest.raises(LatencyError, match='path target_path was dropped: node /ping_node does not publish'):
         measure(tmp_path / 'seed_sample.yaml', [], path='target_path')
 
