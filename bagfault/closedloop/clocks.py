@@ -56,9 +56,9 @@ class ClockCheck:
         """One line per topic that follows wall time."""
         lines = [f'{topic}: published {count} times while the sim clock stood still ({HOLD:g} s before the first '
                  f'/clock): the system under test publishes it on a wall-clock timer, so at --rate {self.rate:g} '
-                 'its rate and deadlines are not the bag\'s; run with --rate 1'
+                 "its rate and deadlines are not the bag's; run with --rate 1"
                  for topic, count in sorted(self.held.items()) if count >= 2 and self.rate != 1]
-        lines += [f'{topic}: {count} of {self.stamps[topic]} header stamps follow the wall clock, not the bag\'s '
+        lines += [f"{topic}: {count} of {self.stamps[topic]} header stamps follow the wall clock, not the bag's "
                   'sim time (the node does not read /clock): verdicts on these stamps compare two clocks'
                   for topic, count in sorted(self.wall_stamps.items()) if count * 2 > self.stamps[topic]]
         return lines
