@@ -482,6 +482,42 @@ def test_impossible_options_are_exit_2(tmp_path, capsys, option):
     assert not (tmp_path / 'out.mcap').exists()
 
 
+HOLD_INJECTOR = '''
+import os
+import time
+from pathlib import Path
+
+from bagfault.injectors.base import Injector
+from bagfault.schema import double
+
+
+class HoldInjector(Injector):
+    """A test's hand on a run: at its first message it says so and waits until the test opens the gate."""
+
+    type_name = 'hold'
+    description = 'holds the run at its first faulted message until $HOLD_GATE exists'
+    message_types = ('sensor_msgs/msg/Imu',)
+    fields = (double('level', 'unused'),)
+
+    def mutate(self, message, stamp, active):
+        gate = Path(os.environ['HOLD_GATE'])
+        gate.with_name('reached').touch()
+        while not gate.exists():
+            time.sleep(0.01)
+'''
+
+
+def hold_plugin(folder: Path) -> Path:
+    """A folder that, on PYTHONPATH, installs the `hold` injector type (an entry point, as a plugin package has)."""
+    folder.mkdir()
+    (folder / 'hold_injector.py').write_text(HOLD_INJECTOR)
+    info = folder / 'hold_injector-0.dist-info'
+    info.mkdir()
+    (info / 'METADATA').write_text('Metadata-Version: 2.1\nName: hold-injector\nVersion: 0\n')
+    (info / 'entry_points.txt').write_text('[bagfault.injectors]\nhold = hold_injector:HoldInjector\n')
+    return folder
+
+
 @pytest.mark.parametrize('signal_number', [signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_during_a_run_leaves_no_output_and_no_temporary_copy(tmp_path, signal_number):
     bag = tmp_path / 'bag'
@@ -489,27 +525,35 @@ def test_a_signal_during_a_run_leaves_no_output_and_no_temporary_copy(tmp_path, 
     writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
     with writer:  # a zstd FILE-compressed bag: bagfault reads it from a decompressed private copy
         connection = writer.add_connection('/imu', 'sensor_msgs/msg/Imu', typestore=ROS2)
-        for time_ns in synthetic.sample_times(2000.0, 60.0):
+        for time_ns in synthetic.sample_times(200.0, 5.0):
             writer.write(connection, time_ns, bytes(ROS2.serialize_cdr(synthetic.imu(ROS2, time_ns, 0.0),
                                                                       'sensor_msgs/msg/Imu')))
     scenario = tmp_path / 'scenario.yaml'
-    scenario.write_text('injector: {id: i, type: imu, input_topic: /imu, output_topic: /imu_out}\n'
-                        'faults: [{id: f, injector_id: i, active_on_startup: true, '
-                        'config: {angular_velocity_z_noise_stddev: 0.1}}]\n')
+    scenario.write_text('injector: {id: i, type: hold, input_topic: /imu, output_topic: /imu_out}\n'
+                        'faults: [{id: f, injector_id: i, start: 2.0, config: {level: 1.0}}]\n')
     tmp = tmp_path / 'tmp'
     tmp.mkdir()
+    gates = tmp_path / 'gates'
+    gates.mkdir()
+    plugin = hold_plugin(tmp_path / 'plugin')
+    env = {**os.environ, 'TMPDIR': str(tmp), 'HOLD_GATE': str(gates / 'open'),
+           'PYTHONPATH': os.pathsep.join(filter(None, [str(plugin), os.environ.get('PYTHONPATH')]))}
     process = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'run', str(scenario), str(bag), '-o',
-                                str(tmp_path / 'out.mcap')], stderr=subprocess.PIPE, text=True,
-                               env={**os.environ, 'TMPDIR': str(tmp)})
-    deadline = time.monotonic() + 60
-    while not list(tmp.glob('bagfault-*')) and time.monotonic() < deadline and process.poll() is None:
-        time.sleep(0.01)
-    assert process.poll() is None and list(tmp.glob('bagfault-*'))  # running, with its private copy
-    process.send_signal(signal_number)  # at once: a fast machine reads the copy within a second
+                                str(tmp_path / 'out.mcap')], stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while not (gates / 'reached').exists() and time.monotonic() < deadline and process.poll() is None:
+            time.sleep(0.01)
+        # held 2 s into the bag by the test's own injector, whatever the machine's speed: running, with its copy
+        assert (gates / 'reached').exists() and process.poll() is None and list(tmp.glob('bagfault-*'))
+        process.send_signal(signal_number)
+        time.sleep(0.2)  # the signal is in (its handler only sets a flag), then the run goes on to see it
+    finally:
+        (gates / 'open').touch()
     _, err = process.communicate(timeout=60)
     assert process.returncode == 2 and 'interrupted' in err and 'Traceback' not in err
     assert list(tmp.iterdir()) == []
-    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag', 'scenario.yaml', 'tmp']
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag', 'gates', 'plugin', 'scenario.yaml', 'tmp']
 
 
 def test_the_output_never_replaces_an_input_given_twice(tmp_path):
