@@ -13,6 +13,21 @@ from helpers import ANCHORS, EXTERNAL, FIXTURES, need
 
 pytest_plugins = ['pytester']
 
+LIVE_FIXTURES = frozenset({'graph', 'tester', 'live_env'})  # each starts real rclpy processes on a leased domain
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """`live` on every test that starts a ROS graph (by its fixtures, or marked in its module), `closed_loop` on
+    those of bagfault test, `campaign` on those under tests/campaign: `pytest -m "not live"` runs without ROS."""
+    for item in items:
+        fixtures = set(getattr(item, 'fixturenames', ()))
+        if fixtures & LIVE_FIXTURES:
+            item.add_marker(pytest.mark.live)
+        if 'tester' in fixtures:
+            item.add_marker(pytest.mark.closed_loop)
+        if item.path.parent.name == 'campaign':
+            item.add_marker(pytest.mark.campaign)
+
 
 @pytest.fixture
 def rover_bag() -> Path:

@@ -9,6 +9,8 @@ from pathlib import Path
 import pytest
 from loop import EXAMPLE, rclpy_available
 
+pytestmark = [pytest.mark.live, pytest.mark.closed_loop, pytest.mark.campaign]
+
 SCENARIO = """
 name: watchdog_threshold
 seed: 3

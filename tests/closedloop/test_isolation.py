@@ -17,6 +17,8 @@ TALKER = """
 import sys, time
 import rclpy
 from sensor_msgs.msg import Imu
+
+pytestmark = pytest.mark.live  # needs rclpy
 rclpy.init()
 node = rclpy.create_node(sys.argv[1])
 topic = sys.argv[2]

@@ -139,6 +139,8 @@ def test_under_xdist_a_scenario_file_runs_on_one_worker_and_its_time_is_its_firs
     timed.stdout.re_match_lines([r'.*s setup\s+test_many\.bagfault\.yaml::bias_activates$'])
 
 
+@pytest.mark.live
+@pytest.mark.closed_loop
 @pytest.mark.skipif(not rclpy_available(), reason="rclpy not installed (pip install '.[live]')")
 def test_closed_loop_scenario_file_and_fixture(pytester: pytest.Pytester) -> None:
     sys.path.insert(0, str(EXAMPLE))

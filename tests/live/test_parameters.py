@@ -18,6 +18,8 @@ from bagfault.injectors.registry import injector_types
 from bagfault.live.params import fault_parameters
 from bagfault.scenario import parse_scenario
 
+pytestmark = pytest.mark.live  # needs rclpy
+
 
 def scenario_with_every_type() -> str:
     injectors, faults = [], []

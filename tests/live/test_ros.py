@@ -11,6 +11,8 @@ from rclpy.qos import DurabilityPolicy, ReliabilityPolicy  # noqa: E402
 
 from bagfault.live.ros import offered_yaml, qos, recorded_qos  # noqa: E402
 
+pytestmark = pytest.mark.live  # needs rclpy
+
 HUMBLE_TF_STATIC = ('- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n  deadline:\n    sec: 9223372036\n'
                     '    nsec: 854775807\n  liveliness: 1\n  avoid_ros_namespace_conventions: false')
 HUMBLE_CLOCK = '- history: 3\n  depth: 0\n  reliability: 2\n  durability: 2\n'
