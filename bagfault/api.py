@@ -25,8 +25,8 @@ from bagfault.io.outputs import check_output
 from bagfault.io.recover import Recovered, partial_of, requested_name
 from bagfault.io.recover import recover as copy_readable
 from bagfault.scenario import Scenario, load_scenario
-from bagfault.scenario.system import SystemUnderTest, system_from
-from bagfault.scenario.yamlnodes import format_path
+from bagfault.spec.system import SystemUnderTest, system_from
+from bagfault.spec.yamlnodes import format_path
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from bagfault.engine.offline import Progress
     from bagfault.engine.run import Observer
     from bagfault.live.recorder import RecordResult
-    from bagfault.scenario.yamlnodes import PathKey
+    from bagfault.spec.yamlnodes import PathKey
 
 DEFAULT_SEED = 0
 SEED_MAX = 2**64 - 1

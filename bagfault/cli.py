@@ -317,7 +317,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 def _system_overrides(args: argparse.Namespace) -> dict[str, object]:
     """`system_under_test` keys given on the command line, in their YAML form."""
-    from bagfault.scenario.system import ready_spec  # noqa: PLC0415
+    from bagfault.spec.system import ready_spec  # noqa: PLC0415
 
     out: dict[str, object] = {}
     if args.command_line is not None:

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from _pytest._code.code import ExceptionInfo, TerminalRepr
 
     from bagfault.engine.result import RunResult
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 SUFFIXES = ('.bagfault.yaml', '.bagfault.yml')
 ALIVE = 'system_alive'

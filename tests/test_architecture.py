@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'bagfault'
-CORE = ('scenario', 'injectors', 'faults', 'engine', 'io', 'assertions', 'fault_manager', 'latency')
+CORE = ('scenario', 'spec', 'injectors', 'faults', 'engine', 'io', 'assertions', 'fault_manager', 'latency')
 CORE_MODULES = ('events', 'schema', 'errors')
 OUTSIDE = ('bagfault.live', 'bagfault.api', 'bagfault.cli', 'bagfault.report', 'bagfault.closedloop',
            'bagfault.campaign', 'bagfault.view', 'bagfault.pytest_plugin')

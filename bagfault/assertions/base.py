@@ -16,7 +16,7 @@ from bagfault.schema import ConfigField
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
     from bagfault.events import AssertionState, FaultEvent
-    from bagfault.scenario.model import AssertionSpec, Scenario
+    from bagfault.spec.model import AssertionSpec, Scenario
 
 PENDING: Final = 'pending'
 PASSED: Final = 'passed'

@@ -11,7 +11,7 @@ NS = 1_000_000_000
 
 if TYPE_CHECKING:
     from bagfault.events import FaultEvent
-    from bagfault.scenario.model import AssertionSpec, Scenario
+    from bagfault.spec.model import AssertionSpec, Scenario
 
 
 class FaultEventAssertion(AssertionType):

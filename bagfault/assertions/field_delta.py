@@ -21,7 +21,7 @@ from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
-    from bagfault.scenario.model import AssertionSpec, Scenario
+    from bagfault.spec.model import AssertionSpec, Scenario
 
 NS = 1_000_000_000
 HORIZON = 60 * NS  # unmatched inputs older than this are forgotten (dropped messages)

@@ -10,7 +10,7 @@ from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
-    from bagfault.scenario.model import AssertionSpec, Scenario
+    from bagfault.spec.model import AssertionSpec, Scenario
 
 
 class MessageCountAssertion(AssertionType):

@@ -18,7 +18,7 @@ from bagfault.schema import ConfigField
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
     from bagfault.events import FaultEvent
-    from bagfault.scenario.model import AssertionSpec, Scenario
+    from bagfault.spec.model import AssertionSpec, Scenario
 
 CHOICES = ('min', 'mean', 'p50', 'p95', 'p99', 'max')
 

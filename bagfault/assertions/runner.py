@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
     from bagfault.events import ScenarioState
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 NS = 1_000_000_000
 

@@ -8,7 +8,7 @@ from bagfault.assertions.base import FAILED, PASSED, AssertionType
 from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
-    from bagfault.scenario.model import AssertionSpec, Scenario
+    from bagfault.spec.model import AssertionSpec, Scenario
 
 
 class SequenceAssertion(AssertionType):

@@ -11,7 +11,7 @@ from bagfault.schema import ConfigField
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
     from bagfault.events import FaultEvent
-    from bagfault.scenario.model import AssertionSpec, Scenario
+    from bagfault.spec.model import AssertionSpec, Scenario
 
 NS = 1_000_000_000
 

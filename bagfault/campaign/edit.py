@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from bagfault.scenario import parse_scenario
-from bagfault.scenario.yamlnodes import load_located
+from bagfault.spec.yamlnodes import load_located
 
 if TYPE_CHECKING:
     from pathlib import Path
 
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 BY_ID = ('faults', 'injectors', 'assertions')
 

@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING, Any
 from bagfault.campaign.edit import PathError, expanded, scenario_data
 from bagfault.campaign.model import Campaign, Search, Until
 from bagfault.errors import CampaignError, ScenarioError, one_line
-from bagfault.scenario.yamlnodes import YamlSyntaxError, format_path, load_located
+from bagfault.spec.yamlnodes import YamlSyntaxError, format_path, load_located
 
 if TYPE_CHECKING:
-    from bagfault.scenario.yamlnodes import LocatedYaml, PathKey
+    from bagfault.spec.yamlnodes import LocatedYaml, PathKey
 
 KEYS = {'campaign', 'scenario', 'mode', 'bags', 'sweep', 'seeds', 'design', 'search', 'keep', 'timeout'}
 MAX_RANGE = 100_000

@@ -48,8 +48,8 @@ if TYPE_CHECKING:
     from bagfault.events import AssertionState
     from bagfault.io.mcap_sink import McapSink
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import Scenario
-    from bagfault.scenario.system import ReadyCondition, SystemUnderTest
+    from bagfault.spec.model import Scenario
+    from bagfault.spec.system import ReadyCondition, SystemUnderTest
 
 POLL = 0.02  # seconds between looks while waiting for readiness
 DISCOVERY_PERIOD = 0.2  # seconds between looks at the graph for new topics of the system during the run

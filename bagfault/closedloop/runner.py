@@ -29,7 +29,7 @@ from bagfault.io.types import TypeCatalog
 from bagfault.live import LOOPBACK_PROFILE
 from bagfault.live.pacer import CLOCK_NOTE
 from bagfault.live.runtime import make_executor, ros_context, running_distro
-from bagfault.scenario.system import command_line
+from bagfault.spec.system import command_line
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -38,8 +38,8 @@ if TYPE_CHECKING:
     from bagfault.closedloop.isolation import Stranger
     from bagfault.engine.result import RunResult
     from bagfault.engine.stop import StopFlag
-    from bagfault.scenario.model import Scenario
-    from bagfault.scenario.system import SystemUnderTest
+    from bagfault.spec.model import Scenario
+    from bagfault.spec.system import SystemUnderTest
 
 PROFILE_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 

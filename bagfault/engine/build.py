@@ -10,7 +10,7 @@ from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import FaultSpec, InjectorSpec
+    from bagfault.spec.model import FaultSpec, InjectorSpec
 
 
 def build_injector(spec: InjectorSpec, msgtype: str, faults: list[FaultSpec], catalog: TypeCatalog,

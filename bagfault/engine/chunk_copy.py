@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from bagfault.io.mcap_sink import McapSink
     from bagfault.io.mcap_source import ChunkRef, McapSource
     from bagfault.io.sources import InputSet
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 def chunk_copy_for(inputs: InputSet) -> ChunkCopy | None:
     """A chunk copy plan when the inputs are one indexed MCAP file whose chunks follow each other in time."""

@@ -17,7 +17,7 @@ from bagfault.errors import FieldValueError, InjectorConfigError
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 
 @dataclass(frozen=True)

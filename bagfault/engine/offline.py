@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from bagfault.engine.routing import Routing
     from bagfault.engine.run import Sink
     from bagfault.engine.scheduler import Activation
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 Progress = Callable[[int, int], None]
 EMPTY_INPUT = 'the input holds no messages; the output has channels only'

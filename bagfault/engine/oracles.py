@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from bagfault.events import Event, EventKind
     from bagfault.fault_manager.observer import FaultManagerObserver
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 Schema = tuple[str, str, str]  # msgtype, schema encoding, schema text
 

@@ -26,7 +26,8 @@ from bagfault.engine.merge import COPY_RANK, EVENT_RANK, TimeOrderedMerge
 from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
 from bagfault.errors import MalformedMessageError
 from bagfault.events import FaultEvent
-from bagfault.injectors.base import ActiveFault, Injector, RawMessage
+from bagfault.faults.active import ActiveFault
+from bagfault.injectors.base import Injector, RawMessage
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
     from bagfault.engine.run import OutputChannel, Run
     from bagfault.io.channel import Data, InputMessage
     from bagfault.io.sources import InputSet
-    from bagfault.scenario.model import FaultSpec, InjectorSpec
+    from bagfault.spec.model import FaultSpec, InjectorSpec
 
 BATCH = 4096  # messages per batch at most ...
 BATCH_BYTES = 4 << 20  # ... and about this many bytes, so writing overlaps the next batch's injection

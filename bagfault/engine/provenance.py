@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
     from bagfault.engine.scheduler import Activation
     from bagfault.io.mcap_sink import McapSink
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 
 def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activations: Sequence[Activation],

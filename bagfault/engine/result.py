@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Literal
 if TYPE_CHECKING:
     from bagfault.assertions.base import AssertionResult
     from bagfault.events import AssertionEvent, FaultEvent, ScenarioStatus
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 Mode = Literal['run', 'check', 'play', 'proxy', 'test']
 

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from bagfault.io.channel import Channel
     from bagfault.io.sources import InputSet
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import InjectorSpec, Scenario
+    from bagfault.spec.model import InjectorSpec, Scenario
 
 ROS_SCHEMA_ENCODINGS = {'', 'ros2msg', 'ros2idl'}
 

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from bagfault.events import Event, EventKind, FaultEvent
     from bagfault.io.mcap_writer import CopiedChunk
     from bagfault.io.types import Codec, TypeCatalog
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 Data = bytes | memoryview
 

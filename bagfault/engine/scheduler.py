@@ -21,15 +21,15 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from bagfault.engine.rng import FaultRandom
 from bagfault.events import FaultEvent
-from bagfault.injectors.base import ActiveFault
+from bagfault.faults.active import ActiveFault
+from bagfault.faults.rng import FaultRandom
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
 
     from bagfault.events import FaultSource
-    from bagfault.scenario.model import FaultSpec, Scenario
+    from bagfault.spec.model import FaultSpec, Scenario
 
 NS = 1_000_000_000
 NS_PER_MS = 1_000_000

@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from bagfault.events import FaultEvent
     from bagfault.fault_manager.config import FaultManagerConfig
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 NS = 1_000_000_000
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'

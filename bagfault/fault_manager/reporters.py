@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from bagfault.events import FaultEvent
     from bagfault.fault_manager.config import Condition, InjectedReport
     from bagfault.faults.fieldpath import FieldPath
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 NS = 1_000_000_000
 _INVALID = re.compile(r'[^A-Za-z0-9_.\-]+')

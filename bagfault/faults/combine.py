@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
+    from bagfault.faults.active import ActiveFault
 
 
 def total(active: Sequence[ActiveFault], key: str) -> float:

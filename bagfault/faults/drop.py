@@ -11,7 +11,7 @@ from bagfault.faults.combine import strongest
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
+    from bagfault.faults.active import ActiveFault
 
 KEY = 'drop_probability'
 

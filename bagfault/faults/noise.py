@@ -11,7 +11,7 @@ from bagfault.faults.combine import strongest
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
+    from bagfault.faults.active import ActiveFault
 
 
 def gaussian(active: Sequence[ActiveFault], key: str, count: int) -> np.ndarray | None:

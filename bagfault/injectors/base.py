@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from bagfault.errors import InjectorConfigError, InjectorError, MalformedMessageError
+from bagfault.faults.active import ActiveFault
 from bagfault.faults.combine import strongest
 from bagfault.faults.drop import drop_mask, should_drop
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, ConfigField
@@ -18,8 +19,7 @@ from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, ConfigFiel
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.engine.rng import FaultRandom
-    from bagfault.scenario.model import FaultSpec, InjectorSpec
+    from bagfault.spec.model import FaultSpec, InjectorSpec
 
 
 @dataclass(slots=True)
@@ -34,25 +34,6 @@ class RawMessage:
     publish_time: int
     data: bytes | memoryview
     order: int = 0
-
-
-@dataclass
-class ActiveFault:
-    """A fault that is active now: its spec, when it started, its random streams."""
-
-    spec: FaultSpec
-    since: int
-    random: FaultRandom
-
-    @property
-    def id(self) -> str:
-        """Fault id."""
-        return self.spec.id
-
-    @property
-    def config(self) -> dict[str, Any]:
-        """Validated config values."""
-        return self.spec.config
 
 
 class Codec(Protocol):

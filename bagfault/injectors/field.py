@@ -25,8 +25,8 @@ from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
-    from bagfault.scenario.model import FaultSpec
+    from bagfault.faults.active import ActiveFault
+    from bagfault.spec.model import FaultSpec
 
 NS = 1_000_000_000
 

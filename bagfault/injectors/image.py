@@ -20,7 +20,7 @@ from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, boolean, pr
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
+    from bagfault.faults.active import ActiveFault
 
 ENCODINGS = {'rgb8': ('u1', 3), 'bgr8': ('u1', 3), 'mono8': ('u1', 1), 'mono16': ('u2', 1), '32FC1': ('f4', 1)}
 

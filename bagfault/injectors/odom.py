@@ -16,7 +16,7 @@ from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, std
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
+    from bagfault.faults.active import ActiveFault
 
 
 class OdomInjector(Injector):

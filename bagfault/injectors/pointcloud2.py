@@ -21,7 +21,7 @@ from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, pro
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
+    from bagfault.faults.active import ActiveFault
 
 FLOAT_TYPES = {7: 'f4', 8: 'f8'}  # sensor_msgs/PointField FLOAT32, FLOAT64
 

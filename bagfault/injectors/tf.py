@@ -18,7 +18,8 @@ from bagfault.schema import DELAY_MS, ConfigField, double
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault, RawMessage
+    from bagfault.faults.active import ActiveFault
+    from bagfault.injectors.base import RawMessage
 
 
 class TfInjector(Injector):

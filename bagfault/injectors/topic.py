@@ -25,7 +25,7 @@ from bagfault.schema import DELAY_MS, DROP_PROBABILITY, MAX_DELAY_MS, ConfigFiel
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-    from bagfault.injectors.base import ActiveFault
+    from bagfault.faults.active import ActiveFault
 
 NS_PER_MS = 1_000_000
 MAX_STAMP_OFFSET_MS = 86_400_000 * 366  # a year either way

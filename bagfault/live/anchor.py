@@ -19,7 +19,7 @@ from bagfault.live.ros import has_interface, interface_class
 
 if TYPE_CHECKING:
     from bagfault.live.session import LiveSession
-    from bagfault.scenario.model import FaultSpec, Scenario
+    from bagfault.spec.model import FaultSpec, Scenario
 
 PACKAGE = 'ros2_fault_injection'
 SERVICES = ('SetFaultState', 'ListFaults', 'GetFaultStatus', 'SetFaultConfig', 'ReloadScenario', 'GetFaultSchema',

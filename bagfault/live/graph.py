@@ -11,7 +11,7 @@ from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
     from bagfault.engine.stop import StopFlag
-    from bagfault.scenario.model import InjectorSpec, Scenario
+    from bagfault.spec.model import InjectorSpec, Scenario
 
 OBSERVE_WAIT = 5.0  # seconds to wait for publishers of watched topics whose type is not known
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'

@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 
     from bagfault.engine.stop import StopFlag
     from bagfault.events import FaultEvent
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 NODE_NAME = 'bagfault'
 TICK = 0.01  # scheduler resolution in live mode, seconds

@@ -35,8 +35,8 @@ if TYPE_CHECKING:
     from bagfault.events import FaultSource
     from bagfault.injectors.base import RawMessage
     from bagfault.live.session import FaultState, LiveTopic
-    from bagfault.scenario.model import FaultSpec, Scenario
     from bagfault.schema import ConfigField
+    from bagfault.spec.model import FaultSpec, Scenario
 
 NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 TYPES = {'double': ParameterType.PARAMETER_DOUBLE, 'special_float': ParameterType.PARAMETER_DOUBLE,

@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from bagfault.engine.run import Run
     from bagfault.engine.stop import StopFlag
     from bagfault.live.params import FaultParameters
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
     from bagfault.view.foxglove import FoxgloveView
 
 LOOP_GAP = 1_000_000  # ns between the end of a pass and the start of the next

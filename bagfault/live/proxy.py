@@ -12,7 +12,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from bagfault.engine.stop import StopFlag
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 
 def run_proxy(

@@ -27,7 +27,8 @@ from bagfault.errors import (
     ReloadError,
 )
 from bagfault.events import FaultEvent
-from bagfault.injectors.base import ActiveFault, Injector, RawMessage
+from bagfault.faults.active import ActiveFault
+from bagfault.injectors.base import Injector, RawMessage
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
     from bagfault.engine.run import OutputChannel, Sink
     from bagfault.events import FaultSource
     from bagfault.io.types import TypeCatalog
-    from bagfault.scenario.model import InjectorSpec, Scenario
+    from bagfault.spec.model import InjectorSpec, Scenario
 
 
 SERVICE_CALLS_TOPIC = '/bagfault/service_calls'  # JSON of each call through a service injector

@@ -20,7 +20,7 @@ from bagfault.live.ros import interface_class
 
 if TYPE_CHECKING:
     from bagfault.live.session import LiveSession
-    from bagfault.scenario.model import InjectorSpec
+    from bagfault.spec.model import InjectorSpec
 
 TARGET_WAIT = 0.1  # seconds to wait for the target to be discovered
 TARGET_TIMEOUT = 2.0  # seconds to wait for the target's answer

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from bagfault.errors import Problem, ScenarioError
 from bagfault.scenario.loader import load_scenario, parse_scenario
-from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
+from bagfault.spec.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 
 __all__ = [
     'AssertionSpec',

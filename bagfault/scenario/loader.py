@@ -15,9 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from bagfault.errors import Problem, ScenarioError, one_line
-from bagfault.scenario.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
-from bagfault.scenario.system import parse_system
-from bagfault.scenario.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
+from bagfault.spec.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
+from bagfault.spec.system import parse_system
+from bagfault.spec.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
 
 TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager',
             'msg_paths', 'system_under_test', 'bags'}

@@ -11,11 +11,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from bagfault.scenario.loader import seconds
-from bagfault.scenario.model import After, FaultSpec, Repeat
+from bagfault.spec.model import After, FaultSpec, Repeat
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
-    from bagfault.scenario.yamlnodes import PathKey
+    from bagfault.spec.yamlnodes import PathKey
 
 
 MIN_PERIOD = 0.01  # seconds: a repeat faster than 100 Hz toggles faster than any sensor it acts on

@@ -20,7 +20,7 @@ from bagfault.schema import ConfigField
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
-    from bagfault.scenario.model import FaultSpec, Scenario
+    from bagfault.spec.model import FaultSpec, Scenario
 
 
 def validate_scenario(scenario: Scenario, out: _Collector) -> None:

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from bagfault.engine.run import Run
     from bagfault.events import Event
     from bagfault.live.pacer import Pacer
-    from bagfault.scenario.model import Scenario
+    from bagfault.spec.model import Scenario
 
 DEFAULT_PORT = 8765
 TIME_PERIOD = 0.05  # seconds between time broadcasts

@@ -10,7 +10,7 @@ import pytest
 from bagfault import api
 from bagfault.errors import ScenarioError
 from bagfault.scenario import load_scenario, parse_scenario
-from bagfault.scenario.system import ReadyCondition, SystemUnderTest, command_line, ready_spec
+from bagfault.spec.system import ReadyCondition, SystemUnderTest, command_line, ready_spec
 
 BASE = """
 injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu}

@@ -5,10 +5,10 @@ from __future__ import annotations
 import pytest
 
 from bagfault.demo import synthetic
-from bagfault.engine.rng import FaultRandom
+from bagfault.faults.rng import FaultRandom
 from bagfault.injectors.base import ActiveFault, RawMessage
 from bagfault.io.types import Codec
-from bagfault.scenario.model import FaultSpec, InjectorSpec
+from bagfault.spec.model import FaultSpec, InjectorSpec
 
 
 class Harness:

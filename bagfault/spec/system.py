@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any, Literal
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
 
-    from bagfault.scenario.yamlnodes import PathKey
+    from bagfault.spec.yamlnodes import PathKey
 
 ReadyKind = Literal['publisher', 'message', 'subscribes', 'service', 'delay', 'default']
 KEYS = {'command', 'shell', 'env', 'cwd', 'ready', 'record', 'stop_timeout', 'use_sim_time', 'tail'}

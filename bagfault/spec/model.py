@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from bagfault.scenario.system import SystemUnderTest
-from bagfault.scenario.yamlnodes import LocatedYaml, PathKey
+from bagfault.spec.system import SystemUnderTest
+from bagfault.spec.yamlnodes import LocatedYaml, PathKey
 
 
 @dataclass

@@ -1,0 +1,3 @@
+"""A scenario as data: the records the loader makes (model), its system_under_test section (system) and the
+located YAML they are read from (yamlnodes). Below every layer that reads a scenario; `bagfault.scenario` loads
+and validates files into these records."""
