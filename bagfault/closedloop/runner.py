@@ -23,12 +23,12 @@ from bagfault.engine.provenance import provenance, record_origin
 from bagfault.engine.result import SystemReport
 from bagfault.errors import ClosedLoopError
 from bagfault.io.definitions import load_definitions
-from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live import LOOPBACK_PROFILE
 from bagfault.live.pacer import CLOCK_NOTE
-from bagfault.live.runtime import make_executor, ros_context, running_distro
+from bagfault.live.recording import maybe_recording
+from bagfault.live.runtime import make_executor, ros_context
 from bagfault.spec.system import command_line
 
 if TYPE_CHECKING:
@@ -87,73 +87,52 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
     from rclpy.node import Node  # noqa: PLC0415
 
     os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
-    with quiet_domain(stop) as (lease, context), tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch:
+    view_notes: list[str] = []
+    with quiet_domain(stop) as (lease, context), tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch, \
+            InputSet(inputs) as input_set, contextlib.ExitStack() as closing:  # closed in the reverse order
         folder = logs if logs is not None else Path(scratch)
         command = command_line(system, sys.executable)
         report = SystemReport(command=command, domain_id=lease.domain, logs=logs)
         inputs = list(inputs)
-        input_set = InputSet(inputs)
-        try:
-            catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
-            recording = (McapSink(output, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
-                         if output is not None else None)
-            node = Node('bagfault_test_player', context=context)
-            listener = Node('bagfault_test_listener', context=context)
-            executor = make_executor(context)
-            executor.add_node(listener)
-            process = None
-            link = None
-            view = None
-            view_notes: list[str] = []
-            try:
-                if foxglove is not None:
-                    from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
+        catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
+        metadata = {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'test', 'command': ' '.join(command)}
+        recording = closing.enter_context(maybe_recording(output, metadata, scenario, input_set.start_time or 0))
+        node = Node('bagfault_test_player', context=context)
+        closing.callback(node.destroy_node)
+        listener = Node('bagfault_test_listener', context=context)
+        closing.callback(listener.destroy_node)
+        executor = make_executor(context)
+        closing.callback(executor.shutdown)
+        executor.add_node(listener)
+        view = None
+        if foxglove is not None:
+            from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
 
-                    view = FoxgloveView(foxglove, scenario)  # read-only: a test's faults are its scenario's
-                    print(f'bagfault: Foxglove view on {view.url}', flush=True)
-                if recording is not None:
-                    recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0),
-                                                        'mode': 'test', 'command': ' '.join(command)})
-                    recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
-                                             input_set.start_time or 0)
-                process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
-                                        shell=system.shell, logs=folder)
-                print(f'bagfault: system under test started on ROS domain {lease.domain}; to watch it: '
-                      f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}',
-                      flush=True)  # (stdout, as the view's address: stderr keeps one line per problem)
-                watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid)
-                link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
-                                  catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)
-                link.view = view
-                run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output,
-                                      hooks=link)
-                if stopped:
-                    run.close(ok=False)
-                    raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '
-                                          'nothing judged', tail=process.tail())
-                if recording is not None:
-                    record_origin(recording, run.stats.origin)
-                    finish(recording, run)
-                else:
-                    run.close(ok=True)
-            except BaseException:
-                if recording is not None:
-                    recording.abort()
-                raise
-            finally:
-                if view is not None:
-                    view_notes = view.notes()
-                    view.close()
-                if link is not None:
-                    link.close()
-                if process is not None:
-                    _stopped(process, system, report)
-                executor.shutdown()
-                listener.destroy_node()
-                node.destroy_node()
-        finally:
-            input_set.close()
-    assert link is not None
+            view = FoxgloveView(foxglove, scenario)  # read-only: a test's faults are its scenario's
+            closing.callback(view.close)
+            closing.callback(lambda: view_notes.extend(view.notes() if view is not None else ()))
+            print(f'bagfault: Foxglove view on {view.url}', flush=True)
+        process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
+                                shell=system.shell, logs=folder)
+        closing.callback(_stopped, process, system, report)
+        print(f'bagfault: system under test started on ROS domain {lease.domain}; to watch it: '
+              f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}',
+              flush=True)  # (stdout, as the view's address: stderr keeps one line per problem)
+        watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid)
+        link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
+                          catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)
+        closing.callback(link.close)
+        link.view = view
+        run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output, hooks=link)
+        with run:  # its black boxes are dropped unless the recording is complete
+            if stopped:
+                raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '
+                                      'nothing judged', tail=process.tail())
+            if recording is not None:
+                record_origin(recording, run.stats.origin)
+                finish(recording, run)
+            else:
+                run.close(ok=True)
     result = run.result('test', inputs, output, seed)
     result.notes += view_notes
     for described in link.watch.listeners.values() if link.watch is not None else ():

@@ -158,12 +158,10 @@ def run_to_file(
     hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
     try:  # the inputs' digests on the second core from the start, beside the setup, the run and the copy
         origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset, stop)
-        inputs = InputSet(paths, salvage=salvage)
-        try:
+        with InputSet(paths, salvage=salvage) as inputs:
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
-            sink = McapSink(output, compression=compression, ros_distro=inputs.ros_distro or '')
-            try:
+            with McapSink(output, compression=compression, ros_distro=inputs.ros_distro or '') as sink:
                 chunks = chunk_copy_for(inputs) if chunk_copy and batch else None
                 if chunks is not None:
                     chunks.reserve(sink)
@@ -171,14 +169,10 @@ def run_to_file(
                 run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
                                 start_offset=start_offset, batch=batch, progress=progress, observers=observers,
                                 blackbox_base=output, chunks=chunks)
-                sink.flush()  # the copied chunks go to the file while the hash completes, not after it
-                sink.add_metadata('bagfault', origin.result())
-            except BaseException:
-                sink.abort()
-                raise
-            finish(sink, run)
-        finally:
-            inputs.close()
+                with run:
+                    sink.flush()  # the copied chunks go to the file while the hash completes, not after it
+                    sink.add_metadata('bagfault', origin.result())
+                    finish(sink, run)
     finally:
         stop.set()  # a failed run does not wait for the hash of a large input
         hashing.shutdown(wait=True, cancel_futures=True)
@@ -188,12 +182,9 @@ def run_to_file(
 
 
 def finish(sink: McapSink, run: Run) -> None:
-    """Complete the output file, then give the run's black boxes their names; remove both on failure."""
-    try:
-        sink.finish()
-    except BaseException:
-        run.close(ok=False)
-        raise
+    """Complete the output file, then give the run's black boxes their names (inside `with run`, which removes
+    them if the file cannot be completed)."""
+    sink.finish()
     run.close(ok=True)
 
 

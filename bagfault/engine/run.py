@@ -24,6 +24,8 @@ if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping, Sequence
     from pathlib import Path
 
+    from typing_extensions import Self
+
     from bagfault.engine.merge import Record
     from bagfault.engine.oracles import Schema
     from bagfault.engine.result import Mode
@@ -120,6 +122,7 @@ class Run:
         self.event_listeners: list[Callable[[Event, bytes], None]] = []  # every event written, encoded (live)
         self._events: dict[str, tuple[OutputChannel, Codec]] = {}
         self._topics: dict[str, OutputChannel] = {}
+        self._closed = False
         for kind in self.oracles.event_kinds:
             self.event_channel(kind)
 
@@ -237,8 +240,17 @@ class Run:
         stats.per_topic_out[channel.topic] = stats.per_topic_out.get(channel.topic, 0) + 1
 
     # -- end --------------------------------------------------------------------------------
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """A run not closed by the end of the `with` was abandoned: its black boxes are removed."""
+        if not self._closed:
+            self.close(ok=False)
+
     def close(self, *, ok: bool) -> None:
         """The output was completed (black boxes take their names) or abandoned (they are removed)."""
+        self._closed = True
         if ok:
             self.oracles.publish()
         else:

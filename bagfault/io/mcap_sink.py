@@ -18,6 +18,7 @@ import struct
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 from mcap.records import Channel as McapChannel
@@ -27,6 +28,9 @@ from bagfault.errors import OutputError
 from bagfault.io.mcap_writer import CopiedChunk, McapWriter
 from bagfault.io.outputs import current_umask
 from bagfault.io.qos import DEFAULT_QOS, normalized
+
+if TYPE_CHECKING:
+    from typing_extensions import Self
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')
 LIVE_FLUSH = 1.0  # seconds: a live recording loses at most this much to a kill
@@ -58,6 +62,7 @@ class McapSink:
         except OSError as exc:
             raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
         self._tmp = Path(tmp)
+        self._ended = False  # published or aborted: leaving a `with` then does nothing
         self.partial = self._tmp  # where the file grows until `finish` (`bagfault recover` reads it after a kill)
         os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
         self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
@@ -197,13 +202,23 @@ class McapSink:
             os.replace(self._tmp, self.path)
         except OSError as exc:
             raise self._failed(exc) from None
+        self._ended = True
 
     def abort(self) -> None:
         """Drop the partial output."""
+        self._ended = True
         self._writer.abandon()
         with contextlib.suppress(OSError):
             self._stream.close()
         self._tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """All or nothing: an output not finished (published) by the end of the `with` is dropped."""
+        if not self._ended:
+            self.abort()
 
     def _failed(self, exc: OSError) -> OutputError:
         """A write failed (a full disk, a lost mount): drop the partial file and say why."""

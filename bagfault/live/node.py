@@ -25,7 +25,7 @@ from bagfault.engine.control import check_change
 from bagfault.engine.offline import finish
 from bagfault.engine.provenance import record_origin
 from bagfault.errors import BagfaultError, LiveError, MalformedMessageError, ReloadError, ScenarioError
-from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
+from bagfault.io.mcap_sink import McapSink
 from bagfault.io.types import TypeCatalog
 from bagfault.live import anchor
 from bagfault.live.delay import DelayLine
@@ -33,8 +33,8 @@ from bagfault.live.diagnostics import diagnostic_array
 from bagfault.live.events import LiveEvents
 from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
 from bagfault.live.params import FaultParameters
+from bagfault.live.recording import start_recording
 from bagfault.live.ros import adapted_qos, interface_class, make_node, qos, unacknowledged
-from bagfault.live.runtime import running_distro
 from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import ServiceHost, TriggerProxy
 from bagfault.scenario import load_scenario
@@ -117,12 +117,9 @@ class ProxyNode:
         watched_classes = {name: interface_class(msgtype) for name, msgtype in watched.items()}
         catalog = TypeCatalog([], 'jazzy')
         if self.record_path is not None:
-            self.recording = McapSink(self.record_path, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
-            self.recording.add_metadata('bagfault', {
+            self.recording = start_recording(self.record_path, {
                 'tool': 'bagfault', 'version': __version__, 'mode': 'proxy', 'seed': str(self.seed),
-                'scenario': self.scenario.name})
-            self.recording.add_attachment(self.scenario.name, 'application/yaml', self.scenario.text.encode(),
-                                          self.now())
+                'scenario': self.scenario.name}, self.scenario, self.now())
         sink: Any = self.recording
         if self.foxglove is not None:
             from bagfault.engine.run import NullSink  # noqa: PLC0415
@@ -384,11 +381,12 @@ class ProxyNode:
                 self._publish(topic, message.data)
             self.unacknowledged = unacknowledged(self.publishers.values(), DRAIN)
             self.session.finish()
-            if self.recording is not None:
-                record_origin(self.recording, self.session.run.stats.origin)
-                finish(self.recording, self.session.run)
-            else:
-                self.session.run.close(ok=True)
+            with self.session.run:  # black boxes dropped unless the recording is complete
+                if self.recording is not None:
+                    record_origin(self.recording, self.session.run.stats.origin)
+                    finish(self.recording, self.session.run)
+                else:
+                    self.session.run.close(ok=True)
         elif self.recording is not None:
             self.recording.abort()
         self.node.destroy_node()

@@ -23,11 +23,10 @@ from bagfault.engine.provenance import provenance, record_origin
 from bagfault.engine.result import RunStats
 from bagfault.errors import FieldValueError, LiveError
 from bagfault.io.definitions import load_definitions
-from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live.pacer import CLOCK_NOTE, SEEK, Pacer
-from bagfault.live.runtime import running_distro
+from bagfault.live.recording import maybe_recording
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -36,6 +35,7 @@ if TYPE_CHECKING:
     from bagfault.engine.result import RunResult
     from bagfault.engine.run import Run
     from bagfault.engine.stop import StopFlag
+    from bagfault.io.mcap_sink import McapSink
     from bagfault.live.params import FaultParameters
     from bagfault.spec.model import Scenario
     from bagfault.view.foxglove import FoxgloveView
@@ -71,65 +71,55 @@ def run_play(
     last: Run | None = None
     first, end = _time_range(inputs)
     control = FaultControl(scenario) if foxglove is not None or ros else None
-    with _node(ros, stop, ros_args, control) as (node, start_values):
-        recording = (McapSink(record, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
-                     if record is not None else None)
+    view_notes: list[str] = []
+    metadata = {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'}
+    with _node(ros, stop, ros_args, control) as (node, start_values), \
+            maybe_recording(record, metadata, scenario, first) as recording, contextlib.ExitStack() as closing:
+        sink = _sink(node, rate=rate, clock=clock, stop=stop, recording=recording, delay=delay,
+                     wait_for=wait_for, clock_hz=clock_hz, topics=topics, start_offset=start_offset)
         view: FoxgloveView | None = None
-        view_notes: list[str] = []
-        try:
-            if recording is not None:
-                recording.add_metadata('bagfault', {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'})
-                recording.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(), first)
-            sink = _sink(node, rate=rate, clock=clock, stop=stop, recording=recording, delay=delay,
-                         wait_for=wait_for, clock_hz=clock_hz, topics=topics, start_offset=start_offset)
-            if foxglove is not None:
-                from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
+        if foxglove is not None:
+            from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
 
-                view = FoxgloveView(foxglove, scenario, controls=control, playback=sink, time_range=(first, end))
-                sink.view = view
-                print(f'bagfault: Foxglove view on {view.url} (open it in the Foxglove app: Open connection, '
-                      'Foxglove WebSocket)', flush=True)
-            while True:
-                if control is not None:  # -p values at the start of every pass, as manual switches
-                    for fault_id, key, value in start_values:
-                        control.ask(fault_id, key, value)
-                run, stopped = _pass(scenario, inputs, sink, seed=seed, record=record, numbers=numbers,
-                                     control=control)
-                last = run
-                passes += 1
-                total.add(run.stats)
-                if sink.seeking():
-                    sink.restart(first)
-                    continue
-                if stopped or run.stats.input_messages == 0:
-                    break
-                if loop:
-                    sink.offset += (run.stats.last_time or 0) - (run.stats.first_time or 0) + LOOP_GAP
-                    continue
-                if view is None:
-                    break
-                view.ended(end)  # stay until Ctrl-C; a seek plays again
-                while not stop.is_set() and not sink.seeking():
-                    stop.wait(0.05)
-                if not sink.seeking():
-                    break
+            view = FoxgloveView(foxglove, scenario, controls=control, playback=sink, time_range=(first, end))
+            closing.callback(view.close)
+            closing.callback(lambda: view_notes.extend(view.notes() if view is not None else ()))
+            sink.view = view
+            print(f'bagfault: Foxglove view on {view.url} (open it in the Foxglove app: Open connection, '
+                  'Foxglove WebSocket)', flush=True)
+        while True:
+            if control is not None:  # -p values at the start of every pass, as manual switches
+                for fault_id, key, value in start_values:
+                    control.ask(fault_id, key, value)
+            run, stopped = _pass(scenario, inputs, sink, seed=seed, record=record, numbers=numbers,
+                                 control=control)
+            last = run
+            passes += 1
+            total.add(run.stats)
+            if sink.seeking():
                 sink.restart(first)
-            ack_wait = ACK_WAIT / 10 if stop.is_set() else ACK_WAIT
-            unacknowledged = sink.delivered(ack_wait)
-            if recording is not None:
-                record_origin(recording, total.origin)
-                written = recording.written()  # what the file holds (--topics leaves the rest out)
-                total.per_topic_out = written
-                total.output_messages = sum(written.values())
-                recording.finish()
-        except BaseException:
-            if recording is not None:
-                recording.abort()
-            raise
-        finally:
-            if view is not None:
-                view_notes = view.notes()
-                view.close()
+                continue
+            if stopped or run.stats.input_messages == 0:
+                break
+            if loop:
+                sink.offset += (run.stats.last_time or 0) - (run.stats.first_time or 0) + LOOP_GAP
+                continue
+            if view is None:
+                break
+            view.ended(end)  # stay until Ctrl-C; a seek plays again
+            while not stop.is_set() and not sink.seeking():
+                stop.wait(0.05)
+            if not sink.seeking():
+                break
+            sink.restart(first)
+        ack_wait = ACK_WAIT / 10 if stop.is_set() else ACK_WAIT
+        unacknowledged = sink.delivered(ack_wait)
+        if recording is not None:
+            record_origin(recording, total.origin)
+            written = recording.written()  # what the file holds (--topics leaves the rest out)
+            total.per_topic_out = written
+            total.output_messages = sum(written.values())
+            recording.finish()
     assert last is not None
     result = last.result('play', inputs, record, seed, total)
     result.notes.append(f'published {sink.published} messages in {passes} pass{"es" if passes != 1 else ""}'

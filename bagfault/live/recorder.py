@@ -9,16 +9,17 @@ use_sim_time). Definitions come from the standard types of the distro.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, field
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
-from bagfault.io.mcap_sink import LIVE_FLUSH, McapSink
 from bagfault.io.types import TypeCatalog
+from bagfault.live.recording import start_recording
 from bagfault.live.ros import adapted_qos, has_interface, interface_class, make_node, offered_yaml
-from bagfault.live.runtime import make_executor, ros_context, running_distro
+from bagfault.live.runtime import make_executor, ros_context
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Collection
@@ -136,13 +137,13 @@ def run_record(
     with ros_context(stop) as context:
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
         node = make_node('bagfault_recorder', context, ros_args, parameter_overrides=overrides)
-        recording = McapSink(output, ros_distro=running_distro(), flush_every=LIVE_FLUSH)
         executor = make_executor(context)
         executor.add_node(node)
-        finished = False
-        try:
-            recording.add_metadata('bagfault', {'tool': 'bagfault', 'version': __version__, 'mode': 'record',
-                                                'topics': ' '.join(names) if names else '--all'})
+        metadata = {'tool': 'bagfault', 'version': __version__, 'mode': 'record',
+                    'topics': ' '.join(names) if names else '--all'}
+        with contextlib.ExitStack() as closing, start_recording(output, metadata) as recording:
+            closing.callback(node.destroy_node)
+            closing.callback(executor.shutdown)
             catalog = TypeCatalog([], 'jazzy')
             channels: dict[str, int] = {}
 
@@ -167,13 +168,6 @@ def run_record(
                     last_look = now
                 executor.spin_once(timeout_sec=0.05)
                 recording.tick()
-            finished = True
-        finally:
-            if finished:
-                recording.finish()
-            else:
-                recording.abort()
-            executor.shutdown()
-            node.destroy_node()
+            recording.finish()
     return RecordResult(output, dict(recorder.counts), sorted(set(names) - set(recorder.subscriptions)),
                         dict(recorder.skipped), stop.reason)
