@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from bagfault import __version__
 from bagfault.errors import BagfaultError, UsageError
 from bagfault.io.outputs import check_output
+from bagfault.log import console
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -512,6 +513,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         words, ros_args = words[:at], [w for w in words[at + 1:] if w not in ('--ros-args', '--')]
     args = _parser().parse_args(words)
     args.ros_args = ros_args
+    console(debug=args.debug)
     if ros_args and args.command not in ROS_COMMANDS:
         print(f'bagfault: error: --ros-args: only {", ".join(ROS_COMMANDS)} make a ROS node', file=sys.stderr)
         return EXIT_ERROR

@@ -61,3 +61,30 @@ def test_only_the_front_ends_import_the_api() -> None:
              if any(module == 'bagfault.api' for _, module in _imports(p))}
     assert 'cli.py' in users
     assert users <= {'cli.py', 'pytest_plugin.py', 'campaign/job.py'}
+
+
+def test_the_library_prints_nothing_outside_the_command_line_and_the_reports() -> None:
+    """Diagnostics are log records of the `bagfault` logger (bagfault/log.py); only the CLI and the report
+    writers print."""
+    printing = []
+    for path in PACKAGE.rglob('*.py'):
+        relative = path.relative_to(PACKAGE)
+        if relative.parts[0] in ('cli.py', 'report'):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == 'print':
+                printing.append(f'{relative}:{node.lineno}')
+            if isinstance(node, ast.Attribute) and node.attr in ('print_exc', 'print_exception'):
+                printing.append(f'{relative}:{node.lineno}')
+    assert printing == []
+
+
+def test_a_library_user_sees_bagfaults_records_through_logging(caplog) -> None:
+    import logging
+
+    from bagfault.log import log
+
+    with caplog.at_level(logging.INFO, logger='bagfault'):
+        log.info('system under test started on ROS domain 42')
+    assert [(r.name, r.levelname, r.getMessage()) for r in caplog.records] == [
+        ('bagfault', 'INFO', 'system under test started on ROS domain 42')]

@@ -29,6 +29,7 @@ from bagfault.live import LOOPBACK_PROFILE
 from bagfault.live.pacer import CLOCK_NOTE
 from bagfault.live.recording import maybe_recording
 from bagfault.live.runtime import make_executor, ros_context
+from bagfault.log import log
 from bagfault.spec.system import command_line
 
 if TYPE_CHECKING:
@@ -111,13 +112,12 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
             view = FoxgloveView(foxglove, scenario)  # read-only: a test's faults are its scenario's
             closing.callback(view.close)
             closing.callback(lambda: view_notes.extend(view.notes() if view is not None else ()))
-            print(f'bagfault: Foxglove view on {view.url}', flush=True)
+            log.info(f'Foxglove view on {view.url}')
         process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
                                 shell=system.shell, logs=folder)
         closing.callback(_stopped, process, system, report)
-        print(f'bagfault: system under test started on ROS domain {lease.domain}; to watch it: '
-              f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}',
-              flush=True)  # (stdout, as the view's address: stderr keeps one line per problem)
+        log.info(f'system under test started on ROS domain {lease.domain}; to watch it: '
+                 f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}')
         watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid)
         link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
                           catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)

@@ -10,7 +10,6 @@ and subclassing `bagfault.injectors.base.Injector`.
 
 from __future__ import annotations
 
-import sys
 from functools import lru_cache
 
 from bagfault.injectors.base import Injector, InjectorType, ServiceInjector
@@ -24,6 +23,7 @@ from bagfault.injectors.scan import ScanInjector
 from bagfault.injectors.tf import TfInjector
 from bagfault.injectors.topic import CompressedImageInjector, TopicInjector
 from bagfault.injectors.trigger_service import TriggerServiceInjector
+from bagfault.log import log
 
 GROUP = 'bagfault.injectors'
 
@@ -52,15 +52,15 @@ def injector_types() -> dict[str, InjectorType]:
     types: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}
     for entry in sorted(entry_points(group=GROUP), key=lambda e: e.name):
         if entry.name in types:
-            print(f'bagfault: plugin {entry.value} ignored: type {entry.name!r} is built in', file=sys.stderr)
+            log.warning(f'plugin {entry.value} ignored: type {entry.name!r} is built in')
             continue
         try:
             cls = entry.load()
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break bagfault
-            print(f'bagfault: plugin {entry.name} = {entry.value} failed to load: {exc}', file=sys.stderr)
+            log.warning(f'plugin {entry.name} = {entry.value} failed to load: {exc}')
             continue
         if not (isinstance(cls, type) and issubclass(cls, (Injector, ServiceInjector))):
-            print(f'bagfault: plugin {entry.name} = {entry.value} is not an Injector subclass', file=sys.stderr)
+            log.warning(f'plugin {entry.name} = {entry.value} is not an Injector subclass')
             continue
         types[entry.name] = cls
     return types

@@ -27,6 +27,7 @@ from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.live.pacer import CLOCK_NOTE, SEEK, Pacer
 from bagfault.live.recording import maybe_recording
+from bagfault.log import log
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -85,8 +86,8 @@ def run_play(
             closing.callback(view.close)
             closing.callback(lambda: view_notes.extend(view.notes() if view is not None else ()))
             sink.view = view
-            print(f'bagfault: Foxglove view on {view.url} (open it in the Foxglove app: Open connection, '
-                  'Foxglove WebSocket)', flush=True)
+            log.info(f'Foxglove view on {view.url} (open it in the Foxglove app: Open connection, '
+                     'Foxglove WebSocket)')
         while True:
             if control is not None:  # -p values at the start of every pass, as manual switches
                 for fault_id, key, value in start_values:

@@ -10,14 +10,13 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import sys
 import threading
-import traceback
 from importlib import metadata
 from typing import TYPE_CHECKING, Any
 
 from bagfault.io.types import DISTROS
 from bagfault.live import require_rclpy
+from bagfault.log import log
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -55,8 +54,7 @@ def spin_until(executor: Any, stop: StopFlag, period: float = 0.05) -> None:
         try:
             executor.spin_once(timeout_sec=period)
         except Exception:  # noqa: BLE001 - one bad callback must not take the proxy down
-            print('bagfault: error in a callback (the proxy keeps running):', file=sys.stderr)
-            traceback.print_exc()
+            log.exception('error in a callback (the proxy keeps running)')
 
 
 def make_executor(context: Any) -> Any:
