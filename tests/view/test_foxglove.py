@@ -186,8 +186,8 @@ def test_the_server_speaks_foxglove_sdk_v1_only_as_the_readme_says() -> None:
         assert ' 400 ' in _handshake(port, 'foxglove.websocket.v1') + ' '
     finally:
         view.close()
-    readme = (ROOT / 'README.md').read_text()
-    assert 'foxglove.sdk.v1' in readme and 'foxglove.websocket.v1' in readme
+    page = (ROOT / 'docs' / 'modes' / 'foxglove.md').read_text()
+    assert 'foxglove.sdk.v1' in page and 'foxglove.websocket.v1' in page
 
 
 def test_play_in_foxglove_leaves_out_a_type_nobody_defined(client_dir: Path, quirks_bag: Path, tmp_path: Path) -> None:
