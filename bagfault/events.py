@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal, Protocol
 
-FaultState = Literal['active', 'inactive', 'config_updated']
+FaultEventState = Literal['active', 'inactive', 'config_updated']
 """What a FaultEvent reports: the fault switched on or off, or its config changed."""
 FaultSource = Literal['startup', 'scheduled', 'manual', 'cli', 'reload']
 """Why: active_on_startup, a schedule, a live parameter or service, `--activate`, a scenario reload."""
@@ -72,7 +72,7 @@ class FaultEvent:
     time: int
     fault_id: str
     injector_id: str
-    state: FaultState
+    state: FaultEventState
     source: FaultSource
     details: str
 

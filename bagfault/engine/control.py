@@ -13,11 +13,10 @@ import queue
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from bagfault.errors import FieldValueError, InjectorConfigError
-from bagfault.injectors.registry import get_injector_type
+from bagfault.engine.fault_state import FaultState
 
 if TYPE_CHECKING:
-    from bagfault.spec.model import Scenario
+    from bagfault.spec.model import FaultSpec, Scenario
 
 
 @dataclass(frozen=True)
@@ -29,42 +28,28 @@ class FaultChange:
     value: Any
 
 
-def check_change(scenario: Scenario, fault_id: str, key: str | None, value: object) -> Any:
+def check_change(state: FaultState, fault_id: str, key: str | None, value: object) -> Any:
     """The value as it will be applied; FieldValueError with the schema's reason otherwise."""
-    fault = scenario.fault(fault_id)
-    if fault is None:
-        raise FieldValueError(f'no fault {fault_id!r} (faults: {", ".join(f.id for f in scenario.faults) or "none"})')
-    if key is None:
-        if not isinstance(value, bool):
-            raise FieldValueError(f'{fault_id}.active: {value!r} is not true or false')
-        return value
-    spec = scenario.injector(fault.injector_id)
-    assert spec is not None
-    cls = get_injector_type(spec.type)
-    assert cls is not None
-    schema_field = cls.field(key)
-    if schema_field is None:
-        raise FieldValueError(f'{key!r} is not a config key of injector type {spec.type!r}')
-    coerced = schema_field.coerce(value)
-    try:
-        cls.check_fault({**fault.config, key: coerced}, spec.options)
-    except InjectorConfigError as exc:
-        raise FieldValueError(str(exc)) from None
-    return coerced
+    return state.check(fault_id, key, value)
 
 
 class FaultControl:
-    """A thread-safe queue of checked changes for one scenario."""
+    """A thread-safe queue of checked changes for the faults of one `FaultState` (which lasts across passes)."""
 
-    def __init__(self, scenario: Scenario) -> None:
-        self.scenario = scenario
+    def __init__(self, state: FaultState | Scenario) -> None:
+        self.state = state if isinstance(state, FaultState) else FaultState(state)
+        self.scenario = self.state.scenario
         self._queue: queue.SimpleQueue[FaultChange] = queue.SimpleQueue()
 
     def ask(self, fault_id: str, key: str | None, value: object) -> Any:
         """Check and queue a change; returns the value as it will be applied."""
-        checked = check_change(self.scenario, fault_id, key, value)
+        checked = check_change(self.state, fault_id, key, value)
         self._queue.put(FaultChange(fault_id, key, checked))
         return checked
+
+    def fault(self, fault_id: str) -> FaultSpec | None:
+        """The fault with its current config."""
+        return self.state.fault(fault_id)
 
     def take(self) -> list[FaultChange]:
         """Every change queued so far, in order."""

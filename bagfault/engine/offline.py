@@ -15,6 +15,7 @@ from functools import partial
 from typing import TYPE_CHECKING, Protocol, cast
 
 from bagfault.engine.chunk_copy import ChunkCopy, chunk_copy_for
+from bagfault.engine.fault_state import FaultState
 from bagfault.engine.pipeline import Pipeline
 from bagfault.engine.provenance import provenance
 from bagfault.engine.routing import build_routing
@@ -100,7 +101,8 @@ def replay(
     closes the run once its own output is complete.
     """
     keep = None if chunks is None else partial(chunks.keep, cast('McapSink', sink))
-    routing = build_routing(inputs, scenario, catalog, sink, keep)
+    state = control.state if control is not None else FaultState(scenario)  # a control's lasts across passes
+    routing = build_routing(inputs, scenario, catalog, sink, keep, state)
     stopped = False
     try:
         outside = hooks.prepare(routing) if hooks is not None else {}
@@ -113,7 +115,7 @@ def replay(
     run.stats.replaced_topics = list(routing.replaced)
     if chunks is not None:
         chunks.wire(routing, run.observers, scenario)
-    pipeline = Pipeline(inputs, run, routing.routes, routing.copies, seed=seed, activations=activations,
+    pipeline = Pipeline(inputs, run, routing.routes, routing.copies, state, seed=seed, activations=activations,
                         start_offset=start_offset, batch=batch, progress=progress, control=control,
                         chunks=chunks if chunks is not None and chunks.passthrough else None)
     if hooks is not None:

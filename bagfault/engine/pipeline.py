@@ -21,10 +21,9 @@ from bisect import bisect_left
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from bagfault.engine.build import build_injector
+from bagfault.engine.fault_state import FaultState, inject
 from bagfault.engine.merge import COPY_RANK, EVENT_RANK, TimeOrderedMerge
 from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
-from bagfault.errors import MalformedMessageError
 from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.injectors.base import Injector, RawMessage
@@ -70,6 +69,7 @@ class Pipeline:
         run: Run,
         routes: dict[int, list[InjectorRuntime]],
         copies: dict[int, OutputChannel],
+        state: FaultState,
         *,
         seed: int,
         activations: Sequence[Activation] = (),
@@ -82,6 +82,7 @@ class Pipeline:
         self.inputs = inputs
         self.chunks = chunks  # chunk copy: untouched chunks of a single MCAP input written as they are
         self.control = control  # changes from outside (play with controls): applied message by message
+        self.state = state  # the one fault state: the scheduler of this pass, config changes, injectors
         self.run = run
         self.scenario = run.scenario
         self.catalog = run.catalog
@@ -162,6 +163,7 @@ class Pipeline:
     def _start(self, first_time: int) -> None:
         origin = self.run.begin(first_time, seconds_to_ns(self.start_offset))
         self.scheduler = FaultScheduler(self.scenario, origin, self.seed, self.activations)
+        self.state.scheduler = self.scheduler
         self._refresh_active()
 
     def _process(self, batch: list[InputMessage], first_order: int) -> None:
@@ -198,23 +200,22 @@ class Pipeline:
         assert scheduler is not None
         events: list[FaultEvent] = []
         held: list[Record] = []
+        state = self.state
         for change in changes:
-            fault = self.scenario.fault(change.fault_id)
-            if fault is None:
+            if state.fault(change.fault_id) is None:
                 continue
             if change.key is None:
-                event = scheduler.set_state(fault.id, bool(change.value), time, 'manual')
+                event = state.switch(change.fault_id, bool(change.value), time, 'manual')
                 if event is not None:
                     events.append(event)
                 continue
-            fault.config = {**fault.config, change.key: change.value}
-            fault.config_text = {**fault.config_text, change.key: str(change.value)}
+            fault = state.configure(change.fault_id, change.key, change.value)
             for runtime in self._runtimes:
-                if fault in runtime.faults:  # a new injector takes the new config; the old one hands over
+                if runtime.spec.id == fault.injector_id:  # a new injector takes the new config; the old hands over
                     held += [(m.log_time, m.order, runtime.rank, next(self._counter), runtime.channel,
                               m.publish_time, m.data) for m in runtime.injector.flush(time)]
-                    runtime.injector = build_injector(runtime.spec, runtime.msgtype, runtime.faults, self.catalog,
-                                                      self.scenario.name)
+                    runtime.faults = state.faults_of(runtime.spec.id)
+                    runtime.injector = state.injector(runtime.spec, runtime.msgtype, self.catalog)
             events.append(FaultEvent(time, fault.id, fault.injector_id, 'config_updated', 'manual',
                                      fault.describe_config()))
         self._refresh_active()
@@ -250,38 +251,17 @@ class Pipeline:
         stats.max_buffered = max(stats.max_buffered, len(self._merge))
 
     def _inject(self, runtime: InjectorRuntime, messages: list[RawMessage]) -> list[RawMessage]:
-        """One injector's messages of a segment, through its active faults."""
-        injector = runtime.injector
-        if not runtime.active and not injector.busy:
-            if injector.tracks_history:
-                injector.watch(messages)
-            return messages
-        try:
-            if self.batch:
-                return injector.process_batch(messages, runtime.active)
-            return [out for m in messages for out in injector.process(m, runtime.active)]
-        except Exception:  # noqa: BLE001 - a message that cannot take the fault: judged one by one below
-            return [out for m in messages for out in self._one(runtime, m)]
+        """One injector's messages of a segment, through its active faults (the one injection step)."""
+        return inject(runtime.injector, runtime.active, messages, batch=self.batch,
+                      malformed=lambda message, reason: self._malformed(runtime, message, reason))
 
-    def _one(self, runtime: InjectorRuntime, message: RawMessage) -> list[RawMessage]:
-        try:
-            return runtime.injector.process(message, runtime.active)
-        except Exception as exc:  # noqa: BLE001 - malformed data is the input's problem: the on_malformed policy
-            return self._malformed(runtime, message, exc)
-
-    def _malformed(self, runtime: InjectorRuntime, message: RawMessage, exc: Exception) -> list[RawMessage]:
-        """on_malformed: forward the message untouched (default), drop it, or stop the run; counted either way."""
-        policy = runtime.spec.options.get('on_malformed', 'forward')
+    def _malformed(self, runtime: InjectorRuntime, message: RawMessage, reason: str) -> str:
+        """Count a message that could not take a fault; where it was."""
         topic = runtime.spec.input_topic or ''
-        reason = f'{type(exc).__name__}: {exc}'
         stats = self.run.stats
         stats.malformed[topic] = stats.malformed.get(topic, 0) + 1
         stats.malformed_first.setdefault(topic, (message.log_time, reason))
-        if policy == 'error':
-            seconds = (message.log_time - (stats.origin or 0)) / 1e9
-            raise MalformedMessageError(f'{topic}: message at {seconds:.3f} s cannot take the fault of injector '
-                                        f'{runtime.spec.id!r} ({reason}); on_malformed is error') from None
-        return [] if policy == 'drop' else [message]
+        return f'{topic}: message at {(message.log_time - (stats.origin or 0)) / 1e9:.3f} s'
 
     def _roundtrip(self, index: int) -> Callable[[Data], Data]:
         """Reference path: decode and re-encode a channel's messages (unchanged when undecodable)."""

@@ -24,6 +24,7 @@ from bagfault.injectors.registry import get_injector_type
 if TYPE_CHECKING:
     from collections.abc import Callable, Collection
 
+    from bagfault.engine.fault_state import FaultState
     from bagfault.engine.run import Sink
     from bagfault.io.channel import Channel
     from bagfault.io.sources import InputSet
@@ -86,14 +87,14 @@ def bag_name(name: str, topics: Collection[str]) -> str:
 
 
 def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink,
-                  keep: Callable[[int], int | None] | None = None) -> Routing:
+                  keep: Callable[[int], int | None] | None = None, state: FaultState | None = None) -> Routing:
     """Check the scenario against the bag and register every output channel; `keep(number)` (chunk copy)
     registers an input channel that passes through under its input id, or says None."""
     _check_encodings(inputs)
     routing = Routing()
     wired = _wire(inputs, scenario, routing)
     _check_no_chains(scenario, wired)
-    _register(inputs, scenario, catalog, sink, wired, routing, keep)
+    _register(inputs, scenario, catalog, sink, wired, routing, keep, state)
     return routing
 
 
@@ -157,7 +158,7 @@ def _check_no_chains(scenario: Scenario, wired: list[_Wired]) -> None:
 
 
 def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink, wired: list[_Wired],
-              routing: Routing, keep: Callable[[int], int | None] | None) -> None:
+              routing: Routing, keep: Callable[[int], int | None] | None, state: FaultState | None = None) -> None:
     """Output channels in input order: copies of untouched topics, then each injector output of the topic."""
     in_place = {w.input_topic for w in wired if w.input_topic == w.output_topic}
     written = {w.output_topic for w in wired}
@@ -177,7 +178,7 @@ def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: 
         for w in wired:
             if not any(c is channel for c in w.channels):
                 continue
-            faults = scenario.faults_of(w.spec.id)
+            faults = state.faults_of(w.spec.id) if state is not None else scenario.faults_of(w.spec.id)
             injector = build_injector(w.spec, channel.msgtype, faults, catalog, scenario.name)
             encoding, text = _schema(channel, catalog)
             if kept is not None and w.output_topic == channel.topic:

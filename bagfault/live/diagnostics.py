@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 if TYPE_CHECKING:
-    from bagfault.live.session import FaultState, LiveTopic
+    from bagfault.live.session import FaultStatus, LiveTopic
 
 PREFIX = 'bagfault'
 
@@ -22,7 +22,7 @@ def _text(value: Any) -> str:
     return str(value)
 
 
-def diagnostic_array(faults: list[FaultState], topics: list[LiveTopic], stamp: Any) -> DiagnosticArray:
+def diagnostic_array(faults: list[FaultStatus], topics: list[LiveTopic], stamp: Any) -> DiagnosticArray:
     """The status of every fault and topic injector."""
     array = DiagnosticArray()
     array.header.stamp = stamp

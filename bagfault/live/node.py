@@ -21,7 +21,6 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy
 
 from bagfault import __version__
-from bagfault.engine.control import check_change
 from bagfault.engine.offline import finish
 from bagfault.engine.provenance import record_origin
 from bagfault.errors import BagfaultError, LiveError, MalformedMessageError, ReloadError, ScenarioError
@@ -40,10 +39,9 @@ from bagfault.live.trigger import ServiceHost, TriggerProxy
 from bagfault.scenario import load_scenario
 
 if TYPE_CHECKING:
-
     from bagfault.engine.stop import StopFlag
     from bagfault.events import FaultEvent
-    from bagfault.spec.model import Scenario
+    from bagfault.spec.model import FaultSpec, Scenario
 
 NODE_NAME = 'bagfault'
 TICK = 0.01  # scheduler resolution in live mode, seconds
@@ -348,11 +346,15 @@ class ProxyNode:
             self.logger.warning(message)
         return success, message
 
+    def fault(self, fault_id: str) -> FaultSpec | None:
+        """A fault with its current config (the session's fault state), for the Foxglove view."""
+        return self.session.state.fault(fault_id) if self.session is not None else self.scenario.fault(fault_id)
+
     def ask(self, fault_id: str, key: str | None, value: object) -> Any:
         """A change from the Foxglove view: checked by the schema, applied now (parameters follow)."""
         assert self.session is not None
         if key is None:
-            checked = check_change(self.session.scenario, fault_id, None, value)
+            checked = self.session.state.check(fault_id, None, value)
             self.session.set_active(fault_id, bool(checked), 'manual')
             return checked
         checked = self.session.check_config(fault_id, key, value)

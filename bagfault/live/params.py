@@ -32,9 +32,10 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
     from bagfault.engine.control import FaultControl
+    from bagfault.engine.fault_state import FaultState
     from bagfault.events import FaultSource
     from bagfault.injectors.base import RawMessage
-    from bagfault.live.session import FaultState, LiveTopic
+    from bagfault.live.session import FaultStatus, LiveTopic
     from bagfault.schema import ConfigField
     from bagfault.spec.model import FaultSpec, Scenario
 
@@ -119,13 +120,16 @@ class FaultTarget(Protocol):
     @property
     def scenario(self) -> Scenario: ...
 
+    @property
+    def state(self) -> FaultState: ...
+
     def check_config(self, fault_id: str, key: str, value: object) -> Any: ...
 
     def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None: ...
 
     def set_config(self, fault_id: str, key: str, value: object) -> list[tuple[LiveTopic, RawMessage]]: ...
 
-    def faults(self) -> list[FaultState]: ...
+    def faults(self) -> list[FaultStatus]: ...
 
 
 class ControlledFaults:
@@ -139,8 +143,12 @@ class ControlledFaults:
     def scenario(self) -> Scenario:
         return self.control.scenario
 
+    @property
+    def state(self) -> FaultState:
+        return self.control.state
+
     def check_config(self, fault_id: str, key: str, value: object) -> Any:
-        return check_change(self.control.scenario, fault_id, key, value)
+        return check_change(self.control.state, fault_id, key, value)
 
     def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None:
         self.control.ask(fault_id, None, active)
@@ -149,7 +157,7 @@ class ControlledFaults:
         self.control.ask(fault_id, key, value)
         return []
 
-    def faults(self) -> list[FaultState]:
+    def faults(self) -> list[FaultStatus]:
         return []
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import contextlib
 from typing import TYPE_CHECKING, Any
 
-from bagfault.engine.control import FaultControl, check_change
+from bagfault.engine.control import FaultControl
 from bagfault.engine.offline import replay
 from bagfault.engine.provenance import provenance, record_origin
 from bagfault.engine.result import RunStats
@@ -184,7 +184,7 @@ def _start_values(parameters: FaultParameters) -> list[tuple[str, str | None, An
     for value in parameters.overrides:
         declared = parameters.parameters[value.name]
         try:
-            checked = check_change(parameters.session.scenario, declared.fault_id, declared.key, value.value)
+            checked = parameters.session.state.check(declared.fault_id, declared.key, value.value)
         except FieldValueError as exc:
             raise LiveError(f'--ros-args -p {value.name}: {exc}') from None
         start.append((declared.fault_id, declared.key, checked))

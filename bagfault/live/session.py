@@ -16,14 +16,12 @@ import threading
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
-from bagfault.engine.build import build_injector
-from bagfault.engine.control import check_change
+from bagfault.engine.fault_state import FaultState, inject
 from bagfault.engine.run import NullSink, Run
 from bagfault.engine.scheduler import FaultScheduler
 from bagfault.errors import (
     EngineError,
     LiveError,
-    MalformedMessageError,
     ReloadError,
 )
 from bagfault.events import FaultEvent
@@ -71,7 +69,7 @@ class LiveTopic:
 
 
 @dataclass(frozen=True)
-class FaultState:
+class FaultStatus:
     """What /diagnostics and the parameters show of one fault."""
 
     fault_id: str
@@ -90,7 +88,7 @@ def _layout(scenario: Scenario) -> list[tuple[Any, ...]]:
 
 
 class LiveSession:
-    """Owns the fault state of a proxy and its run loop; thread-safe."""
+    """A proxy's run loop over the one fault state (engine/fault_state.py); thread-safe."""
 
     def __init__(
         self,
@@ -104,14 +102,12 @@ class LiveSession:
         blackbox_base: Path | None = None,
         observed: dict[str, str] | None = None,
     ) -> None:
-        self.scenario = scenario
+        self.state = FaultState(scenario)  # the loaded scenario stays as the file says (reloads compare with it)
         self.catalog = catalog
         self.clock = clock
         self.seed = seed
         self.lock = threading.RLock()
         self.manual: dict[str, bool] = {}  # fault -> state last set at run time (parameter, service)
-        self.runtime_config: dict[str, dict[str, Any]] = {}  # fault -> config values set at run time
-        self.file_config = {f.id: dict(f.config) for f in scenario.faults}  # as the file says, for reloads
         self.listeners: list[Callable[[list[FaultEvent]], None]] = []
         self.topics: list[LiveTopic] = []
         catalog.add_definition(FaultEvent.msgtype, FaultEvent.definition)
@@ -128,7 +124,6 @@ class LiveSession:
             schemas[topic.input_topic] = schemas[topic.output_topic] = (topic.msgtype, *catalog.schema(topic.msgtype))
         self.run = Run(scenario, sink if sink is not None else NullSink(), catalog, schemas,
                        blackbox_base=blackbox_base)
-        self.scheduler: FaultScheduler | None = None
         self.run.event_channel(FaultEvent)
         self._inputs: dict[int, OutputChannel] = {}
         self._outputs: dict[int, OutputChannel] = {}
@@ -140,18 +135,28 @@ class LiveSession:
         self._string: Any = None
 
     @property
+    def scenario(self) -> Scenario:
+        """The scenario as loaded (or reloaded); its faults' current config is the state's."""
+        return self.state.scenario
+
+    @property
+    def scheduler(self) -> FaultScheduler | None:
+        """The fault state's scheduler, once the session started."""
+        return self.state.scheduler
+
+    @property
     def stats(self) -> RunStats:
         """Counts and times of the session so far."""
         return self.run.stats
 
     # -- wiring -------------------------------------------------------------------
     def _build(self, spec: InjectorSpec, msgtype: str) -> Injector:
-        return build_injector(spec, msgtype, self.scenario.faults_of(spec.id), self.catalog, self.scenario.name)
+        return self.state.injector(spec, msgtype, self.catalog)
 
     def _refresh_active(self) -> None:
         assert self.scheduler is not None
         for topic in self.topics:
-            topic.active = self.scheduler.active_of(self.scenario.faults_of(topic.spec.id))
+            topic.active = self.state.active_of(topic.spec.id)
 
     def _publish_events(self, events: list[FaultEvent]) -> None:
         if not events:
@@ -168,8 +173,8 @@ class LiveSession:
         with self.lock:
             now = self.clock()
             self.run.begin(now)
-            self.scheduler = FaultScheduler(self.scenario, now, self.seed)
-            self._publish_events(self.scheduler.advance(now))
+            self.state.scheduler = FaultScheduler(self.scenario, now, self.seed)
+            self._publish_events(self.state.scheduler.advance(now))
             self._refresh_active()
 
     @property
@@ -200,24 +205,15 @@ class LiveSession:
             self.run.read(1, now)
             self.run.message(self._inputs[id(topic)], now, now, data)
             message = RawMessage(now, now, data, topic.received)
-            injector = topic.injector
-            if not topic.active and not injector.busy:
-                if injector.tracks_history:
-                    injector.watch([message])
-                return [message]
-            try:
-                return injector.process(message, topic.active)
-            except Exception as exc:  # noqa: BLE001 - a malformed message follows on_malformed, never a crash
+
+            def malformed(_message: RawMessage, reason: str) -> str:
                 topic.malformed += 1
-                topic.last_error = f'{type(exc).__name__}: {exc}'
+                topic.last_error = reason
                 self.run.stats.malformed[topic.input_topic] = topic.malformed
-                self.run.stats.malformed_first.setdefault(topic.input_topic, (now, topic.last_error))
-                policy = topic.spec.options.get('on_malformed', 'forward')
-                if policy == 'error':
-                    raise MalformedMessageError(
-                        f'{topic.input_topic}: a message cannot take the fault of injector {topic.spec.id!r} '
-                        f'({topic.last_error}); on_malformed is error') from None
-                return [] if policy == 'drop' else [message]
+                self.run.stats.malformed_first.setdefault(topic.input_topic, (now, reason))
+                return f'{topic.input_topic}: a message'
+
+            return inject(topic.injector, topic.active, [message], batch=False, malformed=malformed)
 
     def sent(self, topic: LiveTopic, data: bytes | memoryview) -> int:
         """A message was published on the output topic: record and observe it; return its time."""
@@ -255,27 +251,22 @@ class LiveSession:
         with self.lock:
             if self.scheduler is None:
                 raise LiveError('the proxy has not started yet')
-            if self.scenario.fault(fault_id) is None:
+            if self.state.fault(fault_id) is None:
                 raise LiveError(f'no fault {fault_id!r}')
-            event = self.scheduler.set_state(fault_id, active, self.clock(), source)
+            event = self.state.switch(fault_id, active, self.clock(), source)
             if source == 'manual':
                 self.manual[fault_id] = active
             self._publish_events([event] if event is not None else [])
 
     def check_config(self, fault_id: str, key: str, value: object) -> Any:
         """The value as the schema accepts it; FieldValueError with the schema's reason otherwise."""
-        return check_change(self.scenario, fault_id, key, value)
+        return self.state.check(fault_id, key, value)
 
     def set_config(self, fault_id: str, key: str, value: object) -> list[tuple[LiveTopic, RawMessage]]:
         """Change one config value now; a `config_updated` event; returns messages the old injector held."""
         with self.lock:
             coerced = self.check_config(fault_id, key, value)
-            fault = self.scenario.fault(fault_id)
-            assert fault is not None
-            fault.config = {**fault.config, key: coerced}
-            self.runtime_config.setdefault(fault_id, {})[key] = coerced
-            text = ('true' if coerced else 'false') if isinstance(coerced, bool) else str(coerced)
-            fault.config_text = {**fault.config_text, key: text}
+            fault = self.state.configure(fault_id, key, coerced)
             held = self._rebuild(fault.injector_id)
             event = FaultEvent(self.clock(), fault.id, fault.injector_id, 'config_updated', 'manual',
                                fault.describe_config())
@@ -306,43 +297,42 @@ class LiveSession:
                 raise ReloadError('reload rejected: the proxy has not started yet')
             now = self.clock()
             old_active = set(self.scheduler.active)
-            previous = self.scenario
-            file_config = {f.id: dict(f.config) for f in scenario.faults}
+            previous = self.state
+            keep: dict[str, dict[str, Any]] = {}
             kept: list[str] = []
-            runtime: dict[str, dict[str, Any]] = {}
-            for fault in scenario.faults:
-                for key, value in self.runtime_config.get(fault.id, {}).items():
-                    if file_config[fault.id].get(key) == self.file_config.get(fault.id, {}).get(key):
-                        fault.config = {**fault.config, key: value}
-                        fault.config_text = {**fault.config_text, key: str(value)}
-                        runtime.setdefault(fault.id, {})[key] = value
+            for fault in scenario.faults:  # a value set at run time stays unless the file changed that key
+                loaded = previous.scenario.fault(fault.id)
+                for key, value in previous.changed.get(fault.id, {}).items():
+                    if loaded is not None and fault.config.get(key) == loaded.config.get(key):
+                        keep.setdefault(fault.id, {})[key] = value
                         kept.append(f'{fault.id}.{key}={value}')
+            state = previous.rebase(scenario, keep)
             scheduler = FaultScheduler(scenario, self.scheduler.origin, self.seed)
             scheduler.advance(now)
             manual = {}
-            for fault_id, state in self.manual.items():
-                still = (fault_id in old_active) == state  # nothing has switched it since
+            for fault_id, on in self.manual.items():
+                still = (fault_id in old_active) == on  # nothing has switched it since
                 if still and scenario.fault(fault_id) is not None:
-                    scheduler.set_state(fault_id, state, self.scheduler.active.get(fault_id, now), 'manual')
-                    manual[fault_id] = state
-                    kept.append(f'{fault_id}.active={"true" if state else "false"}')
-            self.scenario = scenario
+                    scheduler.set_state(fault_id, on, self.scheduler.active.get(fault_id, now), 'manual')
+                    manual[fault_id] = on
+                    kept.append(f'{fault_id}.active={"true" if on else "false"}')
+            state.scheduler = scheduler
+            self.state = state
             try:
                 held = [item for topic in self.topics for item in self._rebuild(topic.spec.id)]
             except EngineError as exc:
-                self.scenario = previous
+                self.state = previous
                 for topic in self.topics:
                     topic.injector = self._build(topic.spec, topic.msgtype)
                 raise ReloadError(f'reload rejected: {exc}') from None
-            self.scheduler = scheduler
-            self.file_config, self.runtime_config, self.manual = file_config, runtime, manual
-            before = {f.id: f for f in previous.faults}
+            self.manual = manual
+            before = {f.id: f for f in previous.faults()}
             events = []
-            for fault in previous.faults:
+            for fault in previous.faults():
                 if fault.id in old_active and fault.id not in scheduler.active:
                     events.append(FaultEvent(now, fault.id, fault.injector_id, 'inactive', 'reload',
                                              fault.describe_config()))
-            for fault in scenario.faults:
+            for fault in state.faults():
                 old = before.get(fault.id)
                 if old is None or old.config != fault.config:
                     events.append(FaultEvent(now, fault.id, fault.injector_id, 'config_updated', 'reload',
@@ -359,15 +349,15 @@ class LiveSession:
         with self.lock:
             if self.scheduler is None:
                 return []
-            return self.scheduler.active_of(self.scenario.faults_of(injector_id))
+            return self.state.active_of(injector_id)
 
     # -- status ---------------------------------------------------------------------------
-    def faults(self) -> list[FaultState]:
+    def faults(self) -> list[FaultStatus]:
         """Every fault with its state and config, in file order."""
         with self.lock:
             active = self.scheduler.active if self.scheduler is not None else {}
-            return [FaultState(f.id, f.injector_id, f.id in active, copy.deepcopy(f.config))
-                    for f in self.scenario.faults]
+            return [FaultStatus(f.id, f.injector_id, f.id in active, copy.deepcopy(f.config))
+                    for f in self.state.faults()]
 
     def flush(self) -> list[tuple[LiveTopic, RawMessage]]:
         """Messages injectors still hold (reorder windows), to publish before stopping."""

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from bagfault.engine.run import Run
     from bagfault.events import Event
     from bagfault.live.pacer import Pacer
-    from bagfault.spec.model import Scenario
+    from bagfault.spec.model import FaultSpec, Scenario
 
 DEFAULT_PORT = 8765
 TIME_PERIOD = 0.05  # seconds between time broadcasts
@@ -41,6 +41,10 @@ class Controls(Protocol):
 
     def ask(self, fault_id: str, key: str | None, value: object) -> Any:
         """Check and apply (or queue) a change; FieldValueError with the reason when refused."""
+        ...
+
+    def fault(self, fault_id: str) -> FaultSpec | None:
+        """The fault with its current config (the run's FaultState)."""
         ...
 
 
@@ -72,6 +76,7 @@ class FoxgloveView:
         self.playback = playback
         self.context = foxglove.Context()
         self.active: set[str] = set()
+        self.asked: dict[str, object] = {}  # values edited here, shown until the run's fault state has them
         self._channels: list[foxglove.Channel | None] = []
         self.hidden: dict[str, str] = {}  # topics not shown (no definition of their type) and their types
         self._run: Run | None = None
@@ -165,7 +170,8 @@ class FoxgloveView:
     def parameters(self, names: list[str] | None = None) -> list[foxglove.Parameter]:
         """Current values: `<fault>.active` and every config key of the fault's injector type."""
         out = []
-        for fault in self.scenario.faults:
+        for loaded in self.scenario.faults:
+            fault = (self.controls.fault(loaded.id) if self.controls is not None else None) or loaded
             injector = self.scenario.injector(fault.injector_id)
             cls = get_injector_type(injector.type) if injector is not None else None
             values: list[tuple[str, object]] = [('active', fault.id in self.active)]
@@ -176,7 +182,9 @@ class FoxgloveView:
                 name = f'{fault.id}.{key}'
                 if names and name not in names:
                     continue
-                out.append(_parameter(name, value))
+                if name in self.asked and self.asked[name] == value:
+                    del self.asked[name]  # the fault state has it now
+                out.append(_parameter(name, self.asked.get(name, value)))
         return out
 
     def set_parameters(self, parameters: list[foxglove.Parameter]) -> list[foxglove.Parameter]:
@@ -194,9 +202,7 @@ class FoxgloveView:
             if key == 'active':
                 self.active.add(fault_id) if value else self.active.discard(fault_id)
             else:
-                fault = self.scenario.fault(fault_id)
-                if fault is not None:
-                    fault.config = {**fault.config, key: value}
+                self.asked[parameter.name] = value  # a play applies it between two messages
         if refused:
             self.server.publish_status('; '.join(refused), foxglove.StatusLevel.Error, STATUS_ID)
         return self.parameters([p.name for p in parameters])

@@ -86,3 +86,38 @@ def test_changes_are_checked_when_asked() -> None:
     with pytest.raises(FieldValueError, match='is not true or false'):
         control.ask('bias', None, 'yes')
     assert control.take() == []
+
+
+def test_changes_live_in_the_fault_state_and_never_in_the_loaded_scenario(tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / 'imu.mcap', [('/imu', IMU, 100.0)], 1.0)
+    scenario = parse_scenario(SCENARIO)
+    control = FaultControl(scenario)
+    for passes in (1, 2):  # a play's second pass (a loop, a seek) keeps what was changed in the first
+        sink = AskingSink(control, {10: ('bias', None, True), 20: ('bias', 'angular_velocity_z_bias', 1.5)}
+                          if passes == 1 else {10: ('bias', None, True)})
+        with InputSet([bag]) as inputs:
+            replay(inputs, scenario, TypeCatalog(inputs.channels, inputs.ros_distro), sink, seed=0, control=control)
+        raw = synthetic.imu_values(0.0)[0]
+        assert sink.z[25] == pytest.approx(raw + 1.5)  # pass 2: the value set in pass 1, from the one fault state
+    assert scenario.fault('bias').config == {'angular_velocity_z_bias': 0.5}  # as the file says
+    assert scenario.fault('bias').config_text == {'angular_velocity_z_bias': '0.5'}
+    assert control.state.fault('bias').config == {'angular_velocity_z_bias': 1.5}
+    assert control.fault('bias').describe_config() == 'config={angular_velocity_z_bias=1.5}'
+
+
+def test_the_live_session_changes_the_state_not_the_scenario() -> None:
+    from bagfault.live.session import LiveSession
+
+    scenario = parse_scenario(SCENARIO)
+    catalog = TypeCatalog([], 'jazzy')
+    session = LiveSession(scenario, catalog, {'imu': IMU}, lambda: 1_000_000_000, seed=0)
+    session.start()
+    session.set_config('bias', 'angular_velocity_z_bias', 2.0)
+    assert scenario.fault('bias').config == {'angular_velocity_z_bias': 0.5}
+    assert session.state.fault('bias').config == {'angular_velocity_z_bias': 2.0}
+    assert [f.config for f in session.faults()] == [{'angular_velocity_z_bias': 2.0}]
+    reloaded = parse_scenario(SCENARIO.replace('0.5', '0.5, linear_acceleration_x_bias: 0.1'))
+    _, kept = session.reload(reloaded)
+    assert kept == ['bias.angular_velocity_z_bias=2.0']  # the file did not change that key: the run's value stays
+    assert session.state.fault('bias').config == {'angular_velocity_z_bias': 2.0, 'linear_acceleration_x_bias': 0.1}
+    assert reloaded.fault('bias').config == {'angular_velocity_z_bias': 0.5, 'linear_acceleration_x_bias': 0.1}
