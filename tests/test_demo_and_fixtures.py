@@ -51,5 +51,5 @@ def test_the_readme_is_a_front_door_and_links_nothing_a_user_lacks():
     text = (ROOT / 'README.md').read_text()
     assert len(text.splitlines()) <= 200
     assert '../shared' not in text
-    docs = [p for p in (ROOT / 'docs').rglob('*.md')]
+    docs = list((ROOT / 'docs').rglob('*.md'))
     assert docs and not [str(p) for p in docs if '../shared' in p.read_text()]
