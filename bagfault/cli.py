@@ -186,7 +186,7 @@ def _parser() -> argparse.ArgumentParser:
 def _report_options(parser: argparse.ArgumentParser) -> None:
     _strict_option(parser)
     parser.add_argument('--report', type=Path, metavar='R.md', help='markdown report')
-    parser.add_argument('--json', type=Path, metavar='R.json', help='machine-readable report (docs/report.md)')
+    parser.add_argument('--json', type=Path, metavar='R.json', help='machine-readable report (docs/reference/report.md)')
     parser.add_argument('--junit', type=Path, metavar='R.xml', help='JUnit XML, one testcase per assertion')
     parser.add_argument('--html', type=Path, metavar='R.html', help='self-contained HTML report with plots')
 

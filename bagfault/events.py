@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal, Protocol
 
+from bagfault.units import NS
+
 FaultEventState = Literal['active', 'inactive', 'config_updated']
 """What a FaultEvent reports: the fault switched on or off, or its config changed."""
 FaultSource = Literal['startup', 'scheduled', 'manual', 'cli', 'reload']
@@ -146,7 +148,7 @@ class Event(EventKind, Protocol):
 def to_message(event: FaultEvent | AssertionEvent | ScenarioStatus, store: Any) -> Any:
     """Build the typestore message object of a flat event (stamp + fields)."""
     types = store.types
-    stamp = types['builtin_interfaces/msg/Time'](sec=event.time // 1_000_000_000, nanosec=event.time % 1_000_000_000)
+    stamp = types['builtin_interfaces/msg/Time'](sec=event.time // NS, nanosec=event.time % NS)
     values = {k: v for k, v in event.__dict__.items() if k != 'time'}
     return types[event.msgtype](stamp=stamp, **values)
 
@@ -156,7 +158,7 @@ EVENTS_JSON_TYPE = 'std_msgs/msg/String'
 
 
 def event_json(event: Event, origin: int | None) -> str:
-    """One event as the JSON text published on /bagfault/events (docs/events.md): `topic` (the anchor topic it
+    """One event as the JSON text published on /bagfault/events (docs/reference/events.md): `topic` (the anchor topic it
     belongs to), `stamp_ns`, `t_s` (from time zero) and the event's own fields."""
     import dataclasses  # noqa: PLC0415
     import json  # noqa: PLC0415

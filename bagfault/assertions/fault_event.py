@@ -6,8 +6,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from bagfault.assertions.base import TICK, AssertionType, fault_reference_problem
 from bagfault.schema import ConfigField
-
-NS = 1_000_000_000
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.events import FaultEvent

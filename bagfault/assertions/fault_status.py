@@ -8,13 +8,13 @@ from bagfault.assertions.base import AssertionType, fault_reference_problem, ran
 from bagfault.errors import AssertionSetupError
 from bagfault.fault_manager.model import STATUSES, valid_code
 from bagfault.schema import ConfigField
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
     from bagfault.events import FaultEvent
     from bagfault.spec.model import AssertionSpec, Scenario
 
-NS = 1_000_000_000
 
 
 class FaultStatusAssertion(AssertionType):

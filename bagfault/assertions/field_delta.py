@@ -18,12 +18,12 @@ from bagfault.assertions.fields import resolve_on_topic
 from bagfault.assertions.windows import DURING, OUTSIDE, describe, in_window
 from bagfault.errors import AssertionSetupError
 from bagfault.schema import ConfigField
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
     from bagfault.spec.model import AssertionSpec, Scenario
 
-NS = 1_000_000_000
 HORIZON = 60 * NS  # unmatched inputs older than this are forgotten (dropped messages)
 
 

@@ -18,6 +18,7 @@ from bagfault.assertions.base import FAILED, PASSED, PENDING, AssertionType
 from bagfault.assertions.registry import ASSERTION_TYPES
 from bagfault.errors import AssertionSetupError
 from bagfault.events import AssertionEvent, FaultEvent, ScenarioStatus
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -26,7 +27,6 @@ if TYPE_CHECKING:
     from bagfault.io.types import TypeCatalog
     from bagfault.spec.model import Scenario
 
-NS = 1_000_000_000
 
 
 class AssertionRunner:

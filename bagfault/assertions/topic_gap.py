@@ -7,13 +7,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from bagfault.assertions.base import AssertionType, fault_reference_problem
 from bagfault.assertions.windows import DURING
 from bagfault.schema import ConfigField
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
     from bagfault.events import FaultEvent
     from bagfault.spec.model import AssertionSpec, Scenario
 
-NS = 1_000_000_000
 
 
 class TopicGapAssertion(AssertionType):

@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from bagfault.assertions.base import TICK, AssertionType
 from bagfault.schema import ConfigField
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
     from bagfault.spec.model import AssertionSpec, Scenario
 
-NS = 1_000_000_000
 
 
 class TopicHzAssertion(AssertionType):

@@ -23,9 +23,11 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
+from bagfault.units import NS
+
 HOLD = 1.0  # seconds the sim clock stands still before the first record when rate != 1
 GRACE = 0.2  # seconds at the start of the hold not counted (what was in flight, a latched topic's history)
-STAMP_SLACK = 1_000_000_000  # ns a stamp may differ from the clock it follows
+STAMP_SLACK = NS  # ns a stamp may differ from the clock it follows
 SAME_CLOCKS = 10_000_000_000  # ns: bag time this close to wall time cannot tell the two apart
 
 
@@ -47,7 +49,7 @@ class ClockCheck:
         if len(data) < 12 or abs(bag_time - wall_time) < SAME_CLOCKS:
             return
         sec, nanosec = struct.unpack_from('<iI' if data[1] else '>iI', data, 4)
-        stamp = sec * 1_000_000_000 + nanosec
+        stamp = sec * NS + nanosec
         self.stamps[topic] = self.stamps.get(topic, 0) + 1
         if abs(stamp - wall_time) < STAMP_SLACK and abs(stamp - bag_time) > STAMP_SLACK:
             self.wall_stamps[topic] = self.wall_stamps.get(topic, 0) + 1

@@ -17,12 +17,13 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from bagfault.units import NS
+
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Iterator
 
     from rosbags.typesys.store import Typestore
 
-NS = 1_000_000_000
 DEFAULT_START = 1_700_000_000 * NS
 SCAN_BEAMS = 360
 JOINTS = ('front_left_wheel', 'front_right_wheel', 'rear_left_wheel', 'rear_right_wheel')

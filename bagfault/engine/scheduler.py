@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.faults.rng import FaultRandom
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -31,7 +32,6 @@ if TYPE_CHECKING:
     from bagfault.events import FaultSource
     from bagfault.spec.model import FaultSpec, Scenario
 
-NS = 1_000_000_000
 NS_PER_MS = 1_000_000
 MAX_SECONDS = 1e7  # as bagfault.scenario.loader.MAX_SECONDS
 

@@ -32,11 +32,11 @@ from bagfault.fault_manager.model import (
     Report,
     valid_code,
 )
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.fault_manager.config import FaultManagerConfig, Thresholds
 
-NS = 1_000_000_000
 
 
 def reject_reason(report: Report) -> str | None:

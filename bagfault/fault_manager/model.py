@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from bagfault.events import SEPARATOR, TIME_DEFINITION
+from bagfault.units import NS
 
 FAILED, PASSED = 0, 1
 INFO, WARN, ERROR, CRITICAL = 0, 1, 2, 3
@@ -155,7 +156,7 @@ class FaultManagerEvent:
         stamp = types['builtin_interfaces/msg/Time']
 
         def time_of(ns: int) -> Any:
-            return stamp(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+            return stamp(sec=ns // NS, nanosec=ns % NS)
 
         fault = self.fault
         message = types[FAULT_TYPE](

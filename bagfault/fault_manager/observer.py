@@ -15,6 +15,7 @@ from bagfault.fault_manager.model import CLEARED, EVENT_CLEARED, FaultManagerEve
 from bagfault.fault_manager.reporters import InjectedReports, condition_report, diagnostics_reports
 from bagfault.fault_manager.snapshots import SnapshotRecorder
 from bagfault.faults.fieldpath import FieldPath
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -25,7 +26,6 @@ if TYPE_CHECKING:
     from bagfault.io.types import TypeCatalog
     from bagfault.spec.model import Scenario
 
-NS = 1_000_000_000
 DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 
 

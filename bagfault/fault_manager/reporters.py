@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bagfault.fault_manager.model import ERROR, FAILED, PASSED, WARN, Report
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.events import FaultEvent
@@ -19,7 +20,6 @@ if TYPE_CHECKING:
     from bagfault.faults.fieldpath import FieldPath
     from bagfault.spec.model import Scenario
 
-NS = 1_000_000_000
 _INVALID = re.compile(r'[^A-Za-z0-9_.\-]+')
 
 

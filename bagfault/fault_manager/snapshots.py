@@ -19,12 +19,12 @@ import numpy as np
 from bagfault.errors import OutputError
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.outputs import written_by_bagfault
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.fault_manager.config import Snapshots
     from bagfault.io.types import TypeCatalog
 
-NS = 1_000_000_000
 ARRAY_LIMIT = 32
 
 

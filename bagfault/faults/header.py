@@ -6,8 +6,8 @@ import struct
 from typing import Any
 
 from bagfault.errors import MalformedMessageError
+from bagfault.units import NS
 
-NS = 1_000_000_000
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 
 

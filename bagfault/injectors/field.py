@@ -21,6 +21,7 @@ from bagfault.errors import FieldPathError, InjectorConfigError
 from bagfault.faults.fieldpath import FLOATS, FieldPath
 from bagfault.injectors.base import Injector
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -28,7 +29,6 @@ if TYPE_CHECKING:
     from bagfault.faults.active import ActiveFault
     from bagfault.spec.model import FaultSpec
 
-NS = 1_000_000_000
 
 # operation -> (required parameters, optional parameters)
 OPERATIONS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {

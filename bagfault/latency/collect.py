@@ -12,6 +12,7 @@ from bagfault.faults.header import has_header
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
 from bagfault.latency.compute import TopicSeries
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -19,7 +20,6 @@ if TYPE_CHECKING:
 
     from bagfault.events import FaultEvent
 
-NS = 1_000_000_000
 
 
 def stamp_of(data: bytes | memoryview) -> int:

@@ -9,12 +9,12 @@ from bagfault.errors import LatencyError
 from bagfault.latency.architecture import Architecture, load_architecture
 from bagfault.latency.collect import fault_windows, read_series
 from bagfault.latency.compute import PathResult, by_fault, path_latency, statistics
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
     from pathlib import Path
 
-NS = 1_000_000_000
 
 
 @dataclass

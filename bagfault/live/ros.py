@@ -16,6 +16,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from bagfault.errors import LiveError
 from bagfault.io.qos import DEFAULT_QOS, dump_profiles, parse_profiles
 from bagfault.io.qos import QosProfile as StoredProfile
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -91,7 +92,7 @@ def recorded_qos(text: str, depth: int = 10) -> QoSProfile | None:
 
 def _duration(value: Any) -> dict[str, int]:
     nanoseconds = int(getattr(value, 'nanoseconds', 0))
-    return {'sec': nanoseconds // 1_000_000_000, 'nsec': nanoseconds % 1_000_000_000}
+    return {'sec': nanoseconds // NS, 'nsec': nanoseconds % NS}
 
 
 def offered_yaml(profiles: list[QoSProfile]) -> str:

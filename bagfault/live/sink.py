@@ -19,6 +19,7 @@ from bagfault.engine.stop import Stopped
 from bagfault.errors import LiveError
 from bagfault.live.pacer import CLOCK_PERIOD, CLOCK_TOPIC, Pacer
 from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos, unacknowledged
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
@@ -135,5 +136,5 @@ class LiveSink(Pacer):
             return
         super()._reached(bag_time)
         if self._clock is not None:
-            self._clock_message.clock.sec, self._clock_message.clock.nanosec = divmod(bag_time, 1_000_000_000)
+            self._clock_message.clock.sec, self._clock_message.clock.nanosec = divmod(bag_time, NS)
             self._clock.publish(self._clock_message)

@@ -24,6 +24,7 @@ from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -32,7 +33,6 @@ if TYPE_CHECKING:
 
 COLUMNS, ROWS = 300, 360
 CLOUD_POINTS, THUMB_WIDTH = 4000, 160
-NS = 1_000_000_000
 CLOUD, IMAGE = 'sensor_msgs/msg/PointCloud2', 'sensor_msgs/msg/Image'
 
 

@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 from bagfault.io.sources import InputSet
 from bagfault.io.types import TypeCatalog
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -46,4 +47,4 @@ def render_info(paths: Sequence[Path]) -> str:
 
 def stamp(time: int) -> str:
     """Exact seconds.nanoseconds text of a time in ns."""
-    return f'{time // 1_000_000_000}.{time % 1_000_000_000:09d}'
+    return f'{time // NS}.{time % NS:09d}'

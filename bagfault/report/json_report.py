@@ -1,4 +1,4 @@
-"""JSON report: the report model as is (keys documented in docs/report.md)."""
+"""JSON report: the report model as is (keys documented in docs/reference/report.md)."""
 
 from __future__ import annotations
 

@@ -8,11 +8,11 @@ from typing import TYPE_CHECKING, Any
 from bagfault.latency.compute import by_fault, statistics
 from bagfault.latency.measure import LatencyReport
 from bagfault.report.page import Page, envelope, shade, title
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.latency.architecture import Architecture
 
-NS = 1_000_000_000
 
 
 def _row(name: str, stats: dict[str, Any]) -> str:

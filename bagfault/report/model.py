@@ -1,6 +1,6 @@
 """One result model for every report: terminal, markdown, JSON, JUnit, HTML.
 
-The keys of `build` are the JSON report's keys; docs/report.md documents
+The keys of `build` are the JSON report's keys; docs/reference/report.md documents
 them and they only ever grow.
 """
 
@@ -10,11 +10,11 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
 from bagfault.events import AssertionEvent, ScenarioStatus
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.engine.result import RunResult
 
-NS = 1_000_000_000
 SCHEMA_VERSION = 1
 
 

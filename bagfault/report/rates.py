@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-NS = 1_000_000_000
+from bagfault.units import NS
+
 EVENT_TOPIC_PREFIXES = ('/fault_injection/', '/fault_manager/')
 FEW = 10  # topics with fewer messages are drawn as events, not rates
 

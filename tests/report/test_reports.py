@@ -89,7 +89,7 @@ def test_json_report_has_stable_documented_keys(reports):
         'schema_version', 'tool', 'mode', 'verdict', 'scenario', 'seed', 'inputs', 'output', 'time', 'messages',
         'fault_events', 'fault_windows', 'injectors', 'assertions', 'assertion_counts', 'assertion_events',
         'final_status', 'notes', 'warnings'}
-    documented = (FIXTURES.parent.parent / 'docs' / 'report.md').read_text()
+    documented = (FIXTURES.parent.parent / 'docs' / 'reference' / 'report.md').read_text()
     for key in data:
         assert f'`{key}`' in documented
     assert data['fault_windows'][0] == {'fault_id': 'odom_covariance_inflation', 'start_s': 3.0, 'end_s': 18.0}
