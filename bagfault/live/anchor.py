@@ -60,7 +60,7 @@ class AnchorServices:
         if not fault_id:
             response.success, response.message = False, 'fault_id cannot be empty'
             return None
-        fault = self.scenario.fault(fault_id)
+        fault = self.session.state.fault(fault_id)
         if fault is None:
             response.success, response.message = False, f'unknown fault_id: {fault_id}'
         return fault
@@ -79,7 +79,7 @@ class AnchorServices:
 
     def _list_faults(self, request: Any, response: Any) -> Any:
         active = self._active()
-        ordered = [f.id for spec in self.scenario.injectors for f in self.scenario.faults_of(spec.id)]
+        ordered = [f.id for spec in self.scenario.injectors for f in self.session.state.faults_of(spec.id)]
         response.fault_ids = ordered
         response.active_fault_ids = [f for f in ordered if f in active]
         return response
@@ -90,7 +90,7 @@ class AnchorServices:
         response.faults = [
             status(fault_id=f.id, injector_id=f.injector_id, state='active' if f.id in active else 'inactive',
                    details=f.describe_config())
-            for spec in self.scenario.injectors for f in self.scenario.faults_of(spec.id)]
+            for spec in self.scenario.injectors for f in self.session.state.faults_of(spec.id)]
         return response
 
     def _set_fault_config(self, request: Any, response: Any) -> Any:
@@ -119,7 +119,7 @@ class AnchorServices:
 
     def _fault_of(self, request: Any, response: Any) -> tuple[Any, Any] | None:
         """The requested fault and its injector; None with the anchor's answer set for an unknown id."""
-        fault = self.scenario.fault(request.fault_id)
+        fault = self.session.state.fault(request.fault_id)
         if fault is None:
             response.success, response.message = False, f'unknown fault_id: {request.fault_id}'
             return None
