@@ -68,9 +68,12 @@ def _parser() -> argparse.ArgumentParser:
     validate.add_argument('scenarios', type=Path, nargs='+', metavar='SCENARIO')
     _strict_option(validate)
 
-    schema = sub.add_parser('schema', help='config keys of injector types')
-    schema.add_argument('type', nargs='?', metavar='INJECTOR_TYPE')
-    schema.add_argument('--json', action='store_true')
+    schema = sub.add_parser('schema', help='every key of scenario and campaign files, of each injector and '
+                                           'assertion type; --json-schema for editors')
+    schema.add_argument('type', nargs='?', metavar='TYPE', help='one injector type (default: everything)')
+    schema.add_argument('--json', action='store_true', help='injector types as JSON')
+    schema.add_argument('--json-schema', choices=('scenario', 'campaign'), default=None,
+                        help='a JSON Schema of scenario or campaign files (for the YAML language server)')
 
     info = sub.add_parser('info', help='what a bag holds')
     info.add_argument('inputs', type=Path, nargs='+', metavar='BAG')
@@ -186,7 +189,8 @@ def _parser() -> argparse.ArgumentParser:
 def _report_options(parser: argparse.ArgumentParser) -> None:
     _strict_option(parser)
     parser.add_argument('--report', type=Path, metavar='R.md', help='markdown report')
-    parser.add_argument('--json', type=Path, metavar='R.json', help='machine-readable report (docs/reference/report.md)')
+    parser.add_argument('--json', type=Path, metavar='R.json',
+                        help='machine-readable report (docs/reference/report.md)')
     parser.add_argument('--junit', type=Path, metavar='R.xml', help='JUnit XML, one testcase per assertion')
     parser.add_argument('--html', type=Path, metavar='R.html', help='self-contained HTML report with plots')
 
@@ -436,9 +440,17 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
-    from bagfault.report.schema import render_schema  # noqa: PLC0415
+    import json  # noqa: PLC0415
 
-    text = render_schema(args.type, as_json=args.json)
+    from bagfault.report.schema import json_schema, render_assertions, render_schema, render_sections  # noqa: PLC0415
+
+    if args.json_schema:
+        text = json.dumps(json_schema(args.json_schema), indent=2, sort_keys=True)
+    elif args.type or args.json:
+        text = render_schema(args.type, as_json=args.json)
+    else:
+        text = '\n\n'.join([render_sections(), "Injector types (each fault's config keys are its injector "
+                             "type's):", render_schema(), 'Assertion types:', render_assertions()])
     print(text)
     return EXIT_OK
 

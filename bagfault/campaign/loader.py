@@ -17,6 +17,7 @@ if TYPE_CHECKING:
 KEYS = {'campaign', 'scenario', 'mode', 'bags', 'sweep', 'seeds', 'design', 'search', 'keep', 'timeout'}
 MAX_RANGE = 100_000
 MAX_REPEAT = 100
+SEARCH_KEYS = {'parameter', 'low', 'high', 'tolerance', 'until', 'repeat'}
 
 
 class _Problems:
@@ -141,6 +142,8 @@ def _search(node: object, problems: _Problems) -> Search | None:
     if not isinstance(node, dict):
         problems.add(('search',), 'must be a mapping: parameter, low, high, tolerance, until, repeat')
         return None
+    for key in sorted(set(node) - SEARCH_KEYS, key=str):
+        problems.add(('search', key), f'unknown key {key!r} (known: {", ".join(sorted(SEARCH_KEYS))})')
     numbers = {k: node.get(k) for k in ('low', 'high', 'tolerance')}
     bad = [k for k, v in numbers.items()
            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)]

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import UsageError
 from bagfault.injectors.registry import injector_types
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 
 def schema_dict(type_name: str | None = None) -> dict[str, Any]:
@@ -81,15 +84,28 @@ def render_markdown() -> str:
     """Every injector type's options and fault config keys, and every assertion type's keys, as markdown tables
     (the docs site's scenario reference is generated from this)."""
     from bagfault.assertions.registry import ASSERTION_TYPES  # noqa: PLC0415
+    from bagfault.spec.sections import CAMPAIGN_SECTIONS, SCENARIO_SECTIONS  # noqa: PLC0415
 
-    lines = ['## Injector types', '']
+    lines = ['## Sections', '']
+    for section in (*SCENARIO_SECTIONS, *CAMPAIGN_SECTIONS):
+        lines += [f'### `{section.where}`', '', section.description, '', HEADER]
+        for key in section.keys:
+            limits = [f'≥ {key.minimum:g}'] if key.minimum is not None else []
+            limits += [f'≤ {key.maximum:g}'] if key.maximum is not None else []
+            limits += [' \\| '.join(f'`{c}`' for c in key.choices)] if key.choices else []
+            unit = f' ({key.unit})' if key.unit else ''
+            default = '' if key.default is None else f'`{key.default}`'
+            lines.append(f'| `{key.name}` | {key.type} | {"yes" if key.required else ""} | {default} | '
+                         f'{", ".join(limits)} | {key.description.replace("|", "/")}{unit} |')
+        lines.append('')
+    lines += ['## Injector types', '']
     for name, entry in schema_dict().items():
         kinds = ', '.join(f'`{k}`' for k in entry['message_types']) or 'any message type'
         live = ' Live mode only.' if entry['live_only'] else ''
         lines += [f'### `{name}`', '', f'{entry["description"]}{live} Messages: {kinds}.', '']
-        for title, key in (('Injector options', 'options'), ('Fault `config` keys', 'fields')):
-            if entry[key]:
-                lines += [f'{title}:', '', HEADER, *(_row(f) for f in entry[key]), '']
+        for title, part in (('Injector options', 'options'), ('Fault `config` keys', 'fields')):
+            if entry[part]:
+                lines += [f'{title}:', '', HEADER, *(_row(f) for f in entry[part]), '']
     lines += ['## Assertion types', '', 'Every assertion has `id` and `type`; the keys of each type:', '']
     for name in sorted(ASSERTION_TYPES):
         cls = ASSERTION_TYPES[name]
@@ -97,3 +113,146 @@ def render_markdown() -> str:
         lines += [f'### `{name}`', '', f'{cls.description}{within}', '', HEADER,
                   *(_row(f.to_dict()) for f in cls.fields), '']
     return '\n'.join(lines)
+
+
+# -- every section, and a JSON Schema of scenario and campaign files ---------------------------------------------
+FIELD_JSON: dict[str, dict[str, Any]] = {
+    'double': {'type': 'number'}, 'int': {'type': 'integer'}, 'bool': {'type': 'boolean'},
+    'string': {'type': 'string'}, 'non_empty_string': {'type': 'string', 'minLength': 1},
+    'special_float': {'anyOf': [{'type': 'number'}, {'enum': ['inf', '+inf', '-inf', '.inf', '-.inf', 'nan', '.nan']}]},
+    'list': {'type': 'array'},
+}
+KEY_JSON: dict[str, dict[str, Any]] = {
+    'string': {'type': 'string'}, 'number': {'type': 'number'}, 'integer': {'type': 'integer'},
+    'boolean': {'type': 'boolean'}, 'seconds': {'type': 'number'}, 'list': {'type': 'array'},
+    'mapping': {'type': 'object'}, 'any': {},
+    'string_or_list': {'anyOf': [{'type': 'string'}, {'type': 'array', 'items': {'type': 'string'}}]},
+}
+OPEN_SECTIONS = ('injector', 'assertion', 'fault_manager')  # their keys depend on a type, or are medkit's own
+
+
+def _field_json(field: dict[str, Any]) -> dict[str, Any]:
+    out = {**FIELD_JSON.get(field['type'], {}), 'description': field['description']}
+    if field['min'] is not None:
+        out['minimum'] = field['min']
+    if field['max'] is not None:
+        out['maximum'] = field['max']
+    if field['choices']:
+        out['enum'] = list(field['choices'])
+    if field['default'] not in (None, ''):
+        out['default'] = field['default']
+    return out
+
+
+def _key_json(key: Any, ref: Callable[[str], dict[str, Any]]) -> dict[str, Any]:
+    out = dict(KEY_JSON[key.type])
+    if key.section:
+        item = ref(key.section)
+        out = {'type': 'array', 'items': item} if key.type == 'list' else item
+    text = key.description + (f' ({key.unit})' if key.unit else '')
+    out['description'] = text
+    if key.minimum is not None:
+        out['minimum'] = key.minimum
+    if key.maximum is not None:
+        out['maximum'] = key.maximum
+    if key.choices:
+        out['enum'] = list(key.choices)
+    if key.default is not None:
+        out['default'] = key.default
+    return out
+
+
+def _section_json(section: Any, ref: Callable[[str], dict[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {'type': 'object', 'description': section.description,
+                           'properties': {k.name: _key_json(k, ref) for k in section.keys}}
+    required = [k.name for k in section.keys if k.required]
+    if required:
+        out['required'] = required
+    if section.name not in OPEN_SECTIONS:
+        out['additionalProperties'] = False
+    return out
+
+
+def json_schema(kind: str) -> dict[str, Any]:
+    """A JSON Schema (2020-12) of a scenario or a campaign file, for editors (the YAML language server): every
+    section's keys, each injector type's options, each assertion type's keys, every fault config key."""
+    from bagfault.assertions.registry import ASSERTION_TYPES  # noqa: PLC0415
+    from bagfault.spec.sections import CAMPAIGN_SECTIONS, SCENARIO_SECTIONS  # noqa: PLC0415
+
+    if kind not in ('scenario', 'campaign'):
+        raise UsageError(f'--json-schema {kind}: give scenario or campaign')
+    sections = SCENARIO_SECTIONS if kind == 'scenario' else CAMPAIGN_SECTIONS
+
+    def ref(name: str) -> dict[str, Any]:
+        return {'$ref': f'#/$defs/{name}'}
+
+    defs = {s.name: _section_json(s, ref) for s in sections}
+    if kind == 'scenario':
+        types = schema_dict()
+        injector = defs['injector']
+        injector['properties']['type'] = {'anyOf': [{'enum': sorted(types)}, {'type': 'string'}],
+                                          'description': injector['properties']['type']['description']}
+        injector['allOf'] = [{'if': {'properties': {'type': {'const': name}}, 'required': ['type']},
+                              'then': {'properties': {f['key']: _field_json(f) for f in entry['options']}}}
+                             for name, entry in types.items() if entry['options']]
+        config: dict[str, Any] = {}
+        for entry in types.values():
+            for f in entry['fields']:
+                config.setdefault(f['key'], _field_json(f))
+        defs['fault']['properties']['config'] = {'type': 'object', 'properties': config,
+                                                 'description': "The fault config keys of its injector's type."}
+        assertion = defs['assertion']
+        assertion['properties']['type'] = {'anyOf': [{'enum': sorted(ASSERTION_TYPES)}, {'type': 'string'}],
+                                           'description': assertion['properties']['type']['description']}
+        rules = []
+        for name, cls in sorted(ASSERTION_TYPES.items()):
+            fields = [f.to_dict() for f in cls.fields]
+            then: dict[str, Any] = {'properties': {f['key']: _field_json(f) for f in fields}}
+            if cls.takes_within:
+                then['properties']['within'] = {'type': 'number', 'minimum': 0,
+                                                'description': 'Deadline, seconds from time zero.'}
+            required = [f['key'] for f in fields if f['required']]
+            if required:
+                then['required'] = required
+            rules.append({'if': {'properties': {'type': {'const': name}}, 'required': ['type']}, 'then': then})
+        assertion['allOf'] = rules
+    top = defs.pop(sections[0].name)
+    return {'$schema': 'https://json-schema.org/draft/2020-12/schema', 'title': f'bagfault {kind} file',
+            **top, '$defs': defs}
+
+
+def render_sections() -> str:
+    """Every section of scenario and campaign files: each key with its type, unit, default, range, whether
+    required, and meaning (`bagfault schema`)."""
+    from bagfault.spec.sections import CAMPAIGN_SECTIONS, SCENARIO_SECTIONS  # noqa: PLC0415
+
+    lines = []
+    for section in (*SCENARIO_SECTIONS, *CAMPAIGN_SECTIONS):
+        lines.append(f'{section.where}: {section.description}')
+        for key in section.keys:
+            limits = [f'min {key.minimum:g}'] if key.minimum is not None else []
+            limits += [f'max {key.maximum:g}'] if key.maximum is not None else []
+            limits += ['one of ' + ' | '.join(key.choices)] if key.choices else []
+            limits += ['required'] if key.required else []
+            extra = f' [{", ".join(limits)}]' if limits else ''
+            unit = f' ({key.unit})' if key.unit else ''
+            default = '' if key.default is None else f' (default {key.default})'
+            lines.append(f'    {key.name:<28} {key.type:<16} {key.description}{unit}{default}{extra}')
+        lines.append('')
+    return '\n'.join(lines).rstrip()
+
+
+def render_assertions() -> str:
+    """Every assertion type's keys, as text."""
+    from bagfault.assertions.registry import ASSERTION_TYPES  # noqa: PLC0415
+
+    lines = []
+    for name in sorted(ASSERTION_TYPES):
+        cls = ASSERTION_TYPES[name]
+        lines.append(f'{name}: {cls.description}' + (' Takes `within` (seconds).' if cls.takes_within else ''))
+        for f in (x.to_dict() for x in cls.fields):
+            extra = ' [required]' if f['required'] else ''
+            default = '' if f['default'] in (None, '') else f' (default {f["default"]})'
+            lines.append(f'    {f["key"]:<28} {f["type"]:<16} {f["description"]}{default}{extra}')
+        lines.append('')
+    return '\n'.join(lines).rstrip()

@@ -36,6 +36,7 @@ if TYPE_CHECKING:
 
 ReadyKind = Literal['publisher', 'message', 'subscribes', 'service', 'delay', 'default']
 KEYS = {'command', 'shell', 'env', 'cwd', 'ready', 'record', 'stop_timeout', 'use_sim_time', 'tail'}
+READY_KEYS = {'topic', 'publisher', 'message', 'subscribes', 'service', 'delay', 'timeout'}
 DEFAULT_TIMEOUT = 30.0
 MAX_SECONDS = 3600.0
 
@@ -140,7 +141,7 @@ def _condition(item: object, path: PathKey, problem: Callable[[PathKey, str], No
                       '{service: /s} or {delay: 1.0}')
         return None
     timeout = _seconds(item, 'timeout', DEFAULT_TIMEOUT, path, problem)
-    known = {'topic', 'publisher', 'message', 'subscribes', 'service', 'delay', 'timeout'}
+    known = READY_KEYS
     for key in item:
         if key not in known:
             problem((*path, key), f'unknown key {key!r} (known: {", ".join(sorted(known))})')
