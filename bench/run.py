@@ -36,7 +36,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
-from bench.bags import KINDS, write_bag  # noqa: E402
+from bagfault.demo.workloads import CASES, KINDS, scenario, write_bag  # noqa: E402
 
 DATA = HERE / 'data'
 RESULTS = HERE / 'results'
@@ -104,36 +104,6 @@ subprocess.run(['cp', SRC, DST], check=True)
 """
 
 
-def scenario(kind: str, case: str) -> str:
-    """The four bagfault scenarios for a bag kind (in-place injectors on its topics)."""
-    topics = KINDS[kind]
-    imus = [t.topic for t in topics if t.msgtype == 'sensor_msgs/msg/Imu']
-    lines = ['injectors:']
-    faults = ['faults:']
-    if case in ('a', 'b', 'w'):
-        for number, topic in enumerate(imus):
-            lines.append(f'  - {{id: imu{number}, type: imu, input_topic: {topic}, output_topic: {topic}}}')
-            config = ('{angular_velocity_z_bias: 0.05, angular_velocity_z_noise_stddev: 0.02, '
-                      'linear_acceleration_z_bias: 0.2, linear_acceleration_z_noise_stddev: 0.05}')
-            schedule = {'a': 'start: 100000.0', 'b': 'active_on_startup: true', 'w': 'start: 100.0, duration: 10.0'}[
-                case]
-            faults.append(f'  - {{id: bias{number}, injector_id: imu{number}, {schedule}, config: {config}}}')
-    if case == 'c':
-        lines.append('  - {id: pc, type: pointcloud2, input_topic: /points, output_topic: /points}')
-        faults.append('  - {id: pc_noise, injector_id: pc, active_on_startup: true, '
-                      'config: {xyz_noise_stddev: 0.02, dropout_probability: 0.1}}')
-    if case == 'd':
-        for number, topic in enumerate(topics):
-            lines.append(f'  - {{id: s{number}, type: topic, input_topic: {topic.topic}, output_topic: {topic.topic}}}')
-            faults.append(f'  - {{id: f{number}, injector_id: s{number}, active_on_startup: true, '
-                          'config: {drop_probability: 0.2, delay_ms: 50}}')
-    return '\n'.join(lines + faults) + '\n'
-
-
-CASES = {
-    'sensor-heavy': ['a', 'c', 'd'],
-    'message-heavy': ['a', 'b', 'd'],
-}
 
 
 PEAK_RSS = """

@@ -9,7 +9,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from helpers import ANCHORS, EXTERNAL, FIXTURES, need
+from support.helpers import ANCHORS, EXTERNAL, FIXTURES, need
 
 pytest_plugins = ['pytester']
 

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import counts, tree_digest
+from support.helpers import counts, tree_digest
 
 from bagfault.cli import main
 from bagfault.progress import ProgressBar

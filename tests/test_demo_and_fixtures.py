@@ -5,7 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from helpers import FIXTURES, ROOT, counts, sha256
+from support.helpers import FIXTURES, ROOT, counts, sha256
 
 from bagfault.cli import main
 

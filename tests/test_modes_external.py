@@ -18,10 +18,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import EXTERNAL, counts, third_party
-from io_cases import ROSBAG2_DIRS
-from rosbag2_rules import DISTROS, check_mcap, distros_reading
-from toolchain import assert_toolchain_opens
+from support.helpers import EXTERNAL, counts, third_party
+from support.io_cases import ROSBAG2_DIRS
+from support.rosbag2_rules import DISTROS, check_mcap, distros_reading
+from support.toolchain import assert_toolchain_opens
 
 from bagfault import api
 from bagfault.cli import main

@@ -8,9 +8,9 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from helpers import FIXTURES, NS, counts, decoded, rosbags_counts, rpy, third_party
-from io_cases import ROSBAG2_DIRS, metadata_counts
 from mcap.reader import make_reader
+from support.helpers import FIXTURES, NS, counts, decoded, rosbags_counts, rpy, third_party
+from support.io_cases import ROSBAG2_DIRS, metadata_counts
 
 from bagfault import api
 from bagfault.errors import EngineError
@@ -127,7 +127,7 @@ def test_turtlebot_values(turtlebot):
 
 
 def test_turtlebot_undecodable_type_passes_through(turtlebot):
-    from helpers import raw_messages
+    from support.helpers import raw_messages
 
     bag, out, _ = turtlebot
     from bagfault.io.sources import open_source
@@ -197,9 +197,7 @@ def test_recorded_output_topic_is_replaced(tmp_path, rover_bag):
 
 def test_turtlebot_and_nav2_outputs_pass_every_readers_checks(tmp_path, external):
     """mcap with CRC validation, mcap-ros2-support decoding every message, rosbags; a definition for every schema."""
-    import sys
-    sys.path.insert(0, str(FIXTURES.parent / 'io'))
-    from test_output_conventions import verify
+    from support.readers import verify
 
     turtlebot = tmp_path / 'turtlebot.mcap'
     api.run(parse_scenario(TURTLEBOT_SCENARIO), [external / TURTLEBOT], turtlebot,

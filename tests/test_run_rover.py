@@ -9,8 +9,8 @@ import shutil
 import blake3
 import numpy as np
 import pytest
-from helpers import FIXTURES, NS, counts, decoded, raw_messages, rpy, sha256
 from mcap.reader import make_reader
+from support.helpers import FIXTURES, NS, counts, decoded, raw_messages, rpy, sha256
 
 from bagfault import api
 from bagfault.demo import synthetic

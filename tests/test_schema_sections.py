@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
-from helpers import FIXTURES, ROOT
+from support.helpers import FIXTURES, ROOT
 
 from bagfault.campaign import loader as campaign_loader
 from bagfault.cli import main

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import counts, raw_messages, run_inline, tree_digest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
@@ -32,6 +31,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_typestore
+from support.helpers import counts, raw_messages, run_inline, tree_digest
 
 from bagfault import api
 from bagfault.cli import main
@@ -70,9 +70,8 @@ def rosbag2_bag(path: Path, plugin: StoragePlugin, compression: CompressionMode 
 
 
 def ros1_bag(path: Path, compression: str | None) -> Path:
-    sys.path.insert(0, str(Path(__file__).parent / 'io'))
     from rosbags.rosbag1 import Writer as Ros1Writer
-    from test_own_formats import ROS1, _to_ros1
+    from support.ros1 import ROS1, _to_ros1
 
     writer = Ros1Writer(path)
     if compression:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import textwrap
 
 import pytest
-from helpers import FIXTURES, NS, make_bag, run_inline
+from support.helpers import FIXTURES, NS, make_bag, run_inline
 
 from bagfault import api
 from bagfault.demo.synthetic import DEFAULT_START as START

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from corpus import SCENARIO, write_imu_bag
+from support.corpus import SCENARIO, write_imu_bag
 
 
 @pytest.fixture

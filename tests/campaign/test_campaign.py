@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from corpus import SCENARIO, campaign_file, write_imu_bag
-from html_check import figures, rendered
+from support.corpus import SCENARIO, campaign_file, write_imu_bag
+from support.html_check import figures, rendered
 
 from bagfault import api
 from bagfault.cli import main

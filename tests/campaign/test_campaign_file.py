@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from corpus import campaign_file
+from support.corpus import campaign_file
 
 from bagfault.campaign.loader import load_campaign
 from bagfault.campaign.plan import make_plan, points

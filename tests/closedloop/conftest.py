@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from loop import EXAMPLE, LoopRunner, rclpy_available
+from support.loop import EXAMPLE, LoopRunner, rclpy_available
 
 
 @pytest.fixture(scope='session')

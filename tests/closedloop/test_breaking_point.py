@@ -7,7 +7,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from loop import EXAMPLE, rclpy_available
+from support.loop import EXAMPLE, rclpy_available
 
 pytestmark = [pytest.mark.live, pytest.mark.closed_loop, pytest.mark.campaign]
 

@@ -12,10 +12,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from loop import EXAMPLE, SCENARIO, LoopRunner, running_with
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from toolchain import assert_toolchain_opens
+from support.loop import EXAMPLE, SCENARIO, LoopRunner, running_with
+from support.toolchain import assert_toolchain_opens
 
 NS = 1_000_000_000
 

@@ -12,7 +12,7 @@ import uuid
 from pathlib import Path
 
 import pytest
-from loop import running_with
+from support.loop import running_with
 
 from bagfault.closedloop.domain import DomainLease
 from bagfault.closedloop.process import ProcessStat, SystemProcess, describe_exit, family, processes

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from loop import SCENARIO, LoopRunner, running_with
+from support.loop import SCENARIO, LoopRunner, running_with
 
 from bagfault.live import LOOPBACK_PROFILE
 

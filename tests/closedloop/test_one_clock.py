@@ -12,8 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from helpers import EXTERNAL, need
-from loop import EXAMPLE, LoopRunner
+from support.helpers import EXTERNAL, need
+from support.loop import EXAMPLE, LoopRunner
 
 TURTLEBOT = EXTERNAL / 'Turtlebot_Walker_Algorithm_ROS2' / 'walker_bag_topics_list'
 

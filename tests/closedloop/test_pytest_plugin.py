@@ -9,12 +9,12 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from loop import EXAMPLE, rclpy_available
+from support.loop import EXAMPLE, rclpy_available
 
 import bagfault.demo.synthetic  # noqa: F401 - numpy loaded before pytester snapshots sys.modules (it cannot load twice)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from helpers import make_bag
+from support.helpers import make_bag
 
 GOOD = """
 name: good

@@ -22,10 +22,9 @@ from rosbags.highlevel import AnyReader
 
 from bagfault import api
 from bagfault.cli import main
+from bagfault.demo.workloads import scenario, write_bag
 from bagfault.io.mcap_sink import DEFAULT_QOS
 from bagfault.scenario import parse_scenario
-from bench.bags import write_bag
-from bench.run import scenario
 
 QOS = {'offered_qos_profiles': DEFAULT_QOS}
 

@@ -6,7 +6,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from helpers import make_bag
+from support.helpers import make_bag
 
 from bagfault.demo import synthetic
 from bagfault.engine.control import FaultControl

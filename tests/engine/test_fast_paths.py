@@ -13,10 +13,9 @@ import pytest
 from mcap.reader import make_reader
 
 from bagfault import api
+from bagfault.demo.workloads import scenario, write_bag
 from bagfault.injectors import base
 from bagfault.scenario import parse_scenario
-from bench.bags import write_bag
-from bench.run import scenario
 
 CASES = [('sensor-heavy', case) for case in 'abcd'] + [('message-heavy', case) for case in 'abd']
 SECONDS = {'sensor-heavy': 0.35, 'message-heavy': 0.2}

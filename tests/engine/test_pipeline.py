@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from helpers import FIXTURES, NS, ROOT, decoded, raw_messages
 from mcap.reader import NonSeekingReader
+from support.helpers import FIXTURES, NS, ROOT, decoded, raw_messages
 
 from bagfault import api
 from bagfault.demo import synthetic

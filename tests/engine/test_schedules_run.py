@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from helpers import NS, make_bag, raw_messages, run_inline
+from support.helpers import NS, make_bag, raw_messages, run_inline
 
 from bagfault.demo import synthetic
 

@@ -7,9 +7,9 @@ import json
 import textwrap
 
 import pytest
-from helpers import NS, make_bag
 from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from support.helpers import NS, make_bag
 
 from bagfault import api
 from bagfault.cli import main

@@ -8,8 +8,8 @@ import textwrap
 
 import numpy as np
 import pytest
-from helpers import NS, decoded, make_bag, run_inline
 from rosbags.typesys import Stores, get_typestore
+from support.helpers import NS, decoded, make_bag, run_inline
 
 from bagfault.demo import synthetic
 from bagfault.errors import EngineError

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import ROOT
+from support.helpers import ROOT
 
 EXAMPLE = ROOT / 'examples' / 'bagfault-rover-plugins'
 

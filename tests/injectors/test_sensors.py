@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import NS, decoded, image_pixels, make_bag, raw_messages, run_inline
+from support.helpers import NS, decoded, image_pixels, make_bag, raw_messages, run_inline
 
 from bagfault.demo import synthetic
 

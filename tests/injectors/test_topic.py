@@ -6,7 +6,7 @@ import struct
 from collections import Counter
 
 import pytest
-from helpers import NS, make_bag, raw_messages, run_inline
+from support.helpers import NS, make_bag, raw_messages, run_inline
 
 from bagfault.demo import synthetic
 

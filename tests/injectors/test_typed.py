@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from helpers import rpy
+from support.helpers import rpy
 
 from bagfault.demo import synthetic
 from bagfault.injectors.imu import ImuInjector

@@ -8,9 +8,9 @@ import zlib
 from pathlib import Path
 
 import pytest
-from helpers import EXTERNAL, FIXTURES, third_party
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
+from support.helpers import EXTERNAL, FIXTURES, third_party
 
 from bagfault.errors import InputError
 from bagfault.io.mcap_source import McapSource

@@ -13,14 +13,14 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import raw_messages
 from mcap.writer import CompressionType, IndexType, Writer
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
-from rosbags.typesys import Stores, get_typestore
+from support.helpers import raw_messages
+from support.ros1 import ROS1, _to_ros1
 
 from bagfault import api
 from bagfault.demo import synthetic
@@ -30,7 +30,6 @@ STREAMS = (synthetic.Stream('/imu', 'sensor_msgs/msg/Imu', 50.0),
            synthetic.Stream('/odom', 'nav_msgs/msg/Odometry', 20.0),
            synthetic.Stream('/scan', 'sensor_msgs/msg/LaserScan', 5.0))
 ROS2 = synthetic.store()
-ROS1 = get_typestore(Stores.ROS1_NOETIC)
 
 
 def read(path: Path) -> list[tuple[str, int, bytes]]:
@@ -141,26 +140,6 @@ def test_ros1_bag_is_converted_to_ros2_cdr(tmp_path, compression):
     finally:
         source.close()
     assert got == written
-
-
-def _to_ros1(message, msgtype):
-    """The ROS 1 form of a synthetic ROS 2 message: a Header with seq, the rest field by field."""
-    types = ROS1.types
-
-    def convert(value, typename):
-        if typename == 'std_msgs/msg/Header':
-            return types['std_msgs/msg/Header'](seq=0, stamp=types['builtin_interfaces/msg/Time'](
-                sec=value.stamp.sec, nanosec=value.stamp.nanosec), frame_id=value.frame_id)
-        if typename not in types:
-            return value
-        fields = {}
-        for name, desc in ROS1.fielddefs[typename][1]:
-            kind, args = int(desc[0]), desc[1]
-            item = getattr(value, name)
-            fields[name] = convert(item, args) if kind == 2 else item
-        return types[typename](**fields)
-
-    return convert(message, msgtype)
 
 
 @pytest.mark.parametrize('layout', ['chunked-zstd', 'chunked-lz4', 'chunked-none', 'unchunked', 'no-index'])

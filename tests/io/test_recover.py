@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import raw_messages
+from support.helpers import raw_messages
 
 from bagfault import api
 from bagfault.errors import InputError
@@ -86,7 +86,7 @@ def test_requested_names() -> None:
 
 
 def test_a_recovered_recording_opens_in_the_ros_toolchain_with_the_recorders_distro(tmp_path: Path) -> None:
-    from toolchain import assert_toolchain_opens
+    from support.toolchain import assert_toolchain_opens
 
     sink = McapSink(tmp_path / 'live.mcap', ros_distro='jazzy', flush_every=0.0)
     channel = sink.add_channel('/n', 'std_msgs/msg/Int32', 'ros2msg', 'int32 data',

@@ -6,9 +6,9 @@ import textwrap
 from collections import Counter
 
 import pytest
-from helpers import NS, counts, decoded, third_party
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
+from support.helpers import NS, counts, decoded, third_party
 
 from bagfault import api
 from bagfault.io.sources import open_source

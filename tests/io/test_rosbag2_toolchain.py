@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import EXTERNAL, FIXTURES, need
 from mcap.reader import make_reader
 from mcap.writer import Writer
-from rosbag2_rules import Rosbag2Error, check_mcap, decode_bag_metadata, decode_qos
 from rosbags.typesys import Stores, get_typestore
-from toolchain import assert_toolchain_opens
+from support.helpers import EXTERNAL, FIXTURES, need
+from support.rosbag2_rules import Rosbag2Error, check_mcap, decode_bag_metadata, decode_qos
+from support.toolchain import assert_toolchain_opens
 
 from bagfault import api
 from bagfault.cli import main

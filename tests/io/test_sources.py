@@ -7,8 +7,8 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from helpers import EXTERNAL, third_party
-from io_cases import ROSBAG2_DIRS, metadata_counts
+from support.helpers import EXTERNAL, third_party
+from support.io_cases import ROSBAG2_DIRS, metadata_counts
 
 from bagfault.errors import InputError
 from bagfault.io.sources import InputSet, open_source

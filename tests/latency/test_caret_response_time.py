@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import FIXTURES
+from support.helpers import FIXTURES
 
 from bagfault.demo import synthetic
 from bagfault.latency.compute import response_cases

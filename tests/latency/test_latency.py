@@ -9,8 +9,8 @@ import textwrap
 
 import numpy as np
 import pytest
-from helpers import CARET, FIXTURES, NS, SHARED, need
-from html_check import figures
+from support.helpers import CARET, FIXTURES, NS, SHARED, need
+from support.html_check import figures
 
 from bagfault import api
 from bagfault.cli import main

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import FIXTURES
+from support.helpers import FIXTURES
 
 SOURCE = FIXTURES / 'anchor_interfaces'
 SITE = f'lib/python{sys.version_info.major}.{sys.version_info.minor}/site-packages'

@@ -6,8 +6,8 @@ import signal
 import time
 from pathlib import Path
 
-from helpers import NS, counts, make_bag, raw_messages
-from toolchain import assert_toolchain_opens
+from support.helpers import NS, counts, make_bag, raw_messages
+from support.toolchain import assert_toolchain_opens
 
 STREAMS = [('/sensors/imu_raw', 'sensor_msgs/msg/Imu', 100.0), ('/odom_raw', 'nav_msgs/msg/Odometry', 50.0),
            ('/scan_raw', 'sensor_msgs/msg/LaserScan', 10.0)]
@@ -185,7 +185,7 @@ def test_the_players_parameter_services_answer_and_switch_a_fault(graph, tmp_pat
     refused = graph.call('set-param', '/bagfault_player', 'bias.nope', '1.0')
     assert refused['successful'] is False and "'nope' is not a key" in refused['reason']
     assert play.wait(timeout=60) == 0, play.err_path.read_text()
-    from helpers import decoded
+    from support.helpers import decoded
 
     [(switch_time, event)] = decoded(played, ['/fault_injection/events'])['/fault_injection/events']
     assert (event.fault_id, event.state, event.source) == ('bias', 'active', 'manual')

@@ -9,8 +9,8 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import NS, decoded
-from toolchain import assert_toolchain_opens
+from support.helpers import NS, decoded
+from support.toolchain import assert_toolchain_opens
 
 BASE_Z = 0.001  # the publisher sends angular_velocity.z = 0.001 * (k % 100), k in orientation_covariance[0]
 
@@ -176,7 +176,7 @@ faults:
 
 
 def test_use_sim_time_follows_clock_from_a_played_bag(graph, tmp_path: Path) -> None:
-    from helpers import make_bag
+    from support.helpers import make_bag
 
     bag = make_bag(tmp_path / 'imu.mcap', [('/sensors/imu_raw', 'sensor_msgs/msg/Imu', 100.0)], 6.0)
     scenario = tmp_path / 'imu.yaml'

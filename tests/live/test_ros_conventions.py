@@ -10,7 +10,7 @@ import signal
 import time
 from pathlib import Path
 
-from helpers import decoded, make_bag
+from support.helpers import decoded, make_bag
 
 IMU = 'sensor_msgs/msg/Imu'
 

@@ -6,7 +6,7 @@ import re
 from pathlib import Path
 
 import pytest
-from helpers import NS, decoded
+from support.helpers import NS, decoded
 
 from bagfault.demo import synthetic
 from bagfault.errors import FieldValueError, ReloadError

@@ -7,7 +7,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from helpers import counts, make_bag
+from support.helpers import counts, make_bag
 
 DRIVER = textwrap.dedent("""
     import json, sys, threading, time

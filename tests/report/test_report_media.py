@@ -7,8 +7,8 @@ import textwrap
 
 import numpy as np
 import pytest
-from helpers import make_bag
-from html_check import figures
+from support.helpers import make_bag
+from support.html_check import figures
 
 from bagfault.cli import main
 from bagfault.demo import synthetic

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import FIXTURES, SHARED, need
-from html_check import click_first_assertion, figures, rendered
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
+from support.helpers import FIXTURES, SHARED, need
+from support.html_check import click_first_assertion, figures, rendered
 
 from bagfault.cli import main
 

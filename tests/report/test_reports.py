@@ -7,8 +7,8 @@ from xml.etree import ElementTree
 
 import pytest
 import xmlschema
-from helpers import FIXTURES, NS, decoded
-from html_check import figures, rendered
+from support.helpers import FIXTURES, NS, decoded
+from support.html_check import figures, rendered
 
 from bagfault import api
 from bagfault.cli import main

@@ -8,7 +8,7 @@ stands in for.
 from __future__ import annotations
 
 import pytest
-from helpers import FIXTURES, raw_messages, third_party
+from support.helpers import FIXTURES, raw_messages, third_party
 
 from bagfault import api
 from bagfault.scenario import load_scenario

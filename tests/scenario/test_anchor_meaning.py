@@ -10,7 +10,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from helpers import NS, decoded, make_bag, raw_messages, run_inline
+from support.helpers import NS, decoded, make_bag, raw_messages, run_inline
 
 from bagfault import api
 from bagfault.demo.synthetic import DEFAULT_START as START

@@ -6,7 +6,7 @@ import math
 import textwrap
 
 import pytest
-from helpers import third_party
+from support.helpers import third_party
 
 from bagfault.scenario import ScenarioError, load_scenario, parse_scenario
 

@@ -3,6 +3,6 @@
 from __future__ import annotations
 
 import pytest
-from livegraph import graph_fixture
+from support.livegraph import graph_fixture
 
 graph = pytest.fixture(graph_fixture, name='graph')

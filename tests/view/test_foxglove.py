@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import make_bag
+from support.helpers import make_bag
 
 pytest.importorskip('foxglove')
 

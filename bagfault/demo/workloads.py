@@ -1,4 +1,5 @@
-"""Deterministic synthetic benchmark bags (zstd-chunked MCAP, ros2 profile).
+"""The benchmark's workloads: deterministic synthetic bags (zstd-chunked MCAP, ros2 profile) and the scenarios
+bench/run.py times on them (the tests run the same ones).
 
 sensor-heavy: IMU 200 Hz, odometry 50 Hz, TF 100 Hz, joint states 100 Hz,
 LaserScan 20 Hz (1081 ranges), PointCloud2 10 Hz (32768 points), Image 10 Hz
@@ -21,10 +22,8 @@ from mcap.writer import CompressionType, Writer
 
 from bagfault.demo import synthetic
 from bagfault.demo.synthetic import Stream
-from bagfault.io.mcap_sink import DEFAULT_QOS as QOS  # channels as ros2 bag record writes them
-
-NS = 1_000_000_000
-
+from bagfault.io.qos import DEFAULT_QOS as QOS  # channels as ros2 bag record writes them
+from bagfault.units import NS
 
 SENSOR_HEAVY = (
     Stream('/imu', 'sensor_msgs/msg/Imu', 200.0),
@@ -85,5 +84,38 @@ def write_bag(path: Path, kind: str, seconds: float) -> int:
             time, owner, k = int(times[position]), int(owners[position]), int(indexes[position])
             topic = topics[owner]
             writer.add_message(channels[owner], time, _vary(templates[topic.topic], topic, k, time), time)
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
     return len(order)
+
+
+def scenario(kind: str, case: str) -> str:
+    """The four bagfault scenarios for a bag kind (in-place injectors on its topics)."""
+    topics = KINDS[kind]
+    imus = [t.topic for t in topics if t.msgtype == 'sensor_msgs/msg/Imu']
+    lines = ['injectors:']
+    faults = ['faults:']
+    if case in ('a', 'b', 'w'):
+        for number, topic in enumerate(imus):
+            lines.append(f'  - {{id: imu{number}, type: imu, input_topic: {topic}, output_topic: {topic}}}')
+            config = ('{angular_velocity_z_bias: 0.05, angular_velocity_z_noise_stddev: 0.02, '
+                      'linear_acceleration_z_bias: 0.2, linear_acceleration_z_noise_stddev: 0.05}')
+            schedule = {'a': 'start: 100000.0', 'b': 'active_on_startup: true', 'w': 'start: 100.0, duration: 10.0'}[
+                case]
+            faults.append(f'  - {{id: bias{number}, injector_id: imu{number}, {schedule}, config: {config}}}')
+    if case == 'c':
+        lines.append('  - {id: pc, type: pointcloud2, input_topic: /points, output_topic: /points}')
+        faults.append('  - {id: pc_noise, injector_id: pc, active_on_startup: true, '
+                      'config: {xyz_noise_stddev: 0.02, dropout_probability: 0.1}}')
+    if case == 'd':
+        for number, stream in enumerate(topics):
+            lines.append(f'  - {{id: s{number}, type: topic, input_topic: {stream.topic}, '
+                         f'output_topic: {stream.topic}}}')
+            faults.append(f'  - {{id: f{number}, injector_id: s{number}, active_on_startup: true, '
+                          'config: {drop_probability: 0.2, delay_ms: 50}}')
+    return '\n'.join(lines + faults) + '\n'
+
+
+CASES = {
+    'sensor-heavy': ['a', 'c', 'd'],
+    'message-heavy': ['a', 'b', 'd'],
+}

@@ -13,7 +13,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 NS = 1_000_000_000
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FIXTURES = ROOT / 'tests' / 'fixtures'
 SHARED = Path(os.environ.get('BAGFAULT_SHARED', ROOT.parent / 'shared'))
 EXTERNAL = SHARED / 'external_bags'

@@ -11,11 +11,12 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from helpers import counts
 from mcap.reader import make_reader
-from rosbag2_rules import DISTROS, check_mcap, decode_qos
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
+
+from support.helpers import counts
+from support.rosbag2_rules import DISTROS, check_mcap, decode_qos
 
 NINE_KEYS = {'history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan', 'liveliness',
              'liveliness_lease_duration', 'avoid_ros_namespace_conventions'}

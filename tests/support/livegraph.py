@@ -16,8 +16,8 @@ from typing import Any
 import bagfault.live
 from bagfault.closedloop.domain import DomainLease
 
-PEERS = Path(__file__).resolve().parent / 'live' / 'peers.py'
-ROOT = Path(__file__).resolve().parents[1]
+PEERS = Path(__file__).resolve().parents[1] / 'live' / 'peers.py'
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def rclpy_available() -> bool:
