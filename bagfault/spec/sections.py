@@ -5,7 +5,7 @@ and what it means. `bagfault schema` prints these tables, and
 `bagfault schema --json-schema` turns them (with the injector and assertion
 types' own `ConfigField`s) into a JSON Schema an editor's YAML language
 server checks and completes files with. The parsers' own key sets are
-tested against these declarations (tests/test_schema_sections.py), so a key
+tested against these declarations (tests/spec/test_sections.py), so a key
 a parser reads is a key the schema documents.
 """
 
