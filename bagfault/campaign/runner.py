@@ -9,6 +9,7 @@ written at the end, each under a temporary name first.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 import time
@@ -160,15 +161,12 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     plan = make_plan(campaign)
     store = _Store(directory, plan)
     store.check(resume)
-    engine = make_engine(workers, ray)  # before any folder is made: an engine that cannot start leaves nothing
-    try:
-        store.open(resume)
-    except BaseException:
-        engine.close()
-        raise
     bar = progress or JobProgress(enabled=False)
     ran = 0
-    try:
+    # the engine before any folder is made: an engine that cannot start leaves nothing
+    with contextlib.closing(make_engine(workers, ray)) as engine, contextlib.closing(bar):
+        store.open(resume)
+
         def run_jobs(jobs: list[Job]) -> dict[str, dict[str, Any]]:
             nonlocal ran
             todo = list({job.key: job for job in jobs if job.key not in store.results}.values())
@@ -186,9 +184,6 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
         run_jobs(plan.jobs)
         points, search_jobs = ([], []) if campaign.search is None else \
             find_breaking_points(plan, run_jobs, len(plan.jobs))
-    finally:
-        bar.close()
-        engine.close()
     plan.jobs += search_jobs
     _, scenario = expanded(scenario_data(campaign.scenario.read_text(encoding='utf-8')), {}, campaign.scenario)
     table = make_table(plan, [(job, store.results[job.key], store.kept(job)) for job in plan.jobs],

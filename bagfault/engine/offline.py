@@ -208,8 +208,7 @@ def check_recording(
     metadata), else the recording's first message, plus `start_offset`.
     """
     definitions = load_definitions([*msg_paths, *scenario.msg_paths])
-    inputs = InputSet([path], salvage=salvage)
-    try:
+    with InputSet([path], salvage=salvage) as inputs:
         begin_progress(progress, inputs)
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
         schemas = {c.topic: (c.msgtype, c.schema_encoding, c.schema_text) for c in inputs.channels}
@@ -232,8 +231,6 @@ def check_recording(
                 progress(run.stats.input_messages, log_time)
         run.end(run.stats.last_time if run.stats.last_time is not None else 0)
         run.warnings += input_warnings(inputs)
-    finally:
-        inputs.close()
     run.close(ok=True)
     if run.stats.input_messages == 0:
         run.notes.append('the recording holds no messages')

@@ -61,10 +61,9 @@ def recover(source: Path, output: Path) -> Recovered:
     with source.open('rb') as stream:
         if stream.read(8) != b'\x89MCAP0\r\n':
             raise InputError(f'{source}: not an MCAP recording (no MCAP magic at its start); nothing to recover')
-    sink = McapSink(output, ros_distro=_distro(source))
     channels: dict[int, int] = {}
     schemas: dict[int, Schema] = {}
-    try:
+    with McapSink(output, ros_distro=_distro(source)) as sink:  # dropped unless finished
         with source.open('rb') as stream:
             reader = StreamReader(stream, validate_crcs=True)
             try:
@@ -92,13 +91,10 @@ def recover(source: Path, output: Path) -> Recovered:
                         break
             except READ_ERRORS as exc:
                 result.stopped = ' '.join(str(exc).split()) or type(exc).__name__
-    except BaseException:
-        sink.abort()
-        raise
-    if not result.complete and not result.stopped:
-        result.stopped = 'the file ends'
-    result.channels = len(channels)
-    sink.finish()
+        if not result.complete and not result.stopped:
+            result.stopped = 'the file ends'
+        result.channels = len(channels)
+        sink.finish()
     return result
 
 

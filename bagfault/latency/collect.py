@@ -59,8 +59,7 @@ def read_series(paths: Sequence[Path], topics: Sequence[str]) -> tuple[dict[str,
     """Series of the given topics and the recorded fault events of one or more bags."""
     from bagfault.events import FAULT_EVENT_TOPIC, FaultEvent  # noqa: PLC0415
 
-    inputs = InputSet(list(paths))
-    try:
+    with InputSet(list(paths)) as inputs:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
         stamped = {}
         for channel in inputs.channels:
@@ -82,8 +81,6 @@ def read_series(paths: Sequence[Path], topics: Sequence[str]) -> tuple[dict[str,
         for topic in topics:
             series.setdefault(topic, TopicSeries.empty())
         return series, events
-    finally:
-        inputs.close()
 
 
 def fault_windows(events: Sequence[FaultEvent]) -> dict[str, list[tuple[int, int | None]]]:

@@ -11,6 +11,7 @@ parameters; `~/reload_scenario` (std_srvs/srv/Trigger) reloads the file;
 
 from __future__ import annotations
 
+import contextlib
 import time
 from functools import partial
 from pathlib import Path
@@ -399,6 +400,14 @@ class ProxyNode:
             self.view.close()
             self.view = None
 
+    def __enter__(self) -> ProxyNode:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, *_: object) -> None:
+        """A failure inside the `with` aborts (a normal end closes explicitly, to report what it drained)."""
+        if kind is not None:
+            self.abort()
+
     def abort(self) -> None:
         """A failure: stop the delay line, drop the partial recording and black boxes."""
         self.close_view()
@@ -410,4 +419,5 @@ class ProxyNode:
             self.recording.abort()
         if self.session is not None:
             self.session.run.close(ok=False)
-        self.node.destroy_node()
+        with contextlib.suppress(Exception):  # close may have destroyed it before it failed
+            self.node.destroy_node()

@@ -223,13 +223,10 @@ def _sink(node: Any, *, rate: float, clock: bool, stop: StopFlag, recording: Mca
 def _pass(scenario: Scenario, inputs: list[Path], sink: Pacer, *, seed: int, record: Path | None,
           numbers: dict[str, int], control: FaultControl | None) -> tuple[Run, bool]:
     """One pass over the bag; its black boxes are named before the next pass begins."""
-    input_set = InputSet(inputs)
-    try:
+    with InputSet(inputs) as input_set:
         catalog = TypeCatalog(input_set.channels, input_set.ros_distro, load_definitions(scenario.msg_paths))
         run, stopped = replay(input_set, scenario, catalog, sink, seed=seed, blackbox_base=record,
                               blackbox_numbers=numbers, hooks=sink, control=control)
-    finally:
-        input_set.close()
     run.close(ok=True)
     return run, stopped
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from typing import TYPE_CHECKING
 
 from bagfault.engine.result import RunResult, RunStats
@@ -28,20 +29,16 @@ def run_proxy(
     """Proxy until `stop` is set (by a signal or the caller); the recording is complete on return."""
 
 
-    with ros_context(stop) as context:
-        proxy = ProxyNode(scenario, context, stop, seed=seed, record=record, use_sim_time=use_sim_time,
-                          ros_args=ros_args, foxglove=foxglove)
+    with ros_context(stop) as context, ProxyNode(scenario, context, stop, seed=seed, record=record,
+                                                 use_sim_time=use_sim_time, ros_args=ros_args,
+                                                 foxglove=foxglove) as proxy:
         executor = make_executor(context)
         executor.add_node(proxy.node)
-        try:
+        with contextlib.ExitStack() as spinning:
+            spinning.callback(executor.shutdown)
             proxy.setup(executor)
             spin_until(executor, stop)
             proxy.drain()
-        except BaseException:
-            proxy.abort()
-            raise
-        finally:
-            executor.shutdown()
         proxy.close()
         proxy.close_view()
     if proxy.failure is not None:

@@ -147,8 +147,7 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duratio
           ) -> dict[str, tuple[list[float], list[float]] | _ImageBuilder]:
     """Scalar series or array images of `fields` on one topic."""
     out: dict[str, tuple[list[float], list[float]] | _ImageBuilder] = {}
-    inputs = InputSet(paths)
-    try:
+    with InputSet(paths) as inputs:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
         channels = {i: c for i, c in enumerate(inputs.channels) if c.topic == topic}
         if not channels:
@@ -179,15 +178,12 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duratio
                     values = np.asarray(path.read(message), dtype=float)
                     target[0].append(seconds)   # the value itself; nan and inf stay what they are
                     target[1].append(float(values.mean()) if values.size else float('nan'))
-    finally:
-        inputs.close()
     return out
 
 
 def _scan_axis(paths: list[Path], topic: str) -> tuple[float, float] | None:
     """(angle_min, angle_increment) in degrees of the first LaserScan on a topic, or None."""
-    inputs = InputSet(paths)
-    try:
+    with InputSet(paths) as inputs:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
         channels = {i: c for i, c in enumerate(inputs.channels)
                     if c.topic == topic and c.msgtype == 'sensor_msgs/msg/LaserScan'}
@@ -198,8 +194,6 @@ def _scan_axis(paths: list[Path], topic: str) -> tuple[float, float] | None:
             if channel in channels and codec is not None:
                 scan = codec.decode(data)
                 return float(np.degrees(scan.angle_min)), float(np.degrees(scan.angle_increment))
-    finally:
-        inputs.close()
     return None
 
 
@@ -250,8 +244,7 @@ def _media(plot: MediaPlot, paths: list[Path], topic: str, origin: int,
     """Point counts over time and the first message at or after the fault start, as a snapshot."""
     counts: tuple[list[float], list[float]] = ([], [])
     snapshot: Any = None
-    inputs = InputSet(paths)
-    try:
+    with InputSet(paths) as inputs:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
         channels = {i for i, c in enumerate(inputs.channels) if c.topic == topic and c.msgtype == plot.msgtype}
         codec = catalog.codec(plot.msgtype)
@@ -270,8 +263,6 @@ def _media(plot: MediaPlot, paths: list[Path], topic: str, origin: int,
             elif snapshot is None and seconds >= plot.start_s:
                 snapshot = thumbnail(codec.decode(data))
                 break
-    finally:
-        inputs.close()
     return counts, snapshot
 
 

@@ -15,8 +15,7 @@ if TYPE_CHECKING:
 
 def render_info(paths: Sequence[Path]) -> str:
     """Topics with type, count, definition source and QoS; time span."""
-    inputs = InputSet(paths)
-    try:
+    with InputSet(paths) as inputs:
         counts = [0] * len(inputs.channels)
         first = last = None
         for index, log_time, _, _ in inputs.messages():
@@ -41,8 +40,6 @@ def render_info(paths: Sequence[Path]) -> str:
             qos = ' qos' if channel.qos else ''
             lines.append(f'  {channel.topic:<{width}}  {count:8d}  {channel.msgtype or "?"}  [{definition}{qos}]')
         return '\n'.join(lines)
-    finally:
-        inputs.close()
 
 
 def stamp(time: int) -> str:
