@@ -6,10 +6,12 @@ import math
 
 
 def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (rad, fixed axes X-Y-Z) of a quaternion; zero quaternion = identity."""
+    """Roll, pitch, yaw (rad, fixed axes X-Y-Z) of a quaternion. The zero quaternion has none: tf2's
+    Matrix3x3(q) scales by 2 / |q|^2 = inf, and 0 * inf makes every angle NaN, so the anchor writes a NaN
+    orientation; so does bagfault."""
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if norm == 0.0:
-        return 0.0, 0.0, 0.0
+        return math.nan, math.nan, math.nan
     x, y, z, w = x / norm, y / norm, z / norm, w / norm
     roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
     sinp = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))

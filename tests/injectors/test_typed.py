@@ -36,6 +36,27 @@ def test_odom_biases_add_up_and_yaw_bias_is_in_degrees(harness):
     assert math.hypot(q.x, q.y, q.z, q.w) == pytest.approx(1.0)
 
 
+def test_a_yaw_bias_on_the_zero_quaternion_gives_nan_as_tf2_does(harness):
+    """ros2_fault_injection odom_fault_injector.cpp:112-130 (tf_fault_injector.cpp:166-179 likewise): getRPY of
+    tf2::Matrix3x3(q), bias, setRPY, normalize. tf2's Matrix3x3::setRotation scales by s = 2 / |q|^2, which is
+    inf for the zero quaternion, and 0 * inf is NaN: every angle, and so every component out, is NaN."""
+    msg = synthetic.odometry(harness.ts, 0, 2.0)
+    q = msg.pose.pose.orientation
+    q.x = q.y = q.z = q.w = 0.0
+    [(_, out)], _ = harness.run(OdomInjector, ODOM, [msg], harness.faults({'yaw_bias_deg': 10.0}))
+    o = out.pose.pose.orientation
+    assert all(math.isnan(v) for v in (o.x, o.y, o.z, o.w))
+    tf = synthetic.tf_message(harness.ts, 0, 0.0)
+    r = tf.transforms[1].transform.rotation
+    r.x = r.y = r.z = r.w = 0.0
+    [(_, moved)], _ = harness.run(TfInjector, TF, [tf], harness.faults(
+        {'parent_frame': 'base_link', 'child_frame': 'laser', 'yaw_bias_deg': 10.0}))
+    m = moved.transforms[1].transform.rotation
+    assert all(math.isnan(v) for v in (m.x, m.y, m.z, m.w))
+    untouched = moved.transforms[0].transform.rotation  # another frame pair: no fault, no change
+    assert not math.isnan(untouched.w)
+
+
 def test_odom_covariance_is_max_of_scaled_and_floor(harness):
     msg = synthetic.odometry(harness.ts, 0, 1.0)
     active = harness.faults({'pose_covariance_scale': 10.0, 'pose_covariance_floor': 0.05,
