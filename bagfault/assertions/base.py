@@ -135,8 +135,8 @@ def fault_reference_problem(
 ) -> list[tuple[str, str]]:
     """Problem list for a key that must name a fault of the scenario."""
     value: Any = spec.params.get(key)
-    if value is None or scenario.fault(str(value)) is not None:
-        return []
+    if value is None or scenario.fault(str(value)) is not None or str(value) in scenario.skipped_faults:
+        return []  # (a skipped fault was named where its injector was: it never activates, as in the anchor)
     known = ', '.join(dict.fromkeys(f.id for f in scenario.faults)) or 'none'
     return [(key, f'unknown fault {value!r} (faults: {known})')]
 

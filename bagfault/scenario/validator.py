@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 def validate_scenario(scenario: Scenario, out: _Collector) -> None:
     """Check everything; append problems and warnings to `out`."""
     _duplicates(scenario, out)
+    _skip_unknown_types(scenario, out)
     for injector in scenario.injectors:
         _check_injector(injector, out)
     _check_outputs(scenario, out)
@@ -49,6 +50,29 @@ def _duplicates(scenario: Scenario, out: _Collector) -> None:
                 seen.add(item.id)
 
 
+def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:
+    """An injector type neither built in nor given by an installed plugin: the anchor's validator warns
+    ('assuming external plugin'), its controller creates no injector and skips that injector's faults, and the
+    other injectors run. So here: a warning (an error under --strict), the injector and its faults left out."""
+    unknown = [i for i in scenario.injectors if i.type and get_injector_type(i.type) is None]
+    if not unknown:
+        return
+    known_types = ', '.join(sorted(injector_types()))
+    for injector in unknown:
+        out.warn((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
+                 f'installed plugin provides it, so injector {injector.id!r} and its faults are skipped and '
+                 f'the others run, as the anchor does ("assuming external plugin"; known: {known_types})')
+    kept = [i for i in scenario.injectors if all(i is not u for u in unknown)]
+    gone = {u.id for u in unknown} - {i.id for i in kept}  # (a duplicate id of a known type keeps its faults)
+    for fault in scenario.faults:
+        if fault.injector_id in gone:
+            out.warn((*fault.path, 'injector_id'), f'fault {fault.id!r} targets injector {fault.injector_id!r} '
+                     'of an unknown type: skipped (it never activates)')
+    scenario.skipped_faults = [f.id for f in scenario.faults if f.injector_id in gone]
+    scenario.injectors = kept
+    scenario.faults = [f for f in scenario.faults if f.injector_id not in gone]
+
+
 def _coerce(field: ConfigField, value: Any, path: tuple[Any, ...], out: _Collector) -> Any:
     try:
         return field.coerce(value)
@@ -61,10 +85,7 @@ def _check_injector(injector: Any, out: _Collector) -> None:
     if not injector.type:
         return
     cls = get_injector_type(injector.type)
-    if cls is None:
-        known = ', '.join(sorted(injector_types()))
-        out.add((*injector.path, 'type'), f'unknown injector type {injector.type!r} (known: {known})')
-        return
+    assert cls is not None  # unknown types were left out
     is_service_type = issubclass(cls, ServiceInjector)
     if is_service_type and not injector.is_service:
         out.add(injector.path,

@@ -114,6 +114,7 @@ class Scenario:
     fault_manager: dict[str, Any] | None = None
     fault_manager_config: Any = None
     warnings: list[str] = field(default_factory=list)
+    skipped_faults: list[str] = field(default_factory=list)  # faults of injectors of a type nothing provides
     msg_paths: list[Path] = field(default_factory=list)  # folders of .msg/.idl definitions (relative to the file)
     system: SystemUnderTest | None = None  # `system_under_test:`, what `bagfault test` starts
     bags: list[Path] = field(default_factory=list)  # `bags:`, what a scenario file run by pytest plays

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from support.helpers import ROOT
+from support.helpers import ROOT, counts, make_bag
 
 EXAMPLE = ROOT / 'examples' / 'bagfault-rover-plugins'
 
@@ -31,11 +31,37 @@ def bagfault(plugin_path: Path, *args: str, cwd: Path | None = None) -> subproce
                           env=env, cwd=cwd, check=False)
 
 
-def test_without_the_plugin_the_type_is_unknown(scenarios):
-    result = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'validate', str(scenarios / 'battery.yaml')],
-                            capture_output=True, text=True, check=False)
-    assert result.returncode == 2
-    assert "unknown injector type 'battery_state'" in result.stderr
+def test_without_the_plugin_the_type_is_skipped_with_its_faults_as_the_anchor_does(scenarios, tmp_path):
+    """ros2_fault_injection scenario_validator.cpp:136-138 warns "injector.type '...' is not built in; assuming
+    external plugin"; fault_controller.cpp:44-57 creates no injector for it and register_faults skips its faults;
+    the other injectors run. A warning here (an error under --strict), never a refusal of the whole file."""
+    checked = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'validate', str(scenarios / 'battery.yaml')],
+                             capture_output=True, text=True, check=False)
+    assert checked.returncode == 0, checked.stderr
+    assert "unknown injector type 'battery_state'" in checked.stderr and 'assuming external plugin' in checked.stderr
+    assert "fault 'battery_voltage_bias' targets injector 'battery' of an unknown type: skipped" in checked.stderr
+    strict = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'validate', '--strict',
+                             str(scenarios / 'battery.yaml')], capture_output=True, text=True, check=False)
+    assert strict.returncode == 2
+    mixed = tmp_path / 'mixed.yaml'
+    mixed.write_text('injectors:\n'
+                     '  - {id: battery, type: battery_state, topic: {input_topic: /battery, output_topic: /b2}}\n'
+                     '  - {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}\n'
+                     'faults:\n'
+                     '  - {id: low, injector_id: battery, start: 0.5, config: {voltage_bias: -1.0}}\n'
+                     '  - {id: bias, injector_id: imu, start: 0.5, config: {angular_velocity_z_bias: 0.5}}\n'
+                     'assertions:\n'
+                     '  - {id: imu_faulted, type: fault_event, fault_id: bias, state: active, within: 1.0}\n'
+                     '  - {id: battery_faulted, type: fault_event, fault_id: low, state: active, within: 1.0}\n')
+    bag = make_bag(tmp_path / 'imu.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 2.0)
+    ran = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'run', str(mixed), str(bag), '-o',
+                          str(tmp_path / 'out.mcap'), '--json', str(tmp_path / 'r.json')],
+                         capture_output=True, text=True, check=False)
+    assert ran.returncode == 1, ran.stderr  # the imu runs; the skipped battery fault never activates
+    import json
+    states = {a['id']: a['state'] for a in json.loads((tmp_path / 'r.json').read_text())['assertions']}
+    assert states == {'imu_faulted': 'passed', 'battery_faulted': 'failed'}
+    assert '/imu_out' in counts(tmp_path / 'out.mcap')
 
 
 def test_installed_plugin_is_found_validated_and_runs(plugin_path, tmp_path, scenarios):
