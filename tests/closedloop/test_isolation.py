@@ -13,12 +13,12 @@ from support.loop import SCENARIO, LoopRunner, running_with
 
 from bagfault.live import LOOPBACK_PROFILE
 
+pytestmark = pytest.mark.live  # needs rclpy
+
 TALKER = """
 import sys, time
 import rclpy
 from sensor_msgs.msg import Imu
-
-pytestmark = pytest.mark.live  # needs rclpy
 rclpy.init()
 node = rclpy.create_node(sys.argv[1])
 topic = sys.argv[2]
