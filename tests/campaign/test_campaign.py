@@ -7,6 +7,7 @@ texts written here, not from the campaign code.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -116,18 +117,55 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def _processes_mentioning(text: str) -> list[int]:
+    found = []
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                if text.encode() in (entry / 'cmdline').read_bytes():
+                    found.append(int(entry.name))
+            except OSError:
+                continue
+    return found
+
+
+def _wait_for_port(port: int, process: subprocess.Popen[str], seconds: float) -> None:
+    import time
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and process.poll() is None:
+        with socket.socket() as probe:
+            if probe.connect_ex(('127.0.0.1', port)) == 0:
+                return
+        time.sleep(0.2)
+    raise AssertionError(f'the Ray head did not listen on {port} (exit {process.poll()})')
+
+
 def test_a_campaign_on_a_ray_head_started_on_loopback(sweep: Path) -> None:
+    """A head of its own, stopped by its own process group: never `ray stop`, which kills every Ray process on
+    the machine and any process with `monitor.py` in its command line (another suite's system under test)."""
+    import signal
+    import time
+
     pytest.importorskip('ray')
     ray_cli = Path(sys.executable).parent / 'ray'
     temp = Path(tempfile.mkdtemp(prefix='rh', dir='/tmp'))  # Ray's socket paths must stay short
     port = _free_port()
-    env = {**os.environ, 'RAY_USAGE_STATS_ENABLED': '0'}
-    started = subprocess.run([str(ray_cli), 'start', '--head', '--node-ip-address', '127.0.0.1', '--port', str(port),
-                              '--temp-dir', str(temp), '--num-cpus', '2', '--include-dashboard', 'false',
-                              '--disable-usage-stats'], env=env, capture_output=True, text=True, timeout=180,
-                             check=False)
+    # (no token: two suites' heads would write one user's token file in turn; the head is this test's alone)
+    env = {**os.environ, 'RAY_USAGE_STATS_ENABLED': '0', 'RAY_AUTH_MODE': 'disabled'}
+    head = subprocess.Popen([str(ray_cli), 'start', '--head', '--block', '--node-ip-address', '127.0.0.1', '--port',
+                             str(port), '--temp-dir', str(temp), '--num-cpus', '2', '--include-dashboard', 'false',
+                             '--disable-usage-stats'], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True)
     try:
-        assert started.returncode == 0, started.stderr[-2000:]
+        assert head.stdout is not None
+        said = []
+        for line in head.stdout:  # (EOF if it fails) it says so once the node is up and its token written
+            said.append(line)
+            if 'Ray runtime started' in line:
+                break
+        assert head.poll() is None, ''.join(said)[-2000:]
+        _wait_for_port(port, head, 60)
         done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'campaign', str(sweep / 'campaign.yaml'), '-o',
                                str(sweep / 'head'), '--ray', f'127.0.0.1:{port}'], env=env, capture_output=True,
                               text=True, timeout=300, check=False)
@@ -135,8 +173,21 @@ def test_a_campaign_on_a_ray_head_started_on_loopback(sweep: Path) -> None:
         assert f'on Ray at 127.0.0.1:{port} (2 CPUs)' in done.stdout
         assert table(sweep / 'head') == table(sweep / 'one')
     finally:
-        subprocess.run([str(ray_cli), 'stop', '--force'], env=env, capture_output=True, timeout=120, check=False)
+        head.send_signal(signal.SIGINT)  # `ray start --block` stops what it started
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            head.communicate(timeout=60)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(head.pid, signal.SIGKILL)
+        head.wait(timeout=30)
+        deadline = time.monotonic() + 30
+        while _processes_mentioning(str(temp)) and time.monotonic() < deadline:
+            time.sleep(0.5)
+        left = _processes_mentioning(str(temp))
+        for pid in left:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
         shutil.rmtree(temp, ignore_errors=True)
+    assert left == []  # the head's processes ended with it
 
 
 def test_search_finds_the_breaking_point_known_from_the_thresholds(corpus: Path) -> None:
