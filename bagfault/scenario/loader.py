@@ -18,6 +18,7 @@ from bagfault.errors import Problem, ScenarioError, one_line
 from bagfault.spec.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 from bagfault.spec.system import parse_system
 from bagfault.spec.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
+from bagfault.yamlcpp import as_bool
 
 TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager',
             'msg_paths', 'system_under_test', 'bags'}
@@ -218,10 +219,13 @@ def seconds(value: object, path: PathKey, out: _Collector, *, positive: bool = F
 
 
 def _bool(value: object, path: PathKey, out: _Collector) -> bool:
-    if isinstance(value, bool):
-        return value
-    out.add(path, f'{value!r} is not true or false')
-    return False
+    """A boolean as the anchor reads it, with yaml-cpp's `as<bool>()` (y/n, yes/no, true/false, on/off, quoted
+    or not)."""
+    read = as_bool(value)
+    if read is None:
+        out.add(path, f'{value!r} is not true or false (nor yes/no, y/n, on/off, as yaml-cpp reads booleans)')
+        return False
+    return read
 
 
 def _seed(value: object, path: PathKey, out: _Collector) -> int | None:

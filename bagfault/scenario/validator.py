@@ -9,6 +9,7 @@ ignores (`start` with `active_on_startup`, `duration` without `start`).
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter
 from typing import TYPE_CHECKING, Any
 
@@ -71,6 +72,31 @@ def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:
     scenario.skipped_faults = [f.id for f in scenario.faults if f.injector_id in gone]
     scenario.injectors = kept
     scenario.faults = [f for f in scenario.faults if f.injector_id not in gone]
+
+
+ANCHOR_TYPES = frozenset({'odom', 'scan', 'joint_state', 'imu', 'trigger_service', 'tf'})  # is_known_injector_type
+_FROM_CHARS_DOUBLE = re.compile(r'-?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf(?:inity)?|nan(?:\([\w]*\))?)',
+                                re.IGNORECASE)
+
+
+def anchor_refusal(field: ConfigField, text: str) -> str | None:
+    """What ros2_fault_injection's validate_config_value (fault_config_schema.cpp) says of a config value's
+    scalar text, None when it accepts it. Its numbers are std::from_chars over the whole text: no leading '+',
+    no hexadecimal, no YAML's '.inf', and an int key takes no decimal point."""
+    kind = field.type
+    if kind == 'bool':
+        return None if text in ('true', 'false') else f"config '{field.key}' must be 'true' or 'false'"
+    if kind == 'int':
+        if re.fullmatch(r'-?\d+', text) is None or not -2**31 <= int(text) < 2**31:
+            return f"config '{field.key}' must be an integer"
+        return None
+    if kind in ('double', 'special_float'):
+        if kind == 'special_float' and text in ('inf', '+inf', '-inf', 'nan'):
+            return None
+        if _FROM_CHARS_DOUBLE.fullmatch(text) is None:
+            tail = ', inf, -inf, or nan' if kind == 'special_float' else ''
+            return f"config '{field.key}' must be a number{tail}"
+    return None
 
 
 def _coerce(field: ConfigField, value: Any, path: tuple[Any, ...], out: _Collector) -> Any:
@@ -143,10 +169,15 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
             continue
         fault.config[key] = _coerce(field, value, path, out)
         coerced = fault.config[key]
+        refusal = anchor_refusal(field, fault.config_text.get(key, str(value))) if injector.type in ANCHOR_TYPES \
+            else None
+        if coerced is not None and refusal is not None:
+            out.warn(path, f"{fault.config_text.get(key, value)!r} is read here, but ros2_fault_injection's "
+                           f'validator refuses it ({refusal}): the file would not load in the anchor')
         if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
             out.warn(path, "nan has no effect: a level is the largest of the active faults' values, and "
                            'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
-        elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double':
+        elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double' and refusal is None:
             out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '
                            'it too)')
     for field in cls.fields:

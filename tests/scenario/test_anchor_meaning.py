@@ -237,3 +237,51 @@ def test_a_nan_drop_probability_is_accepted_and_drops_nothing(tmp_path, odom_bag
     assert len(decoded(out, ['/odom'])['/odom']) == len(decoded(odom_bag, ['/odom_raw'])['/odom_raw'])
     with pytest.raises(ScenarioError, match=r'above the maximum 1\.0'):
         parse_scenario(text.replace('nan', 'inf'))
+
+
+@pytest.mark.parametrize(('config', 'key', 'refusal'), [
+    # fault_config_schema.cpp validate_config_value: bool is the text 'true' or 'false'; numbers are
+    # std::from_chars over the whole text (parse_double, parse_int), which takes no '+', no hex, no YAML '.inf'
+    ('{force_failure: yes}', 'force_failure', "config 'force_failure' must be 'true' or 'false'"),
+    ('{delay_ms: 100.0}', 'delay_ms', "config 'delay_ms' must be an integer"),
+    ('{delay_ms: 0x10}', 'delay_ms', "config 'delay_ms' must be an integer"),
+    ('{delay_ms: +5}', 'delay_ms', "config 'delay_ms' must be an integer"),
+])
+def test_spellings_the_anchors_validator_refuses_are_warnings_and_errors_under_strict(config, key, refusal):
+    text = ('injectors:\n  - {id: t, type: trigger_service, proxy_service: /a, target_service: /b}\n'
+            f'faults:\n  - {{id: f, injector_id: t, config: {config}}}\n')
+    scenario = parse_scenario(text)
+    assert any(f'faults[0].config.{key}:' in w and f'validator refuses it ({refusal})' in w
+               for w in scenario.warnings), scenario.warnings
+    with pytest.raises(ScenarioError, match='would not load in the anchor'):
+        parse_scenario(text, strict=True)
+
+
+@pytest.mark.parametrize(('value', 'refused'), [
+    ('+1.0', True), ('.inf', True), ('1e3', False), ('-2.5', False), ('inf', False), ('-inf', False),
+    ('nan', False), ('.5', False), ('5.', False),
+])
+def test_a_number_the_anchor_parses_with_from_chars(value, refused):
+    """parse_double (fault_config_schema.cpp): std::from_chars, general format, the whole text."""
+    text = ('injector: {id: o, type: odom, input_topic: /odom_raw, output_topic: /odom}\n'
+            f'faults:\n  - {{id: f, injector_id: o, config: {{x_bias: {value}}}}}\n')
+    warned = any('validator refuses it' in w for w in parse_scenario(text).warnings)
+    assert warned == refused
+
+
+@pytest.mark.parametrize(('value', 'active'), [
+    ('y', True), ('N', False), ("'false'", False), ("'TRUE'", True), ('Yes', True), ('off', False), ('On', True),
+])
+def test_active_on_startup_is_read_as_yaml_cpp_reads_a_bool(value, active):
+    """scenario_config.cpp:160 reads `active_on_startup` (and `active`) with yaml-cpp's as<bool>(), whose table
+    (convert.cpp) takes y/n, yes/no, true/false and on/off, quoted or not, in lower, upper or capitalised case."""
+    text = ('injector: {id: o, type: odom, input_topic: /odom_raw, output_topic: /odom}\n'
+            f'faults:\n  - {{id: f, injector_id: o, active_on_startup: {value}, config: {{x_bias: 1.0}}}}\n')
+    assert parse_scenario(text).faults[0].active_on_startup is active
+
+
+def test_a_bool_yaml_cpp_cannot_read_is_refused():
+    text = ('injector: {id: o, type: odom, input_topic: /odom_raw, output_topic: /odom}\n'
+            'faults:\n  - {id: f, injector_id: o, active_on_startup: tRUE, config: {x_bias: 1.0}}\n')
+    with pytest.raises(ScenarioError, match="'tRUE' is not true or false"):  # not flexible case: bad conversion
+        parse_scenario(text)

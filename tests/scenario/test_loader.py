@@ -207,7 +207,8 @@ def test_wrong_types_and_structure():
         """))
     found = {(p.path, p.message) for p in info.value.problems}
     assert ('injector.qos_depth', '0 is not a positive integer') in found
-    assert ('faults[0].active_on_startup', "'maybe' is not true or false") in found
+    assert ('faults[0].active_on_startup', "'maybe' is not true or false (nor yes/no, y/n, on/off, as yaml-cpp reads "
+            'booleans)') in found
     assert ('faults[0].config.delay_ms', '2.5 is not an integer') in found
     assert not any(p == 'asertions' for p, _ in found)  # an unknown top-level key is a warning
 
