@@ -48,9 +48,20 @@ class FaultState:
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario  # as loaded, never edited
         self.lock = threading.RLock()
-        self.scheduler: FaultScheduler | None = None  # the pass's, once it started
+        self._scheduler: FaultScheduler | None = None
         self.changed: dict[str, dict[str, Any]] = {}  # fault -> config values set while running
         self._specs: dict[str, FaultSpec] = {f.id: f for f in scenario.faults}
+
+    @property
+    def scheduler(self) -> FaultScheduler | None:
+        """The pass's scheduler, once it started; its events describe the faults' current config."""
+        return self._scheduler
+
+    @scheduler.setter
+    def scheduler(self, scheduler: FaultScheduler | None) -> None:
+        if scheduler is not None:
+            scheduler.current = self.fault
+        self._scheduler = scheduler
 
     # -- reading ---------------------------------------------------------------------------
     def fault(self, fault_id: str) -> FaultSpec | None:

@@ -27,6 +27,7 @@ from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
 from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.injectors.base import Injector, RawMessage
+from bagfault.spec.model import describe_config_update
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
@@ -217,7 +218,7 @@ class Pipeline:
                     runtime.faults = state.faults_of(runtime.spec.id)
                     runtime.injector = state.injector(runtime.spec, runtime.msgtype, self.catalog)
             events.append(FaultEvent(time, fault.id, fault.injector_id, 'config_updated', 'manual',
-                                     fault.describe_config()))
+                                     describe_config_update(change.key, fault.config_text[change.key])))
         self._refresh_active()
         records: list[Record] = [(e.time, order, EVENT_RANK, next(self._counter), e) for e in events]
         self.run.emit(self._merge.release(records + held, time, is_sorted=False))

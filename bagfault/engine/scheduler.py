@@ -27,7 +27,7 @@ from bagfault.faults.rng import FaultRandom
 from bagfault.units import NS
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator, Sequence
+    from collections.abc import Callable, Iterator, Sequence
 
     from bagfault.events import FaultSource
     from bagfault.spec.model import FaultSpec, Scenario
@@ -137,6 +137,7 @@ class FaultScheduler:
         activations: Sequence[Activation] = (),
     ) -> None:
         self.scenario = scenario
+        self.current: Callable[[str], FaultSpec | None] = scenario.fault  # a FaultState gives its current config
         self.origin = origin
         self.random = {
             f.id: FaultRandom(_fault_seed(scenario, f, seed), f.id) for f in scenario.faults
@@ -208,8 +209,9 @@ class FaultScheduler:
         return events
 
     def set_state(self, fault_id: str, state: bool, time: int, source: FaultSource) -> FaultEvent | None:
-        """Activate or deactivate a fault now (also for live/manual changes)."""
-        fault = self.scenario.fault(fault_id)
+        """Activate or deactivate a fault now (also for live/manual changes); a switch from outside is detailed
+        as the anchor's SetFaultState details it (describe_fault), a scheduled one with its config."""
+        fault = self.current(fault_id)
         if fault is None or (fault_id in self.active) == state:
             return None
         if state:
@@ -232,7 +234,7 @@ class FaultScheduler:
             injector_id=injector.id if injector else fault.injector_id,
             state='active' if state else 'inactive',
             source=source,
-            details=fault.describe_config(),
+            details=fault.describe_fault() if source == 'manual' else fault.describe_config(),
         )
 
     def is_active(self, fault_id: str) -> bool:

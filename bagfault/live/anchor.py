@@ -89,7 +89,7 @@ class AnchorServices:
         active = self._active()
         response.faults = [
             status(fault_id=f.id, injector_id=f.injector_id, state='active' if f.id in active else 'inactive',
-                   details=f.describe_config())
+                   details=f.describe_fault())
             for spec in self.scenario.injectors for f in self.session.state.faults_of(spec.id)]
         return response
 

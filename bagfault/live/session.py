@@ -27,6 +27,7 @@ from bagfault.errors import (
 from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.injectors.base import Injector, RawMessage
+from bagfault.spec.model import describe_config_update
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -269,7 +270,7 @@ class LiveSession:
             fault = self.state.configure(fault_id, key, coerced)
             held = self._rebuild(fault.injector_id)
             event = FaultEvent(self.clock(), fault.id, fault.injector_id, 'config_updated', 'manual',
-                               fault.describe_config())
+                               describe_config_update(key, fault.config_text[key]))
             self._publish_events([event])
             return held
 

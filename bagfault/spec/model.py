@@ -90,6 +90,20 @@ class FaultSpec:
         items = sorted(self.config_text.items())
         return 'config={' + ', '.join(f'{k}={v}' for k, v in items) + '}'
 
+    def describe_fault(self) -> str:
+        """The anchor's describe_fault (utils/fault_descriptions.cpp), the details of a switch asked from outside
+        and of GetFaultStatus: 'scheduled, start=5000ms, duration=10000ms, config={...}' or 'manual-only, ...'
+        (whole milliseconds, truncated as its static_cast<int64_t>(seconds * 1000.0))."""
+        parts = ['scheduled', f'start={int(self.start * 1000.0)}ms'] if self.start is not None else ['manual-only']
+        if self.duration is not None:
+            parts.append(f'duration={int(self.duration * 1000.0)}ms')
+        return ', '.join([*parts, self.describe_config()])
+
+
+def describe_config_update(key: str, value: str) -> str:
+    """The anchor's details of a SetFaultConfig event: 'config_update={key=value}'."""
+    return f'config_update={{{key}={value}}}'
+
 
 @dataclass
 class AssertionSpec:

@@ -74,7 +74,7 @@ def test_a_switch_and_a_new_value_apply_from_the_next_message(tmp_path: Path) ->
     assert [(e.state, e.source) for e in events] == [('active', 'manual'), ('config_updated', 'manual'),
                                                       ('inactive', 'manual')]
     assert [round((e.time - events[0].time) / 1e7) for e in events] == [0, 40, 70]  # 100 Hz: at messages 11, 51, 81
-    assert events[1].details == 'config={angular_velocity_z_bias=2.0}'
+    assert events[1].details == 'config_update={angular_velocity_z_bias=2.0}'  # the anchor's describe_config_update
 
 
 def test_changes_are_checked_when_asked() -> None:

@@ -122,3 +122,31 @@ def test_event_details_use_the_anchor_format():
     [event] = FaultScheduler(s, ORIGIN, 0).advance(ORIGIN + 2 * NS)
     assert event.details == 'config={angular_velocity_z_bias=1, linear_acceleration_z_bias=0.20}'
     assert event.injector_id == 'imu'
+
+
+def test_describe_fault_and_config_update_as_the_anchors_own_tests_say():
+    """ros2_fault_injection test/utils/test_fault_description.cpp: DescribeFaultFormatsFault (start 1000 ms,
+    duration 500 ms, x_bias 1.0) and DescribeConfigUpdateFormatsUpdate; a fault without start is manual-only."""
+    from bagfault.scenario import parse_scenario
+    from bagfault.spec.model import describe_config_update
+
+    s = parse_scenario('injector: {id: o, type: odom, input_topic: /a, output_topic: /b}\nfaults:\n'
+                       '  - {id: odom_bias, injector_id: o, start: 1.0, duration: 0.5, config: {x_bias: 1.0}}\n'
+                       '  - {id: manual, injector_id: o, config: {x_bias: 1.0, drop_probability: 0.5}}\n')
+    assert s.fault('odom_bias').describe_fault() == 'scheduled, start=1000ms, duration=500ms, config={x_bias=1.0}'
+    assert s.fault('manual').describe_fault() == 'manual-only, config={drop_probability=0.5, x_bias=1.0}'
+    assert describe_config_update('x_bias', '2.0') == 'config_update={x_bias=2.0}'
+
+
+def test_a_switch_from_outside_is_detailed_with_describe_fault_and_the_current_config():
+    """fault_service_manager.cpp handle_set_fault_state: details = describe_fault(the injector's current
+    config); the scheduler's own events keep describe_config."""
+    from bagfault.engine.fault_state import FaultState
+
+    state = FaultState(scenario('- {id: f, injector_id: imu, start: 1, config: {angular_velocity_z_bias: 1}}\n'))
+    state.scheduler = FaultScheduler(state.scenario, ORIGIN, 0)
+    [scheduled] = state.scheduler.advance(ORIGIN + 2 * NS)
+    assert scheduled.details == 'config={angular_velocity_z_bias=1}'
+    state.configure('f', 'angular_velocity_z_bias', 2.5)
+    event = state.switch('f', False, ORIGIN + 3 * NS, 'manual')
+    assert event is not None and event.details == 'scheduled, start=1000ms, config={angular_velocity_z_bias=2.5}'

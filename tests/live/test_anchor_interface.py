@@ -79,7 +79,7 @@ def test_the_proxy_answers_the_anchors_services_and_publishes_its_events(graph, 
     assert (switched['success'], switched['message']) == (True, 'activated fault: imu_yaw_rate_bias')
     assert [(f['fault_id'], f['state']) for f in status['faults']][:3] == [
         ('imu_dropout', 'inactive'), ('imu_delay', 'inactive'), ('imu_yaw_rate_bias', 'active')]
-    assert status['faults'][2]['details'] == 'config={angular_velocity_z_bias=0.05}'
+    assert status['faults'][2]['details'] == 'manual-only, config={angular_velocity_z_bias=0.05}'  # describe_fault
     assert (bad_key['success'], bad_key['message']) == (False, "key 'gain' is not valid for injector type 'imu'")
     assert configured == {'service': 'SetFaultConfig', 'success': True,
                           'message': "updated fault 'imu_yaw_rate_bias' config 'angular_velocity_z_bias' to '0.2'"}

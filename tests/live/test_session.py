@@ -111,7 +111,8 @@ def test_config_changes_are_checked_by_the_schema_and_take_effect() -> None:
     (out,) = session.receive(session.topics[0], imu(0.25))
     assert value(out.data, 'angular_velocity.z') == 2.25
     event = session.stats.events[-1]
-    assert (event.state, event.source, event.details) == ('config_updated', 'manual', 'config={angular_velocity_z_bias=2.0}')
+    assert (event.state, event.source, event.details) == ('config_updated', 'manual',
+                                                          'config_update={angular_velocity_z_bias=2.0}')
 
 
 def test_reload_takes_new_faults_but_refuses_a_new_layout() -> None:
