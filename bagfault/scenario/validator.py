@@ -263,6 +263,11 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
     if all(v is not None for v in assertion.params.values()):
         for key, message in cls.check(assertion, scenario):
             out.add((*assertion.path, key) if key else assertion.path, message)
+    window = assertion.params.get('window')
+    if assertion.type == 'topic_hz' and assertion.within is not None and isinstance(window, (int, float)) \
+            and assertion.within < window:  # the anchor's advisory (scenario_validator.cpp, validate_assertions)
+        out.warn((*assertion.path, 'within'), f'assertion {assertion.id!r} has within smaller than window; it may '
+                                               'fail before a full measurement window is available')
 
 
 def _closest(word: str, candidates: list[str]) -> str | None:
