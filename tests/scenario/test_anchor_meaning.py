@@ -290,9 +290,9 @@ def test_a_bool_yaml_cpp_cannot_read_is_refused():
 def test_a_topic_hz_within_shorter_than_its_window_is_the_anchors_advisory_warning():
     """scenario_validator.cpp validate_assertions: within < window warns "has within smaller than window; it may
     fail before a full measurement window is available" (a warning: the file still loads)."""
-    text = ("injector: {id: o, type: odom, input_topic: /odom_raw, output_topic: /odom}\nfaults: []\n"
-            "assertions:\n  - {id: hz, type: topic_hz, topic: /odom, message_type: nav_msgs/msg/Odometry, "
-            "min_hz: 10.0, window: 2.0, within: 1.0}\n")
+    text = ('injector: {id: o, type: odom, input_topic: /odom_raw, output_topic: /odom}\nfaults: []\n'
+            'assertions:\n  - {id: hz, type: topic_hz, topic: /odom, message_type: nav_msgs/msg/Odometry, '
+            'min_hz: 10.0, window: 2.0, within: 1.0}\n')
     warnings = parse_scenario(text).warnings
     assert [w.split(': ', 2)[1:] for w in warnings] == [
         ['assertions[0].within', "assertion 'hz' has within smaller than window; it may fail before a full "
