@@ -8,7 +8,6 @@ that is not a function of the inputs.
 from __future__ import annotations
 
 import csv
-import html
 import io
 import json
 from dataclasses import dataclass
@@ -142,17 +141,9 @@ td.l,th.l{text-align:left} td,th{text-align:right} th{background:#f4f4f4} table{
 """
 
 
-def _rate_cell(passed: int, total: int) -> str:
-    if total == 0:
-        return '<td class="muted">-</td>'
-    rate = passed / total
-    color = f'hsl({round(120 * rate)},65%,82%)'
-    return f'<td style="background:{color}" title="{passed} of {total}">{rate * 100:.0f}% <span class="muted">' \
-           f'({passed}/{total})</span></td>'
-
-
 def _label(value: Any) -> str:
-    return html.escape(f'{value:g}' if isinstance(value, float) else str(value))
+    """A parameter value as the tables and figures show it (plain text: the template escapes it)."""
+    return f'{value:g}' if isinstance(value, float) else str(value)
 
 
 def _order(values: list[Any]) -> list[Any]:
@@ -163,50 +154,48 @@ def _order(values: list[Any]) -> list[Any]:
     return seen
 
 
+def _template() -> Any:
+    """The report's macros (templates/report.html.j2), autoescaped."""
+    import jinja2  # noqa: PLC0415
+
+    environment = jinja2.Environment(loader=jinja2.PackageLoader('bagfault.campaign', 'templates'),
+                                     autoescape=True, trim_blocks=True, lstrip_blocks=True)
+    return environment.get_template('report.html.j2').module
+
+
+def _passes(group: list[dict[str, Any]], column: str = 'status') -> dict[str, int]:
+    decided = [r for r in group if r[column] is not None]
+    return {'passed': sum(r[column] == 'passed' for r in decided), 'total': len(decided)}
+
+
 def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine: str) -> str:
     """A one-file HTML page: pass rates per parameter value (table and plot), a heatmap of two parameters,
-    breaking points with the search's jobs, failed jobs with links to their kept outputs."""
+    breaking points with the search's jobs, failed jobs with links to their kept outputs. The HTML comes from a
+    Jinja2 template, the figures from Plotly, between its sections."""
     c = plan.campaign
     rows = table.sweep_rows()
     counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}
     page = Page(f'{c.name}: bagfault campaign')
-    parts = [f'<style>{STYLE}</style><h1>Campaign {html.escape(c.name)}</h1>',
-             f'<p>scenario <code>{html.escape(str(c.scenario))}</code>, mode <code>{c.mode}</code>, '
-             f'{len(plan.bags)} bag(s), {len(rows)} sweep job(s): <b>{counts["passed"]} passed</b>, '
-             f'{counts["failed"]} failed, {counts["error"]} error; ran on {html.escape(engine)}.</p>']
-    columns = ['job passed', *table.assertions]
+    parts = _template()
+    page.html(str(parts.header(c.name, str(c.scenario), c.mode, len(plan.bags), len(rows), counts, engine, STYLE)))
     for parameter in table.parameters:
         values = _order([r[parameter] for r in rows if parameter in c.sweep])
         if not values:
             continue
-        parts.append(f'<h2>Pass rate against <code>{html.escape(parameter)}</code></h2><table><tr>'
-                     f'<th class="l">{html.escape(parameter)}</th>'
-                     + ''.join(f'<th>{html.escape(a)}</th>' for a in columns) + '</tr>')
+        lines = []
         for value in values:
             group = [r for r in rows if r[parameter] == value]
-            cells = [_rate_cell(sum(r['status'] == 'passed' for r in group), len(group))]
-            for a in table.assertions:
-                decided = [r for r in group if r[a] is not None]
-                cells.append(_rate_cell(sum(r[a] == 'passed' for r in decided), len(decided)))
-            parts.append(f'<tr><td class="l">{_label(value)}</td>{"".join(cells)}</tr>')
-        parts.append('</table>')
-        _flush(page, parts)
+            lines.append({'label': _label(value),
+                          'cells': [_passes(group), *(_passes(group, a) for a in table.assertions)]})
+        page.html(str(parts.rate_table(parameter, ['job passed', *table.assertions], lines)))
         _pass_rate_figure(page, parameter, values, rows, table.assertions)
     swept = list(c.sweep)
     if len(swept) >= 2:
         first, second = swept[0], swept[1]
         xs, ys = _order([r[second] for r in rows]), _order([r[first] for r in rows])
-        parts.append(f'<h2>Jobs passed: <code>{html.escape(first)}</code> against <code>{html.escape(second)}'
-                     f'</code></h2><table><tr><th class="l">{html.escape(first)} \\ {html.escape(second)}</th>'
-                     + ''.join(f'<th>{_label(x)}</th>' for x in xs) + '</tr>')
-        for y in ys:
-            cells = []
-            for x in xs:
-                group = [r for r in rows if r[first] == y and r[second] == x]
-                cells.append(_rate_cell(sum(r['status'] == 'passed' for r in group), len(group)))
-            parts.append(f'<tr><td class="l">{_label(y)}</td>{"".join(cells)}</tr>')
-        parts.append('</table>')
-        _flush(page, parts)
+        lines = [{'label': _label(y), 'cells': [_passes([r for r in rows if r[first] == y and r[second] == x])
+                                                for x in xs]} for y in ys]
+        page.html(str(parts.grid_table(first, second, [_label(x) for x in xs], lines)))
         rates = [[_rate([r for r in rows if r[first] == y and r[second] == x]) for x in xs] for y in ys]
         page.figure([{'type': 'heatmap', 'x': [_label(x) for x in xs], 'y': [_label(y) for y in ys], 'z': rates,
                       'zmin': 0, 'zmax': 100, 'colorscale': 'RdYlGn', 'colorbar': {'title': {'text': '% passed'}},
@@ -216,42 +205,19 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
                      'yaxis': {'type': 'category', 'title': {'text': first}}}, name=f'heatmap:{first}:{second}')
     if points:
         assert c.search is not None
-        parts.append(f'<h2>Breaking point of <code>{html.escape(c.search.parameter)}</code> '
-                     f'({html.escape(c.search.until.assertion)} {c.search.until.state}, tolerance '
-                     f'{c.search.tolerance:g})</h2><table><tr><th class="l">bag</th><th>holds from</th>'
-                     '<th>not at</th><th>jobs</th><th class="l">note</th>'
-                     '<th class="l">samples (value: held of runs)</th></tr>')
-        for p in points:
-            parts.append(f'<tr><td class="l">{html.escape(bag_name(plan, p.bag))}</td>'
-                         f'<td>{"-" if p.value is None else _label(p.value)}</td>'
-                         f'<td>{"-" if p.below is None else _label(p.below)}</td><td>{p.jobs}</td>'
-                         f'<td class="l">{html.escape(p.note)}</td>'
-                         f'<td class="l">{html.escape(", ".join(s.describe() for s in p.samples))}</td></tr>')
-        parts.append('</table>')
-        _flush(page, parts)
+        shown = [{'bag': bag_name(plan, p.bag), 'holds': '-' if p.value is None else _label(p.value),
+                  'below': '-' if p.below is None else _label(p.below), 'jobs': p.jobs, 'note': p.note,
+                  'samples': ', '.join(s.describe() for s in p.samples)} for p in points]
+        page.html(str(parts.points_table(c.search.parameter, c.search.until.assertion, c.search.until.state,
+                                         f'{c.search.tolerance:g}', shown)))
         _search_figure(page, c.search.parameter, [r for r in table.rows if r['kind'] == 'search'], points, plan)
     bad = [r for r in rows if r['status'] != 'passed']
     if bad:
-        parts.append('<h2>Jobs that did not pass</h2><table><tr><th>job</th><th class="l">bag</th>'
-                     + ''.join(f'<th>{html.escape(p)}</th>' for p in swept)
-                     + '<th>seed</th><th class="l">status</th><th class="l">why</th><th class="l">output</th></tr>')
-        for r in bad:
-            link = f'<a href="{html.escape(r["output"])}">{html.escape(Path(r["output"]).name)}</a>' \
-                if r['output'] else '<span class="muted">not kept</span>'
-            parts.append(f'<tr><td>{r["job"]}</td><td class="l">{html.escape(r["bag"])}</td>'
-                         + ''.join(f'<td>{_label(r[p])}</td>' for p in swept)
-                         + f'<td>{r["seed"]}</td><td class="l">{r["status"]}</td>'
-                         f'<td class="l" style="min-width:28em">{html.escape(r["message"] or "")}</td>'
-                         f'<td class="l">{link}</td></tr>')
-        parts.append('</table>')
-    _flush(page, parts)
+        jobs = [{'job': r['job'], 'bag': r['bag'], 'swept': [_label(r[p]) for p in swept], 'seed': r['seed'],
+                 'status': r['status'], 'message': r['message'] or '', 'output': r['output'] or '',
+                 'output_name': Path(r['output']).name if r['output'] else ''} for r in bad]
+        page.html(str(parts.bad_table(swept, jobs)))
     return page.render()
-
-
-def _flush(page: Page, parts: list[str]) -> None:
-    """Move the HTML written so far onto the page (figures go between tables)."""
-    page.html('\n'.join(parts))
-    parts.clear()
 
 
 def _rate(group: list[dict[str, Any]], column: str = 'status') -> float | None:
