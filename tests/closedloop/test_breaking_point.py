@@ -44,7 +44,7 @@ def test_identical_closed_loop_searches_bracket_the_watchdogs_threshold(tmp_path
         import make_bag
     finally:
         sys.path.remove(str(EXAMPLE))
-    make_bag.write(tmp_path / 'rover.mcap', 3.0)
+    make_bag.write(tmp_path / 'rover.mcap', 2.5)
     shutil.copy(EXAMPLE / 'monitor.py', tmp_path / 'monitor.py')
     (tmp_path / 'watchdog.yaml').write_text(SCENARIO)
     (tmp_path / 'campaign.yaml').write_text("""
@@ -56,7 +56,7 @@ search:
   parameter: faults.odom_blackout.duration
   low: 0.1
   high: 0.9
-  tolerance: 0.2
+  tolerance: 0.4
   repeat: 2
   until: {assertion: odom_blackout_detected, state: passed}
 keep: none
@@ -64,14 +64,15 @@ keep: none
     # By construction (monitor.py): odometry at 50 Hz, so a blackout of d seconds leaves a gap of d + 0.02 s; the
     # watchdog looks every 0.2 s of ROS time and alarms once the gap exceeds 0.5 s. A gap above 0.7 s is always
     # seen, one below 0.5 s never; between, it depends on where the looks fall. So d in (0.48, 0.68] is where
-    # the outcome can change: every interval found must touch it, and the two campaigns' must overlap.
+    # the outcome can change: every interval found must touch it, and the two campaigns' must overlap. (Values
+    # run: 0.1 and 0.9, then 0.5, where a gap of 0.52 s is seen only if a look falls in its last 0.02 s.)
     intervals = []
     for name in ('first', 'second'):
         result = api.campaign(tmp_path / 'campaign.yaml', tmp_path / name, workers=2)
         (point,) = result.breaking_points
         assert point.value is not None and point.below is not None, point.note
         assert point.below < 0.68 and point.value > 0.48, point.describe()
-        assert point.value - point.below <= 0.2
+        assert point.value - point.below <= 0.4
         # every value was run twice, and the rule is all-or-not-holding: the top held 2 of 2, the bottom did not
         samples = {s.value: s for s in point.samples}
         assert all(s.runs == 2 for s in samples.values())
