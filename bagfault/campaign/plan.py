@@ -119,11 +119,21 @@ def bags_of(campaign: Campaign) -> list[Path]:
 def points(campaign: Campaign) -> list[dict[str, Any]]:
     """Sweep points: the full grid in file order, or `samples` points of it drawn with the design seed."""
     keys = list(campaign.sweep)
-    grid = list(itertools.product(*(campaign.sweep[k] for k in keys)))
-    if campaign.design == 'random' and campaign.samples < len(grid):
-        picked = sorted(random.Random(campaign.design_seed).sample(range(len(grid)), campaign.samples))
-        grid = [grid[i] for i in picked]
-    return [dict(zip(keys, values, strict=True)) for values in grid]
+    axes = [campaign.sweep[k] for k in keys]
+    total = grid_size(campaign)
+    if campaign.design == 'random' and campaign.samples < total:  # indices of the grid, never the grid itself
+        picked = sorted(random.Random(campaign.design_seed).sample(range(total), campaign.samples))
+        return [dict(zip(keys, _grid_point(axes, i), strict=True)) for i in picked]
+    return [dict(zip(keys, values, strict=True)) for values in itertools.product(*axes)]
+
+
+def _grid_point(axes: list[list[Any]], index: int) -> tuple[Any, ...]:
+    """The `index`th point of itertools.product(*axes) (the last axis varies fastest)."""
+    values = []
+    for axis in reversed(axes):
+        index, position = divmod(index, len(axis))
+        values.append(axis[position])
+    return tuple(reversed(values))
 
 
 def bag_digest(path: Path) -> str:
@@ -141,9 +151,25 @@ def job_key(bag_sha: str, scenario_text: str, seed: int, mode: str, sample: int 
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
+MAX_JOBS = 100_000  # sweep jobs a campaign may plan: each is a run; more is a mistake (or a random design's job)
+
+
+def grid_size(campaign: Campaign) -> int:
+    """How many points the sweep's full grid has."""
+    return math.prod(len(v) for v in campaign.sweep.values())
+
+
 def make_plan(campaign: Campaign) -> Plan:
-    """The sweep's jobs, bag-major, then point, then seed."""
+    """The sweep's jobs, bag-major, then point, then seed; CampaignError before anything is expanded or hashed
+    when they would be more than MAX_JOBS."""
     bags = bags_of(campaign)
+    size = min(campaign.samples, grid_size(campaign)) if campaign.design == 'random' else grid_size(campaign)
+    count = len(bags) * size * len(campaign.seeds)
+    if count > MAX_JOBS:
+        parts = ' x '.join([f'{len(bags)} bags', *(f'{len(v)} {k}' for k, v in campaign.sweep.items()),
+                            f'{len(campaign.seeds)} seeds'])
+        raise CampaignError(f'{campaign.source}: the sweep makes {count:,} jobs ({parts}), more than {MAX_JOBS:,}: '
+                            'give fewer values, or design: {random: {samples: N, seed: S}}')
     plan = Plan(campaign, bags, fingerprints={str(b): bag_digest(b) for b in bags})
     data = scenario_data(campaign.scenario.read_text(encoding='utf-8'))
     texts = [(point, expanded(data, point, campaign.scenario)[0]) for point in points(campaign)]

@@ -86,6 +86,8 @@ def test_ranges_and_the_random_design(corpus: Path) -> None:
     grid = [{BIAS: b, 'faults.bias.start': s} for b in campaign.sweep[BIAS] for s in (1, 2, 3)]
     assert len(chosen) == 7 and all(p in grid for p in chosen)
     assert chosen == [p for p in grid if p in chosen]  # in grid order
+    import random
+    assert chosen == [grid[i] for i in sorted(random.Random(3).sample(range(18), 7))]  # the draw over grid indices
     assert points(load_campaign(path)) == chosen  # the design seed fixes the draw
     plan = make_plan(campaign)
     assert [b.name for b in plan.bags] == ['a.mcap', 'b.mcap']  # a bag named twice runs once
@@ -118,3 +120,29 @@ def test_the_progress_line_counts_jobs_and_estimates_what_is_left(monkeypatch: p
     # 3 jobs ran in 30 s: the 5 left take 50 s
     assert bar.line() == '[############............] 5/10 jobs  1 passed  1 failed  1 error ETA 00:50'
     assert stream.getvalue().endswith(bar.line() + '\x1b[K')
+
+
+def test_a_sweep_too_large_is_refused_before_anything_is_expanded(tmp_path: Path) -> None:
+    """Two ranges of 1000 values make a million jobs: said at once, never expanded (it used to hang)."""
+    import time
+
+    from bagfault.campaign.loader import load_campaign
+    from bagfault.campaign.plan import make_plan
+    from bagfault.errors import CampaignError
+
+    (tmp_path / 'bag.mcap').write_bytes(b'')
+    (tmp_path / 's.yaml').write_text('injector: {id: i, type: imu, input_topic: /imu, output_topic: /imu}\n'
+                                     'faults:\n  - {id: f, injector_id: i, start: 1.0, duration: 1.0, '
+                                     'config: {angular_velocity_z_bias: 0.1}}\n')
+    (tmp_path / 'c.yaml').write_text('campaign: huge\nscenario: s.yaml\nbags: [bag.mcap]\nsweep:\n'
+                                     '  faults.f.config.angular_velocity_z_bias: {range: [0.0, 1.0, 0.001]}\n'
+                                     '  faults.f.start: {range: [1.0, 2.0, 0.001]}\n')
+    began = time.monotonic()
+    campaign = load_campaign(tmp_path / 'c.yaml')
+    with pytest.raises(CampaignError, match=r'makes 1,00[0-9],[0-9]{3} jobs \(1 bags x 100[01] '):
+        make_plan(campaign)
+    assert time.monotonic() - began < 10
+    sampled = load_campaign(tmp_path / 'c.yaml')
+    sampled.design, sampled.samples, sampled.design_seed = 'random', 5, 3
+    plan = make_plan(sampled)  # a random design draws points of the grid without building it
+    assert len(plan.jobs) == 5 and len({tuple(j.values.values()) for j in plan.jobs}) == 5
