@@ -117,6 +117,24 @@ class AssertionSpec:
     path: PathKey = ()
 
 
+class _Index:
+    """A scenario's injectors and faults by id, for the lists they were made from (as they were then)."""
+
+    def __init__(self, injectors: list[InjectorSpec], faults: list[FaultSpec]) -> None:
+        self.lists = (injectors, faults, len(injectors), len(faults))
+        self.injectors: dict[str, InjectorSpec] = {}
+        self.faults: dict[str, FaultSpec] = {}
+        for x in injectors:
+            self.injectors.setdefault(x.id, x)
+        for f in faults:
+            self.faults.setdefault(f.id, f)
+
+    def matches(self, injectors: list[InjectorSpec], faults: list[FaultSpec]) -> bool:
+        """Made from these lists, which have not grown or shrunk since."""
+        return (self.lists[0] is injectors and self.lists[1] is faults and self.lists[2] == len(injectors)
+                and self.lists[3] == len(faults))
+
+
 @dataclass
 class Scenario:
     """A loaded scenario file."""
@@ -135,6 +153,14 @@ class Scenario:
     source: Path | None = None
     text: str = ''
     located: LocatedYaml = field(default_factory=lambda: LocatedYaml(None))
+    _index: _Index | None = field(default=None, repr=False, compare=False)
+
+    def _ids(self) -> _Index:
+        """Injectors and faults by id (the first of a repeated id), made again when the lists change."""
+        index = self._index
+        if index is None or not index.matches(self.injectors, self.faults):
+            index = self._index = _Index(self.injectors, self.faults)
+        return index
 
     @property
     def name(self) -> str:
@@ -142,12 +168,12 @@ class Scenario:
         return self.source.name if self.source else '<scenario>'
 
     def injector(self, injector_id: str) -> InjectorSpec | None:
-        """Injector with this id, if any."""
-        return next((x for x in self.injectors if x.id == injector_id), None)
+        """Injector with this id (the first, if repeated), if any; a lookup by id, whatever the file's size."""
+        return self._ids().injectors.get(injector_id)
 
     def fault(self, fault_id: str) -> FaultSpec | None:
-        """Fault with this id, if any."""
-        return next((x for x in self.faults if x.id == fault_id), None)
+        """Fault with this id (the first, if repeated), if any; a lookup by id, whatever the file's size."""
+        return self._ids().faults.get(fault_id)
 
     def faults_of(self, injector_id: str) -> list[FaultSpec]:
         """Faults owned by one injector, in file order."""
