@@ -18,11 +18,13 @@ Every problem is reported through `problem(path, message)` with its place.
 
 from __future__ import annotations
 
+import functools
 import math
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
+
+import re2  # type: ignore[import-untyped]
 
 from bagfault.fault_manager.correlation import CorrelationConfig, no_warning, parse_correlation
 from bagfault.fault_manager.model import severity_value, valid_code
@@ -103,7 +105,7 @@ class Snapshots:
         if code in self.fault_specific:
             return self.fault_specific[code]
         for pattern, topics in self.patterns:
-            if re.fullmatch(pattern, code):
+            if snapshot_regex(pattern).fullmatch(code):
                 return topics
         return self.default_topics
 
@@ -264,7 +266,7 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
         node = section['correlation']
         config.correlation = parse_correlation(node, (*PREFIX, 'correlation'), problem, warn or no_warning)
     if 'snapshots' in section:
-        config.snapshots = _snapshots(section['snapshots'], (*PREFIX, 'snapshots'), problem)
+        config.snapshots = _snapshots(section['snapshots'], (*PREFIX, 'snapshots'), problem, warn)
     for number, node in enumerate(section.get('clear') or []):
         path = (*PREFIX, 'clear', number)
         if not isinstance(node, dict):
@@ -311,7 +313,7 @@ def _condition(node: object, path: tuple[Any, ...], problem: Problem) -> Conditi
     return Condition(topic, when['field'], code, severity, source, **kwargs) if code else None
 
 
-def _snapshots(node: object, path: tuple[Any, ...], problem: Problem) -> Snapshots:
+def _snapshots(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem | None = None) -> Snapshots:
     if not isinstance(node, dict):
         problem(path, 'must be a mapping')
         return Snapshots()
@@ -337,7 +339,7 @@ def _snapshots(node: object, path: tuple[Any, ...], problem: Problem) -> Snapsho
         else:
             problem((*path, 'fault_specific'), 'must map fault codes to topic lists')
     if 'patterns' in node:
-        values['patterns'] = _snapshot_patterns(node['patterns'] or [], (*path, 'patterns'), problem)
+        values['patterns'] = _snapshot_patterns(node['patterns'] or [], (*path, 'patterns'), problem, warn)
     for key in ('duration_sec', 'duration_after_sec', 'recapture_cooldown_sec'):
         if key in node:
             value = node[key]
@@ -348,7 +350,15 @@ def _snapshots(node: object, path: tuple[Any, ...], problem: Problem) -> Snapsho
     return Snapshots(**values)
 
 
-def _snapshot_patterns(node: object, path: tuple[Any, ...], problem: Problem,
+@functools.lru_cache(maxsize=256)
+def snapshot_regex(pattern: str) -> Any:
+    """A snapshot pattern compiled by RE2: time linear in the code's length whatever the pattern (a backtracking
+    engine can take forever on `(a+)+$`), so no scenario can hang a run; re2.error for what RE2 cannot compile
+    (invalid, or backreferences and lookaround, which need backtracking)."""
+    return re2.compile(pattern)
+
+
+def _snapshot_patterns(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem | None = None,
                        ) -> tuple[tuple[str, tuple[str, ...]], ...]:
     """medkit's `{REGEX: [topics]}` map or a list of `{match: REGEX, topics: [...]}`; kept sorted by regex, as
     medkit's std::map holds them, so the lexicographically first matching regex wins."""
@@ -365,9 +375,10 @@ def _snapshot_patterns(node: object, path: tuple[Any, ...], problem: Problem,
             problem(where, 'must be {match: REGEX, topics: [...]}')
             continue
         try:
-            re.compile(item['match'])
-        except re.error as exc:
-            problem((*where, 'match'), f'bad regular expression: {exc}')
+            snapshot_regex(item['match'])
+        except re2.error as exc:  # medkit (snapshot_capture.cpp) logs an invalid regex and ignores the pattern
+            (warn or problem)((*where, 'match'), f'invalid regular expression {item["match"]!r} ({exc}) is '
+                                                 'ignored, as medkit ignores it')
             continue
         if item['match'] in patterns:
             problem((*where, 'match'), f"duplicate pattern {item['match']!r}")

@@ -200,12 +200,33 @@ def test_correlation_and_clear_in_a_run(tmp_path, bag):
     ("fault_manager: {diagnostics: {codes: {a: 'bad code'}}}", "'bad code' is not a fault code"),
     ('fault_manager: {conditions: [{topic: /imu, when: {field: x}}]}', 'give exactly one of above'),
     ('fault_manager: {bogus: 1}', "unknown fault_manager key 'bogus'"),
-    ('fault_manager: {snapshots: {patterns: [{match: "(", topics: []}]}}', 'bad regular expression'),
 ])
 def test_fault_manager_section_is_validated(section, problem):
     text = 'injector: {id: i, type: imu, input_topic: /a, output_topic: /b}\n' + section + '\n'
     with pytest.raises(ScenarioError, match=problem.replace('(', r'\(')):
         parse_scenario(text)
+
+
+def test_an_invalid_snapshot_regex_is_ignored_with_a_warning_as_medkit_ignores_it():
+    """medkit snapshot_capture.cpp: an invalid regex in the snapshot config is logged and IGNORED; the other
+    patterns still apply. Under --strict the warning is an error."""
+    text = ('injector: {id: i, type: imu, input_topic: /a, output_topic: /b}\n'
+            'fault_manager: {snapshots: {patterns: [{match: "(", topics: [/x]}, {match: "IMU_.*", topics: [/a]}]}}\n')
+    scenario = parse_scenario(text)
+    assert any("invalid regular expression '('" in w and 'ignored, as medkit ignores it' in w for w in scenario.warnings)
+    assert scenario.fault_manager_config.snapshots.topics_for('IMU_DRIFT') == ('/a',)
+    with pytest.raises(ScenarioError, match='invalid regular expression'):
+        parse_scenario(text, strict=True)
+
+
+def test_a_catastrophic_snapshot_regex_matches_in_linear_time():
+    """(a+)+$ against 'aaaa...b' takes exponential time in a backtracking engine (Python's re needs minutes at
+    30 characters); RE2 answers at once, so a scenario cannot hang a run through its snapshot patterns."""
+    text = ('injector: {id: i, type: imu, input_topic: /a, output_topic: /b}\n'
+            'fault_manager: {snapshots: {patterns: {"(A+)+$": [/x]}}}\n')
+    snapshots = parse_scenario(text).fault_manager_config.snapshots
+    assert snapshots.topics_for('A' * 5000 + 'B') == ()  # no match: the defaults (none here)
+    assert snapshots.topics_for('AAAA') == ('/x',)
 
 
 def test_report_block_is_validated():
