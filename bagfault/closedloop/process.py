@@ -102,6 +102,19 @@ def _interruptible_children() -> Iterator[None]:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def _watchdog(leader: int, start: int) -> subprocess.Popen[bytes] | None:
+    """The watchdog of closedloop/watchdog.py for a system's session (None if it cannot start: then only a live
+    bagfault stops the system)."""
+    import sys  # noqa: PLC0415
+
+    try:
+        return subprocess.Popen([sys.executable, '-m', 'bagfault.closedloop.watchdog', str(leader), str(start)],
+                                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                start_new_session=True, close_fds=True)
+    except OSError:
+        return None
+
+
 class SystemProcess:
     """A running system under test with its stdout and stderr in files."""
 
@@ -126,6 +139,7 @@ class SystemProcess:
                                   f'{exc.strerror or exc}') from None
         self.pid = self.popen.pid
         self._known: dict[int, int] = family(self.pid, {})  # the group: the new process at least
+        self._watchdog = _watchdog(self.pid, self._known.get(self.pid, 0))
 
     @property
     def returncode(self) -> int | None:
@@ -169,7 +183,20 @@ class SystemProcess:
             self.ending = 'exited'
         self.popen.wait()
         self._close_logs()
+        self._release_watchdog()
         return self.ending
+
+    def _release_watchdog(self) -> None:
+        """Stopped here: the watchdog has nothing to do."""
+        watchdog, self._watchdog = self._watchdog, None
+        if watchdog is None:
+            return
+        with contextlib.suppress(OSError):
+            assert watchdog.stdin is not None
+            watchdog.stdin.write(b'done\n')
+            watchdog.stdin.close()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            watchdog.wait(timeout=5)
 
     def leftovers(self) -> set[int]:
         """Processes of the system still running (its group and the descendants seen)."""

@@ -344,3 +344,27 @@ faults: []
     assert result.report is not None
     # the listener joined after the bag's description was played and received it from bagfault's history first
     assert result.report['system_under_test']['heard_per_topic'] == {'/robot_description': 1}
+
+
+def test_the_system_and_its_children_end_when_bagfault_is_killed(tester: LoopRunner, example_bag: Path) -> None:
+    """SIGKILL leaves bagfault no chance to stop anything: its watchdog (closedloop/watchdog.py) sees the pipe
+    close and ends the system's whole session, a child it started in the background included."""
+    import signal
+    import time
+
+    token = tester.token()
+    sleeper = f"{sys.executable} -c 'import time; time.sleep(300)' {token}-child"
+    process, _ = tester.start(str(SCENARIO), str(example_bag), '--shell', '--command',
+                              f'{sleeper} & exec {{python}} monitor.py --hardware-id {token}')
+    assert process.stdout is not None
+    assert 'on ROS domain' in process.stdout.readline()  # the system runs
+    deadline = time.monotonic() + 30
+    while len(running_with(token)) < 3 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert len(running_with(token)) >= 3  # bagfault (its --command), the monitor and the background child
+    process.send_signal(signal.SIGKILL)
+    process.wait(timeout=30)
+    deadline = time.monotonic() + 10
+    while running_with(token) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert running_with(token) == []
