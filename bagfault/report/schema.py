@@ -9,7 +9,7 @@ from bagfault.errors import UsageError
 from bagfault.injectors.registry import injector_types
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Sequence
 
 
 def schema_dict(type_name: str | None = None) -> dict[str, Any]:
@@ -30,6 +30,21 @@ def schema_dict(type_name: str | None = None) -> dict[str, Any]:
     }
 
 
+def _limits(minimum: float | None, maximum: float | None, choices: Sequence[str], *, required: bool = False,
+            markdown: bool = False) -> list[str]:
+    """A key's range, choices and whether it is required, as the text tables or the markdown tables say it."""
+    out = []
+    if minimum is not None:
+        out.append(f'{"≥" if markdown else "min"} {minimum:g}')
+    if maximum is not None:
+        out.append(f'{"≤" if markdown else "max"} {maximum:g}')
+    if choices:
+        out.append(' \\| '.join(f'`{c}`' for c in choices) if markdown else 'one of ' + ' | '.join(choices))
+    if required:
+        out.append('required')
+    return out
+
+
 def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str:
     """Human table or JSON of one or all injector types."""
     data: dict[str, Any] = schema_dict(type_name)
@@ -47,15 +62,7 @@ def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str
                 continue
             lines.append('  injector options:' if title == 'options' else '  fault config keys:')
             for field in fields:
-                limits = []
-                if field['min'] is not None:
-                    limits.append(f'min {field["min"]}')
-                if field['max'] is not None:
-                    limits.append(f'max {field["max"]}')
-                if field['choices']:
-                    limits.append('one of ' + ' | '.join(field['choices']))
-                if field['required']:
-                    limits.append('required')
+                limits = _limits(field['min'], field['max'], field['choices'], required=field['required'])
                 extra = f' [{", ".join(limits)}]' if limits else ''
                 default = '' if field['default'] in (None, '') else f' (default {field["default"]})'
                 lines.append(f'    {field["key"]:<36} {field["type"]:<16} {field["description"]}{default}{extra}')
@@ -64,13 +71,7 @@ def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str
 
 
 def _row(field: dict[str, Any]) -> str:
-    limits = []
-    if field['min'] is not None:
-        limits.append(f'≥ {field["min"]}')
-    if field['max'] is not None:
-        limits.append(f'≤ {field["max"]}')
-    if field['choices']:
-        limits.append(' \\| '.join(f'`{c}`' for c in field['choices']))
+    limits = _limits(field['min'], field['max'], field['choices'], markdown=True)
     default = '' if field['default'] in (None, '') else f'`{field["default"]}`'
     required = 'yes' if field['required'] else ''
     text = field['description'].replace('|', '\\|')
@@ -90,9 +91,7 @@ def render_markdown() -> str:
     for section in (*SCENARIO_SECTIONS, *CAMPAIGN_SECTIONS):
         lines += [f'### `{section.where}`', '', section.description, '', HEADER]
         for key in section.keys:
-            limits = [f'≥ {key.minimum:g}'] if key.minimum is not None else []
-            limits += [f'≤ {key.maximum:g}'] if key.maximum is not None else []
-            limits += [' \\| '.join(f'`{c}`' for c in key.choices)] if key.choices else []
+            limits = _limits(key.minimum, key.maximum, key.choices, markdown=True)
             unit = f' ({key.unit})' if key.unit else ''
             default = '' if key.default is None else f'`{key.default}`'
             lines.append(f'| `{key.name}` | {key.type} | {"yes" if key.required else ""} | {default} | '
@@ -230,10 +229,7 @@ def render_sections() -> str:
     for section in (*SCENARIO_SECTIONS, *CAMPAIGN_SECTIONS):
         lines.append(f'{section.where}: {section.description}')
         for key in section.keys:
-            limits = [f'min {key.minimum:g}'] if key.minimum is not None else []
-            limits += [f'max {key.maximum:g}'] if key.maximum is not None else []
-            limits += ['one of ' + ' | '.join(key.choices)] if key.choices else []
-            limits += ['required'] if key.required else []
+            limits = _limits(key.minimum, key.maximum, key.choices, required=key.required)
             extra = f' [{", ".join(limits)}]' if limits else ''
             unit = f' ({key.unit})' if key.unit else ''
             default = '' if key.default is None else f' (default {key.default})'
