@@ -562,3 +562,38 @@ def test_the_output_never_replaces_an_input_given_twice(tmp_path):
         api.run(SCENARIO, [bag, bag], bag)
     assert bag.read_bytes() == before
     assert struct.unpack('<B', before[8:9]) == (1,)  # still an MCAP header record after the magic
+
+
+def test_a_ros1_bag_whose_header_claims_fewer_chunks_than_it_holds(tmp_path, capsys):
+    """The bag header's chunk_count says how many chunk infos the index holds; a reader that trusts a smaller
+    one reads only the first chunks, and the counts it gives come from those chunk infos too. So the chunk
+    records in the file are walked and counted: more than the index lists is an error, never an exit 0 with a
+    part of the bag; --salvage reads the indexed ones and says what it skipped."""
+    from rosbags.rosbag1 import Writer as Ros1Writer
+
+    bag = tmp_path / 'chunked.bag'
+    original = Ros1Writer.__init__
+
+    def small_chunks(self, path, *args, **kwargs):
+        original(self, path, *args, **kwargs)
+        self.chunk_threshold = 16 * 1024  # several chunks in a 2 s bag
+    Ros1Writer.__init__ = small_chunks
+    try:
+        ros1_bag(bag, None)
+    finally:
+        Ros1Writer.__init__ = original
+    data = bytearray(bag.read_bytes())
+    at = data.index(b'chunk_count=') + len(b'chunk_count=')
+    chunks = struct.unpack_from('<I', data, at)[0]
+    assert chunks > 1
+    struct.pack_into('<I', data, at, 1)
+    bag.write_bytes(bytes(data))
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text('injector: {id: i, type: imu, input_topic: /imu, output_topic: /imu_out}\nfaults: []\n')
+    code = main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count('\n') == 1
+    assert f'the bag holds {chunks} chunks and its index lists 1 (its header says chunk_count=1)' in err
+    assert not (tmp_path / 'out.mcap').exists()
+    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--salvage']) == 0
+    assert f'salvage skipped {bag}: the bag holds {chunks} chunks' in capsys.readouterr().err

@@ -22,6 +22,7 @@ from bagfault.engine.routing import build_routing
 from bagfault.engine.run import NullSink, Observer, OutputChannel, Run
 from bagfault.engine.scheduler import seconds_to_ns
 from bagfault.engine.stop import Stopped
+from bagfault.errors import InputError
 from bagfault.events import FaultEvent
 from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import McapSink
@@ -172,6 +173,7 @@ def run_to_file(
                                 start_offset=start_offset, batch=batch, progress=progress, observers=observers,
                                 blackbox_base=output, chunks=chunks)
                 with run:
+                    check_declared(inputs, run, paths, salvage=salvage)
                     sink.flush()  # the copied chunks go to the file while the hash completes, not after it
                     sink.add_metadata('bagfault', origin.result())
                     finish(sink, run)
@@ -181,6 +183,27 @@ def run_to_file(
     if run.stats.input_messages == 0:
         run.notes.append(EMPTY_INPUT)
     return run.result('run', paths, output, seed)
+
+
+def check_declared(inputs: InputSet, run: Run, paths: Sequence[Path], *, salvage: bool) -> None:
+    """The messages read against what the inputs declare (MCAP statistics, ROS 1 index records, rosbag2's
+    metadata.yaml, the rows of a sqlite3 file). Fewer read means part of an input was never read (a chunk left
+    out of the index, a record that swallowed the next, a truncated file): an error, or with `salvage` a
+    warning saying how many are missing. More read than declared loses nothing (a recorder that died before
+    it wrote its final counts): a warning."""
+    declared, read = inputs.message_count, run.stats.input_messages
+    if declared is None or declared == read:
+        return
+    names = ', '.join(str(p) for p in paths)
+    text = f'{names}: the input declares {declared} messages and {read} were read'
+    if read > declared:
+        run.warnings.append(f'{text}: its counts are older than its messages (a recording cut short); every '
+                            'message read is in the output')
+    elif not salvage:
+        raise InputError(f'{text}: part of it was not read (damaged or left out of its index); --salvage writes '
+                         'what can be read and says what is missing')
+    else:
+        run.warnings.append(f'{text}: {declared - read} missing (--salvage)')
 
 
 def finish(sink: McapSink, run: Run) -> None:
@@ -231,6 +254,7 @@ def check_recording(
                 progress(run.stats.input_messages, log_time)
         run.end(run.stats.last_time if run.stats.last_time is not None else 0)
         run.warnings += input_warnings(inputs)
+        check_declared(inputs, run, [path], salvage=salvage)
     run.close(ok=True)
     if run.stats.input_messages == 0:
         run.notes.append('the recording holds no messages')

@@ -34,6 +34,51 @@ READ_ERRORS = (AnyReaderError, ReaderError, TypesysError, SerdeError, AssertionE
                ValueError, KeyError, IndexError, EOFError, struct.error, zlib.error, UnicodeDecodeError, MemoryError)
 
 
+def count_chunk_records(path: Path) -> int | None:
+    """Chunk records (op 0x05) between the bag header and the index, each record's header read and its data
+    skipped; None when the walk does not find the layout (the reader reports that file on its own)."""
+    try:
+        with path.open('rb') as stream:
+            if stream.read(13) != b'#ROSBAG V2.0\n':
+                return None
+            index_pos = None
+            count = 0
+            first = True
+            while True:
+                start = stream.tell()
+                if index_pos is not None and start >= index_pos:
+                    return count
+                raw = stream.read(4)
+                if len(raw) < 4:
+                    return count if index_pos is not None else None
+                header = stream.read(struct.unpack('<I', raw)[0])
+                fields = _fields(header)
+                size = struct.unpack('<I', stream.read(4))[0]
+                op = fields.get(b'op', b'')
+                if first:
+                    first = False
+                    if op != b'\x03' or b'index_pos' not in fields:
+                        return None
+                    index_pos = struct.unpack('<Q', fields[b'index_pos'])[0]
+                elif op == b'\x05':
+                    count += 1
+                stream.seek(size, 1)
+    except (OSError, struct.error):
+        return None
+
+
+def _fields(header: bytes) -> dict[bytes, bytes]:
+    """The name=value fields of a record header."""
+    fields = {}
+    position = 0
+    while position + 4 <= len(header):
+        length = struct.unpack_from('<I', header, position)[0]
+        name, _, value = header[position + 4:position + 4 + length].partition(b'=')
+        fields[name] = value
+        position += 4 + length
+    return fields
+
+
 class Ros1Source:
     """Messages of a ROS 1 bag as ROS 2 CDR, in time order.
 
@@ -63,8 +108,25 @@ class Ros1Source:
             raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({one_line(exc)})') from None
         connections = self._reader.connections
         self.message_count: int | None = sum(c.msgcount for c in connections)
+        self._check_chunks()
         self.start_time = self._reader.start_time if self.message_count else None
         self.end_time = self._reader.end_time - 1 if self.message_count else None
+
+    def _check_chunks(self) -> None:
+        """The chunks the index lists (the header's chunk_count of chunk infos, which the reader trusts) against
+        the chunk records in the file, walked record by record up to the index: a bag holding more chunks than
+        it indexes would be read in part, its own counts agreeing with that part. An error (or with salvage a
+        listed loss: the indexed chunks are read)."""
+        indexed = len(getattr(self._reader.readers[0], 'chunk_infos', ()) or ())
+        found = count_chunk_records(self.path)
+        if found is None or found <= indexed:
+            return
+        text = f'{self.path}: the bag holds {found} chunks and its index lists {indexed} (its header says ' \
+               f'chunk_count={indexed}): the other chunks would not be read'
+        if not self.salvage:
+            self._reader.close()
+            raise InputError(text + ' (--salvage reads the indexed ones and says so)')
+        self.losses.append(text)
 
     def _setup(self) -> None:
         source = self._reader.typestore

@@ -59,6 +59,9 @@ class Rosbag2Source(MergedSource):
             raise
         super().__init__(parts, adjust=self._declared(), ros_distro=distro)
         self.own_warnings += notes
+        claimed = self.metadata.get('message_count')
+        if isinstance(claimed, int) and not isinstance(claimed, bool):
+            self.message_count = claimed  # what metadata.yaml declares: checked against what is read
 
     def _files(self) -> list[Path]:
         if self.path.is_file():
