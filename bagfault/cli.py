@@ -390,7 +390,10 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         where = f'holds from {point.value:g}' if point.value is not None else \
             'never holds' if point.below is not None else 'undecided'
         print(f'breaking point {point.parameter} on {point.bag.name}: {where} ({point.note})')
-    print(f'results   {args.output_dir / "results.parquet"}, {args.output_dir / "results.csv"}')
+    for note in result.notes:
+        print(f'note: {note}')
+    parquet = [str(args.output_dir / 'results.parquet')] if result.parquet else []
+    print(f'results   {", ".join([*parquet, str(args.output_dir / "results.csv")])}')
     print(f'report    {args.output_dir / "report.html"}')
     return EXIT_FAILED if result.failed else EXIT_OK
 

@@ -97,6 +97,15 @@ def _cell(value: Any, kind: str) -> Any:
     return value
 
 
+def parquet_available() -> bool:
+    """True when pyarrow can be imported (the campaign extra)."""
+    try:
+        import pyarrow  # noqa: F401, PLC0415
+    except ImportError:
+        return False
+    return True
+
+
 def write_parquet(table: Table, path: Path) -> None:
     """results.parquet, typed columns (parameters numeric when every value is a number)."""
     try:

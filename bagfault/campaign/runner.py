@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 from bagfault.campaign.edit import expanded, scenario_data
 from bagfault.campaign.engines import make_engine
 from bagfault.campaign.plan import make_plan, scenario_file
-from bagfault.campaign.results import make_table, render_report, write_csv, write_parquet
+from bagfault.campaign.results import make_table, parquet_available, render_report, write_csv, write_parquet
 from bagfault.campaign.search import find_breaking_points
 from bagfault.errors import CampaignError
 from bagfault.io.outputs import write_atomic
@@ -44,6 +44,8 @@ class CampaignResult:
     engine: str
     ran: int  # jobs run now (the others came from DIR/jobs)
     counts: dict[str, int] = field(default_factory=dict)  # sweep jobs by status
+    notes: list[str] = field(default_factory=list)  # what was not written, and why
+    parquet: bool = True  # results.parquet was written (pyarrow is there)
 
     @property
     def failed(self) -> bool:
@@ -190,14 +192,19 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
                        [a.id for a in scenario.assertions])
     description = getattr(engine, 'description', type(engine).__name__)
     _write_scenarios(directory, plan)
-    write_parquet(table, directory / 'results.parquet')
     write_csv(table, directory / 'results.csv')
     described = {**plan.describe(), 'breaking_points': [point.describe() for point in points]}
     write_atomic(directory / 'campaign.json', json.dumps(described, indent=1, sort_keys=True) + '\n')
     write_atomic(directory / 'report.html', render_report(plan, table, points, description))
+    notes = []
+    if parquet_available():
+        write_parquet(table, directory / 'results.parquet')
+    else:  # the jobs ran: their table is in results.csv and the report, whatever is missing here
+        notes.append('results.parquet not written: pyarrow is not installed (pip install "bagfault[campaign]"); '
+                     'results.csv holds the same table')
     rows = table.sweep_rows()
     counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}
-    return CampaignResult(plan, table, points, directory, description, ran, counts)
+    return CampaignResult(plan, table, points, directory, description, ran, counts, notes, not notes)
 
 
 def _write_scenarios(directory: Path, plan: Plan) -> None:

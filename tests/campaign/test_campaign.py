@@ -410,3 +410,25 @@ def test_a_ray_address_where_nothing_answers_is_one_line_and_leaves_nothing(corp
     assert err.startswith('bagfault: error: --ray 127.0.0.1:') and 'no Ray head answers there' in err
     assert len(err.splitlines()) == 1 and 'Traceback' not in err
     assert not (corpus / 'out').exists()
+
+
+def test_without_pyarrow_the_table_and_the_report_are_still_written(corpus: Path) -> None:
+    """The jobs ran: results.csv and report.html hold their table; only results.parquet needs the extra."""
+    path = campaign_file(corpus, f"""
+        campaign: no_arrow
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+        keep: none
+    """)
+    blocked = corpus / 'no_arrow'
+    blocked.mkdir()
+    (blocked / 'pyarrow.py').write_text('raise ImportError("pyarrow is not installed here")\n')
+    env = {**os.environ, 'PYTHONPATH': os.pathsep.join(filter(None, [str(blocked), os.environ.get('PYTHONPATH')]))}
+    done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'campaign', str(path), '-o', str(corpus / 'out'),
+                           '--workers', '1'], env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr
+    assert 'note: results.parquet not written: pyarrow is not installed' in done.stdout
+    assert (corpus / 'out' / 'results.csv').exists() and (corpus / 'out' / 'report.html').exists()
+    assert not (corpus / 'out' / 'results.parquet').exists()
+    assert f'results   {corpus / "out" / "results.csv"}' in done.stdout
