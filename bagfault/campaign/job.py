@@ -29,7 +29,7 @@ def run_job(spec: dict[str, Any]) -> dict[str, Any]:
             result = api.run(scenario, [spec['bag']], output, seed=spec['seed'])
     except Exception as exc:  # noqa: BLE001 - any failure of a job is its row, never the campaign's end
         message = ' '.join(str(exc).split()) or type(exc).__name__
-        return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {},
+        return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {}, 'warnings': [],
                 'seconds': round(time.monotonic() - started, 3), 'output': None}
     origin = result.stats.origin
     assertions = {a.id: {'state': a.state, 'message': a.message, 'value': a.value, 'unit': a.unit,
@@ -42,6 +42,6 @@ def run_job(spec: dict[str, Any]) -> dict[str, Any]:
     failed = [a for a in result.assertions if a.state != 'passed']
     return {'status': 'failed' if failed else 'passed',
             'message': '; '.join(f'{a.id}: {a.message}' for a in failed)[:2000],
-            'assertions': assertions, 'detections': detections,
+            'assertions': assertions, 'detections': detections, 'warnings': list(result.warnings),
             'seconds': round(time.monotonic() - started, 3), 'output': str(output) if output else None}
 

@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from bagfault.campaign.search import BreakingPoint
 
 FIXED = ('job', 'kind', 'bag', 'seed')
-TAIL = ('status', 'message')
+TAIL = ('status', 'message', 'warnings')
 
 
 @dataclass
@@ -42,11 +42,11 @@ class Table:
 
 def bag_name(plan: Plan, bag: Path) -> str:
     """A bag as the table shows it: relative to the campaign file's folder when inside it."""
-    base = plan.campaign.source.parent.resolve() if plan.campaign.source is not None else Path.cwd()
-    try:
-        return str(bag.resolve().relative_to(base))
+    base = plan.campaign.source.parent.absolute() if plan.campaign.source is not None else Path.cwd()
+    try:  # as the campaign names it: a symlinked folder of bags keeps its name
+        return str(bag.absolute().relative_to(base))
     except ValueError:
-        return str(bag.resolve())
+        return str(bag.absolute())
 
 
 def make_table(plan: Plan, done: list[tuple[Job, dict[str, Any], str]], assertions: list[str]) -> Table:
@@ -59,18 +59,19 @@ def make_table(plan: Plan, done: list[tuple[Job, dict[str, Any], str]], assertio
     columns = [*FIXED, *parameters, *TAIL]
     for a in assertions:
         columns += [a, f'{a}.value', f'{a}.unit', f'{a}.t_s']
-    columns += [f'detected.{code}' for code in codes] + ['seconds', 'output', 'key']
+    columns += [f'{code}.confirmed_s' for code in codes] + ['seconds', 'output', 'key']  # (no assertion suffix)
     rows = []
     for job, result, output in done:
         row: dict[str, Any] = {'job': job.index, 'kind': job.kind, 'bag': bag_name(plan, job.bag), 'seed': job.seed}
         row.update({p: job.values.get(p) for p in parameters})
-        row['status'], row['message'] = result['status'], result.get('message', '')
+        row['status'], row['message'] = result['status'], result.get('message') or None
+        row['warnings'] = '; '.join(result.get('warnings') or []) or None  # what the job's run warned about
         for a in assertions:
             got = result.get('assertions', {}).get(a, {})
             row[a], row[f'{a}.value'] = got.get('state'), got.get('value')
             row[f'{a}.unit'], row[f'{a}.t_s'] = got.get('unit') or None, got.get('t_s')
         for code in codes:
-            row[f'detected.{code}'] = result.get('detections', {}).get(code)
+            row[f'{code}.confirmed_s'] = result.get('detections', {}).get(code)
         row['seconds'], row['output'], row['key'] = result.get('seconds'), output or None, job.key
         rows.append(row)
     return Table(columns, rows, parameters, assertions)
@@ -106,8 +107,9 @@ def parquet_available() -> bool:
     return True
 
 
-def write_parquet(table: Table, path: Path) -> None:
-    """results.parquet, typed columns (parameters numeric when every value is a number)."""
+def write_parquet(table: Table, path: Path, metadata: dict[str, str] | None = None) -> None:
+    """results.parquet, typed columns (parameters numeric when every value is a number), and `metadata` (what
+    made it: the campaign, bagfault's version, the scenario's digest) in the file's key-value metadata."""
     try:
         import pyarrow as pa  # noqa: PLC0415
         import pyarrow.parquet as pq  # noqa: PLC0415
@@ -121,7 +123,8 @@ def write_parquet(table: Table, path: Path) -> None:
         arrays.append(pa.array([_cell(v, kind) for v in values], type=types[kind] if column != 'seed' else pa.uint64()))
         fields.append(pa.field(column, arrays[-1].type))
     buffer = pa.BufferOutputStream()
-    pq.write_table(pa.Table.from_arrays(arrays, schema=pa.schema(fields)), buffer)
+    schema = pa.schema(fields, metadata={f'bagfault.{k}': v for k, v in (metadata or {}).items()})
+    pq.write_table(pa.Table.from_arrays(arrays, schema=schema), buffer)
     write_atomic(path, buffer.getvalue().to_pybytes())
 
 

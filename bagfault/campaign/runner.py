@@ -10,6 +10,7 @@ written at the end, each under a temporary name first.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import sys
 import time
@@ -17,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from bagfault import __version__
 from bagfault.campaign.edit import expanded, scenario_data
 from bagfault.campaign.engines import make_engine
 from bagfault.campaign.plan import make_plan, scenario_file
@@ -198,7 +200,9 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     write_atomic(directory / 'report.html', render_report(plan, table, points, description))
     notes = []
     if parquet_available():
-        write_parquet(table, directory / 'results.parquet')
+        made = {'campaign': campaign.name, 'version': __version__,
+                'scenario_sha256': hashlib.sha256(campaign.scenario.read_bytes()).hexdigest()}
+        write_parquet(table, directory / 'results.parquet', made)
     else:  # the jobs ran: their table is in results.csv and the report, whatever is missing here
         notes.append('results.parquet not written: pyarrow is not installed (pip install "bagfault[campaign]"); '
                      'results.csv holds the same table')

@@ -69,9 +69,11 @@ def test_twelve_rows_match_twelve_separate_runs(sweep: Path, tmp_path: Path) -> 
         assert row['drift_detected'] == row['status']
         if detected:
             assert row['drift_detected.value'] == pytest.approx(0.04) and row['drift_detected.unit'] == 's'
-            assert row['detected.IMU_DRIFT'] == pytest.approx(1.04)
+            assert row['IMU_DRIFT.confirmed_s'] == pytest.approx(1.04)
+            assert row['message'] is None  # nothing to say: null, never an empty string beside nulls
         else:
-            assert row['detected.IMU_DRIFT'] is None and 'did not reach CONFIRMED' in row['message']
+            assert row['IMU_DRIFT.confirmed_s'] is None and 'did not reach CONFIRMED' in row['message']
+        assert row['warnings'] is None
         # the same run by hand, from a scenario text written here
         scenario = parse_scenario(SCENARIO % {'bias': repr(row[BIAS])})
         result = api.run(scenario, [sweep / row['bag']], tmp_path / f'{row["job"]}.mcap', seed=row['seed'])
@@ -432,3 +434,34 @@ def test_without_pyarrow_the_table_and_the_report_are_still_written(corpus: Path
     assert (corpus / 'out' / 'results.csv').exists() and (corpus / 'out' / 'report.html').exists()
     assert not (corpus / 'out' / 'results.parquet').exists()
     assert f'results   {corpus / "out" / "results.csv"}' in done.stdout
+
+
+def test_a_jobs_warnings_and_what_made_the_table_are_in_it(corpus: Path) -> None:
+    """A bag without the faulted topic: the run's warning is in the job's row (CSV and Parquet), not only a
+    'failed'; the Parquet file says which campaign, bagfault and scenario made it; a symlinked folder of bags
+    keeps the name the campaign gives it."""
+    import csv
+    import hashlib
+
+    from bagfault import __version__
+
+    (corpus / 'other').mkdir()
+    write_imu_bag(corpus / 'other' / 'odom_only.mcap', 0.0, topic='/odom_imu')
+    (corpus / 'linked').symlink_to(corpus / 'other', target_is_directory=True)
+    path = campaign_file(corpus, f"""
+        campaign: warned
+        scenario: drift.yaml
+        bags: [linked/odom_only.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+        keep: none
+    """)
+    result = api.campaign(path, corpus / 'out', workers=1)
+    (row,) = result.table.rows
+    assert row['bag'] == 'linked/odom_only.mcap'
+    assert 'input topic /imu is not in the bag' in row['warnings']
+    with (corpus / 'out' / 'results.csv').open() as stream:
+        (written,) = list(csv.DictReader(stream))
+    assert written['warnings'] == row['warnings']
+    meta = pq.read_schema(corpus / 'out' / 'results.parquet').metadata
+    assert meta[b'bagfault.campaign'] == b'warned' and meta[b'bagfault.version'] == __version__.encode()
+    assert meta[b'bagfault.scenario_sha256'] == hashlib.sha256((corpus / 'drift.yaml').read_bytes()).hexdigest().encode()

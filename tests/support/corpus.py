@@ -31,8 +31,9 @@ assertions:
 """
 
 
-def write_imu_bag(path: Path, z: float, seconds: float = 4.0) -> Path:
-    """An MCAP of sensor_msgs/Imu at 50 Hz with angular_velocity.z == z, written with mcap and rosbags only."""
+def write_imu_bag(path: Path, z: float, seconds: float = 4.0, topic: str = '/imu') -> Path:
+    """An MCAP of sensor_msgs/Imu at 50 Hz on `topic` with angular_velocity.z == z, written with mcap and rosbags
+    only."""
     ts = get_typestore(Stores.ROS2_JAZZY)
     imu, header, time_, vec, quat = (ts.types[n] for n in (
         'sensor_msgs/msg/Imu', 'std_msgs/msg/Header', 'builtin_interfaces/msg/Time', 'geometry_msgs/msg/Vector3',
@@ -43,7 +44,7 @@ def write_imu_bag(path: Path, z: float, seconds: float = 4.0) -> Path:
         writer = Writer(stream)
         writer.start(profile='ros2', library='tests')
         schema = writer.register_schema('sensor_msgs/msg/Imu', 'ros2msg', text.encode())
-        channel = writer.register_channel('/imu', 'cdr', schema, {})
+        channel = writer.register_channel(topic, 'cdr', schema, {})
         for k in range(int(seconds * RATE_HZ)):
             stamp = START + k * 1_000_000_000 // RATE_HZ
             message = imu(header(time_(*divmod(stamp, 1_000_000_000)), 'imu'), quat(0.0, 0.0, 0.0, 1.0),
