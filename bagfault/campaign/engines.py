@@ -65,6 +65,18 @@ def _without_main() -> Iterator[None]:
             sys.modules['__main__'] = main
 
 
+def cool_down() -> None:
+    """Stop this process's fork server and resource tracker and reap them (the next campaign starts them again).
+    multiprocessing has no public call for it; `_stop` is what its own tests use."""
+    from multiprocessing import forkserver, resource_tracker  # noqa: PLC0415
+
+    for helper in (getattr(forkserver, '_forkserver', None), getattr(resource_tracker, '_resource_tracker', None)):
+        stop = getattr(helper, '_stop', None)
+        if stop is not None:
+            with contextlib.suppress(OSError, ChildProcessError):
+                stop()
+
+
 def warm_up() -> int:
     """Start this process's fork server (bagfault imported) before the first job needs it; its pid."""
     from multiprocessing import forkserver  # noqa: PLC0415
@@ -199,7 +211,9 @@ class LocalEngine:
             pool.shutdown(wait=True, cancel_futures=True)
 
     def close(self) -> None:
-        """Nothing outlives `run`."""
+        """Nothing outlives the campaign: the fork server and multiprocessing's resource tracker are stopped
+        and waited for (left to exit with the campaign's process, they stay zombies where PID 1 reaps none)."""
+        cool_down()
 
 
 class RayEngine:
