@@ -190,6 +190,11 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
     page = Page(f'{c.name}: bagfault campaign')
     parts = _template()
     page.html(str(parts.header(c.name, str(c.scenario), c.mode, len(plan.bags), len(rows), counts, engine, STYLE)))
+    bags = _order([r['bag'] for r in rows])
+    if len(bags) > 1:  # per bag first: a bag that lacks a topic shows here, not as a lower rate of every value
+        lines = [{'label': bag, 'cells': [_passes(group), *(_passes(group, a) for a in table.assertions)]}
+                 for bag in bags for group in [[r for r in rows if r['bag'] == bag]]]
+        page.html(str(parts.rate_table('bag', ['job passed', *table.assertions], lines)))
     for parameter in table.parameters:
         values = _order([r[parameter] for r in rows if parameter in c.sweep])
         if not values:

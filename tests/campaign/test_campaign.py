@@ -88,6 +88,13 @@ def test_the_report_plots_the_pass_rate_known_from_the_thresholds(sweep: Path, t
     assert (passed['x'], passed['y']) == ([0.05, 0.09, 0.2], [0.0, 50.0, 100.0])
     body = rendered(sweep / 'one' / 'report.html', tmp_path / 'profile')
     assert body['errors'] == '0' and int(body['figures']) == len(drawn)
+    # per bag, before any parameter: a passes at 0.09 and 0.2 (4 of 6 jobs), b only at 0.2 (2 of 6)
+    import re
+    html = (sweep / 'one' / 'report.html').read_text()
+    table_of_bags = html[html.index('Pass rate against <code>bag</code>'):]
+    table_of_bags = table_of_bags[:table_of_bags.index('</table>')]
+    rows = re.findall(r'<td class="l">([^<]+)</td><td[^>]*>(\d+)% <span class="muted">\((\d+)/(\d+)\)', table_of_bags)
+    assert rows == [('bags/a.mcap', '67', '4', '6'), ('bags/b.mcap', '33', '2', '6')]
 
 
 def test_a_job_writes_what_bagfault_run_writes_by_hand(sweep: Path, tmp_path: Path) -> None:
