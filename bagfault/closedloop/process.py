@@ -167,9 +167,9 @@ class SystemProcess:
             self.watch()
         began = time.monotonic()
         for sig, name in ((signal.SIGINT, 'SIGINT'), (signal.SIGTERM, 'SIGTERM'), (signal.SIGKILL, 'SIGKILL')):
-            remaining = self.leftovers()
             main_running = self.alive()
-            if not remaining and not main_running:
+            remaining = self.leftovers() | ({self.pid} if main_running else set())  # (see _wait)
+            if not remaining:
                 break
             if main_running:
                 self.ending = name  # type: ignore[assignment]
@@ -226,8 +226,10 @@ class SystemProcess:
     def _wait(self, timeout: float) -> None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            self.popen.poll()  # reap the main process so it leaves the table
-            if not self.leftovers():
+            # the main process runs until poll() reaps it, whatever /proc says meanwhile: a process whose main
+            # thread has ended while others still shut down shows as a zombie there (seen: SIGTERM sent 0.2 s
+            # after SIGINT to a node that was still stopping on its own)
+            if self.popen.poll() is not None and not self.leftovers():
                 return
             time.sleep(0.02)
 
