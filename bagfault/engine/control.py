@@ -1,6 +1,6 @@
 """Fault changes asked from outside a running pass (a Foxglove parameter edit during `play`).
 
-The asker's thread checks a change with the schema at once (`check_change`,
+The asker's thread checks a change with the schema at once (`FaultState.check`,
 the same check as live parameters) and queues it; the pipeline applies
 queued changes between two messages, at the bag time of the next one, as
 `manual` fault events, so the output and the oracles see exactly when a
@@ -28,11 +28,6 @@ class FaultChange:
     value: Any
 
 
-def check_change(state: FaultState, fault_id: str, key: str | None, value: object) -> Any:
-    """The value as it will be applied; FieldValueError with the schema's reason otherwise."""
-    return state.check(fault_id, key, value)
-
-
 class FaultControl:
     """A thread-safe queue of checked changes for the faults of one `FaultState` (which lasts across passes)."""
 
@@ -43,7 +38,7 @@ class FaultControl:
 
     def ask(self, fault_id: str, key: str | None, value: object) -> Any:
         """Check and queue a change; returns the value as it will be applied."""
-        checked = check_change(self.state, fault_id, key, value)
+        checked = self.state.check(fault_id, key, value)
         self._queue.put(FaultChange(fault_id, key, checked))
         return checked
 

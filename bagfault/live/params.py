@@ -24,7 +24,6 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from bagfault.engine.control import check_change
 from bagfault.errors import FieldValueError, LiveError
 from bagfault.injectors.registry import get_injector_type
 
@@ -148,7 +147,7 @@ class ControlledFaults:
         return self.control.state
 
     def check_config(self, fault_id: str, key: str, value: object) -> Any:
-        return check_change(self.control.state, fault_id, key, value)
+        return self.control.state.check(fault_id, key, value)
 
     def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None:
         self.control.ask(fault_id, None, active)
