@@ -21,7 +21,7 @@ from bagfault.engine.result import RunResult
 from bagfault.engine.scheduler import Activation
 from bagfault.engine.stop import StopFlag
 from bagfault.errors import BagfaultError, Problem, ScenarioError, UsageError
-from bagfault.io.outputs import check_output
+from bagfault.io.outputs import Protected, check_derived, check_output
 from bagfault.io.recover import Recovered, partial_of, requested_name
 from bagfault.io.recover import recover as copy_readable
 from bagfault.scenario import Scenario, load_scenario
@@ -69,11 +69,16 @@ def _paths(inputs: Sequence[str | Path]) -> list[Path]:
     return paths
 
 
-def _check_output(output: Path, what: str, inputs: Sequence[Path], scenario: Scenario | None) -> None:
-    protected = [('the input', p) for p in inputs]
+def _check_output(output: Path, what: str, inputs: Sequence[Path], scenario: Scenario | None, *,
+                  force: bool = False, msg_paths: Sequence[str | Path] = ()) -> None:
+    """Before anything runs: the output, and the black boxes named after it, replace nothing they must not."""
+    pairs = [('the input', p) for p in inputs]
     if scenario is not None and scenario.source is not None:
-        protected.append(('the scenario', scenario.source))
-    check_output(output, what, protected)
+        pairs.append(('the scenario', scenario.source))
+    pairs += [('the --msg-path', Path(p)) for p in msg_paths]
+    protected = Protected.of(pairs)
+    check_output(output, what, protected, force=force)
+    check_derived(output, f'{output.stem}.blackbox.*.mcap', f'a black box of {output}', protected, force=force)
 
 
 def _activations(scenario: Scenario, texts: Sequence[str | Activation]) -> list[Activation]:
@@ -105,6 +110,7 @@ def run(
     salvage: bool = False,
     msg_paths: Sequence[str | Path] = (),
     chunk_copy: bool = True,
+    force: bool = False,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP.
 
@@ -112,11 +118,12 @@ def run(
     detect (CRCs, record lengths, impossible rows) stops the run; with `salvage` what can be read is copied
     and every skipped part is a warning. With `chunk_copy` (a single MCAP input), chunks nothing touches
     are copied as they are; False takes the reference path that decompresses and rewrites every chunk.
+    An existing output (or black box) that bagfault did not write is refused unless `force`.
     """
     loaded = scenario_of(scenario)
     paths = _paths(inputs)
     out = Path(output)
-    _check_output(out, 'output', paths, loaded)
+    _check_output(out, 'output', paths, loaded, force=force, msg_paths=msg_paths)
     return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
                        start_offset=_seconds('--start', start_offset), compression=compression, batch=batch,
                        progress=progress, observers=observers, salvage=salvage,
@@ -148,6 +155,7 @@ def proxy(
     stop: StopFlag | None = None,
     ros_args: Sequence[str] = (),
     foxglove: str | None = None,
+    force: bool = False,
 ) -> RunResult:
     """Live proxy (`/x_raw` -> faults -> `/x`) until SIGINT/SIGTERM or `stop.set()`; needs rclpy.
 
@@ -161,7 +169,7 @@ def proxy(
     loaded = scenario_of(scenario)
     out = Path(record) if record is not None else None
     if out is not None:
-        _check_output(out, 'recording', [], loaded)
+        _check_output(out, 'recording', [], loaded, force=force)
     return run_proxy(loaded, seed=seed_of(loaded, seed), record=out, use_sim_time=use_sim_time,
                      stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args), foxglove=foxglove)
 
@@ -184,6 +192,7 @@ def play(
     clock_hz: float = 100.0,
     ros_args: Sequence[str] = (),
     foxglove: str | None = None,
+    force: bool = False,
 ) -> RunResult:
     """Publish bags on their topics through the scenario's faults (a plain player without one); needs rclpy,
     but for `foxglove` ('HOST:PORT'), which shows the play in Foxglove with its faults as parameters and
@@ -205,7 +214,7 @@ def play(
         raise UsageError(f'--rate {rate:g}: must be above 0')
     out = Path(record) if record is not None else None
     if out is not None:
-        _check_output(out, 'recording', paths, loaded)
+        _check_output(out, 'recording', paths, loaded, force=force)
     if not (math.isfinite(clock_hz) and 0 < clock_hz <= 10_000):
         raise UsageError(f'--clock {clock_hz:g}: must be a rate in Hz above 0, at most 10000')
     mapped = []
@@ -231,6 +240,7 @@ def record(
     use_sim_time: bool = False,
     stop: StopFlag | None = None,
     ros_args: Sequence[str] = (),
+    force: bool = False,
 ) -> RecordResult:
     """Record live topics (or all with `every`) into an MCAP until `duration`, a signal or `stop.set()`."""
     from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
@@ -239,7 +249,7 @@ def record(
     from bagfault.live.recorder import run_record  # noqa: PLC0415
 
     out = Path(output)
-    _check_output(out, 'output', [], None)
+    _check_output(out, 'output', [], None, force=force)
     if duration is not None and not (math.isfinite(duration) and duration > 0):
         raise UsageError(f'--duration {duration:g}: must be above 0')
     if not topics and not every:
@@ -260,6 +270,7 @@ def test(
     keep_logs: str | Path | None = None,
     stop: StopFlag | None = None,
     foxglove: str | None = None,
+    force: bool = False,
 ) -> RunResult:
     """Closed loop: start the scenario's system under test on a private ROS domain, play the inputs (default:
     the scenario's `bags`) into it through the faults on sim time, record it, judge it, stop it; needs rclpy.
@@ -290,7 +301,7 @@ def test(
                                             for n in range(1, repeat + 1)]
         for path in outputs:
             assert path is not None
-            _check_output(path, 'recording', paths, loaded)
+            _check_output(path, 'recording', paths, loaded, force=force)
     logs = Path(keep_logs) if keep_logs is not None else None
     flag = stop if stop is not None else StopFlag()
     results = []
@@ -320,17 +331,18 @@ def system_of(scenario: Scenario, overrides: Mapping[str, object]) -> SystemUnde
     return system
 
 
-def recover(recording: str | Path, output: str | Path | None = None) -> Recovered:
+def recover(recording: str | Path, output: str | Path | None = None, *, force: bool = False) -> Recovered:
     """A live recording cut short by a kill made a valid MCAP: `recording` is the partial file or the name
     that was requested (its `.NAME.*.partial` is found); `output` defaults to that requested name."""
     source = partial_of(Path(recording))
     out = Path(output) if output is not None else requested_name(source)
-    check_output(out, 'output', [('the recording', source)])
+    check_output(out, 'output', [('the recording', source)], force=force)
     return copy_readable(source, out)
 
 
 def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int | None = None,
-             ray: str | None = None, resume: bool = False, progress: JobProgress | None = None) -> CampaignResult:
+             ray: str | None = None, resume: bool = False, progress: JobProgress | None = None,
+             force: bool = False) -> CampaignResult:
     """Run a campaign file's jobs (bag x sweep point x seed, and the search) on a local pool of `workers`
     processes (default: one per core) or, with `ray` ('' for a local instance, or a cluster address), as Ray
     tasks; results, tables and report in `directory`."""
@@ -340,7 +352,8 @@ def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int
     if workers is not None and workers < 1:
         raise UsageError(f'--workers {workers}: must be 1 or more')
     loaded = file if not isinstance(file, (str, Path)) else load_campaign(file)
-    return run_campaign(loaded, Path(directory), workers=workers, ray=ray, resume=resume, progress=progress)
+    return run_campaign(loaded, Path(directory), workers=workers, ray=ray, resume=resume, progress=progress,
+                        force=force)
 
 
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:

@@ -43,7 +43,7 @@ def _parser() -> argparse.ArgumentParser:
     run = sub.add_parser('run', help='inject faults into bags, write an output MCAP')
     run.add_argument('scenario', type=Path)
     run.add_argument('inputs', type=Path, nargs='+', metavar='INPUT')
-    run.add_argument('-o', '--output', type=Path, required=True)
+    run.add_argument('-o', '--output', type=output_file, required=True)
     run.add_argument('--seed', type=int, default=None)
     run.add_argument('--activate', action='append', default=[], metavar='FAULT[@START[+DURATION]]',
                      help='activate a fault offline (seconds from bag time zero); repeatable')
@@ -83,8 +83,9 @@ def _parser() -> argparse.ArgumentParser:
                                    '       bagfault latency validate ARCH.yaml')
     latency.add_argument('items', nargs='+', metavar='ARG', help='ARCH.yaml BAG..., or validate ARCH.yaml')
     latency.add_argument('--path', metavar='NAME', help='only this named path')
-    latency.add_argument('--json', type=Path, metavar='F')
-    latency.add_argument('--html', type=Path, metavar='F')
+    latency.add_argument('--json', type=output_file, metavar='F')
+    latency.add_argument('--html', type=output_file, metavar='F')
+    _force_option(latency)
     latency.add_argument('--stamp-origin', action='store_true',
                          help="measure from the first message's header.stamp instead of its receive time")
 
@@ -92,7 +93,7 @@ def _parser() -> argparse.ArgumentParser:
                            usage='bagfault proxy SCENARIO [--record OUT.mcap] [--seed N] [--use-sim-time] [reports] '
                                  '[--ros-args -r __node:=NAME -r __ns:=/NS -r FROM:=TO -p FAULT.active:=true ...]')
     proxy.add_argument('scenario', type=Path)
-    proxy.add_argument('--record', type=Path, metavar='OUT.mcap', help='record raw and faulty topics and events')
+    proxy.add_argument('--record', type=output_file, metavar='OUT.mcap', help='record raw and faulty topics and events')
     proxy.add_argument('--seed', type=int, default=None)
     proxy.add_argument('--use-sim-time', action='store_true', help='follow /clock (scheduler starts with it)')
     proxy.add_argument('--foxglove', nargs='?', const='', default=None, metavar='HOST:PORT',
@@ -108,7 +109,7 @@ def _parser() -> argparse.ArgumentParser:
     play.add_argument('--clock', type=float, nargs='?', const=100.0, default=None, metavar='HZ',
                       help='publish /clock with the bag time (at HZ while waiting, default 100)')
     play.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
-    play.add_argument('--record', type=Path, metavar='OUT.mcap', help='record what was published and the events')
+    play.add_argument('--record', type=output_file, metavar='OUT.mcap', help='record what was published and the events')
     play.add_argument('--seed', type=int, default=None)
     play.add_argument('--delay', type=float, default=0.5, metavar='SECONDS',
                       help='wait before the first message so subscribers can connect (default 0.5), then until '
@@ -128,7 +129,8 @@ def _parser() -> argparse.ArgumentParser:
                             usage='bagfault record (TOPIC... | --all) -o OUT.mcap [--duration S]')
     record.add_argument('topics', nargs='*', metavar='TOPIC')
     record.add_argument('--all', action='store_true', help='every topic, including ones that appear later')
-    record.add_argument('-o', '--output', type=Path, required=True)
+    record.add_argument('-o', '--output', type=output_file, required=True)
+    _force_option(record)
     record.add_argument('--duration', type=float, default=None, metavar='S', help='stop after S seconds')
     record.add_argument('--use-sim-time', action='store_true', help='stamp messages with /clock time')
 
@@ -138,7 +140,7 @@ def _parser() -> argparse.ArgumentParser:
                                 '[--keep-logs DIR] [reports] [system options]')
     test.add_argument('scenario', type=Path)
     test.add_argument('inputs', type=Path, nargs='*', metavar='BAG', help="bags (default: the scenario's `bags`)")
-    test.add_argument('-o', '--output', type=Path, metavar='OUT.mcap',
+    test.add_argument('-o', '--output', type=output_file, metavar='OUT.mcap',
                       help='one recording on bag time: played streams, events, what the system published')
     test.add_argument('--rate', type=float, default=1.0, help='playback speed factor (default 1.0)')
     test.add_argument('--repeat', type=int, default=1, metavar='N', help='run N times; pass rates per assertion')
@@ -167,6 +169,7 @@ def _parser() -> argparse.ArgumentParser:
     campaign.add_argument('campaign', type=Path, metavar='FILE')
     campaign.add_argument('-o', '--output-dir', type=Path, metavar='DIR',
                           help='results.parquet, results.csv, campaign.json, report.html, jobs/, outputs/')
+    _force_option(campaign)
     campaign.add_argument('--workers', type=int, default=None, metavar='N',
                           help='jobs at a time (default: one per core; with --ray: all the cluster takes)')
     campaign.add_argument('--ray', nargs='?', const='', default=None, metavar='ADDRESS',
@@ -178,7 +181,9 @@ def _parser() -> argparse.ArgumentParser:
     recover = sub.add_parser('recover', help='make a recording cut short by a kill a valid MCAP again')
     recover.add_argument('recording', type=Path, metavar='FILE',
                          help='the partial file (.NAME.*.partial), or the name that was requested')
-    recover.add_argument('-o', '--output', type=Path, default=None, help='default: the name that was requested')
+    recover.add_argument('-o', '--output', type=output_file, default=None,
+                         help='default: the name that was requested')
+    _force_option(recover)
 
     demo = sub.add_parser('demo', help='run the embedded demo bag and scenario')
     demo.add_argument('-o', '--output-dir', type=Path, default=Path('bagfault_demo'), metavar='DIR')
@@ -186,13 +191,26 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def output_file(text: str) -> Path:
+    """An output file name: one that names a folder (`out/`) is refused, not turned into a file `out`."""
+    if not text or text.endswith(('/', os.sep)) or text in ('.', '..'):
+        raise argparse.ArgumentTypeError(f'{text!r} names a folder; give a file name')
+    return Path(text)
+
+
+def _force_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--force', action='store_true',
+                        help='replace existing output files that bagfault did not write (never an input)')
+
+
 def _report_options(parser: argparse.ArgumentParser) -> None:
     _strict_option(parser)
-    parser.add_argument('--report', type=Path, metavar='R.md', help='markdown report')
-    parser.add_argument('--json', type=Path, metavar='R.json',
+    _force_option(parser)
+    parser.add_argument('--report', type=output_file, metavar='R.md', help='markdown report')
+    parser.add_argument('--json', type=output_file, metavar='R.json',
                         help='machine-readable report (docs/reference/report.md)')
-    parser.add_argument('--junit', type=Path, metavar='R.xml', help='JUnit XML, one testcase per assertion')
-    parser.add_argument('--html', type=Path, metavar='R.html', help='self-contained HTML report with plots')
+    parser.add_argument('--junit', type=output_file, metavar='R.xml', help='JUnit XML, one testcase per assertion')
+    parser.add_argument('--html', type=output_file, metavar='R.html', help='self-contained HTML report with plots')
 
 
 def _salvage_option(parser: argparse.ArgumentParser) -> None:
@@ -213,7 +231,8 @@ def _reports(args: argparse.Namespace) -> ReportPaths:
     from bagfault.report.files import ReportPaths  # noqa: PLC0415
 
     return ReportPaths(markdown=getattr(args, 'report', None), json=getattr(args, 'json', None),
-                       junit=getattr(args, 'junit', None), html=getattr(args, 'html', None))
+                       junit=getattr(args, 'junit', None), html=getattr(args, 'html', None),
+                       force=getattr(args, 'force', False))
 
 
 def _protected(**paths: Path | Sequence[Path] | None) -> list[tuple[str, Path]]:
@@ -241,7 +260,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from bagfault.progress import ProgressBar  # noqa: PLC0415
 
     reports = _reports(args)
-    reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
+    reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output,
+                             **{'--msg-path': args.msg_path}))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
     bar = ProgressBar()
     collectors = reports.collectors()
@@ -249,7 +269,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         result = api.run(
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
             start_offset=args.start, compression=args.compression, progress=bar, observers=collectors,
-            salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy,
+            salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy, force=args.force,
         )
     finally:
         bar.close()
@@ -261,7 +281,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from bagfault.progress import ProgressBar  # noqa: PLC0415
 
     reports = _reports(args)
-    reports.check(_protected(recording=args.recording, scenario=args.scenario))
+    reports.check(_protected(recording=args.recording, scenario=args.scenario, **{'--msg-path': args.msg_path}))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
     bar = ProgressBar()
     collectors = reports.collectors()
@@ -280,7 +300,7 @@ def _cmd_proxy(args: argparse.Namespace) -> int:
     reports.check(_protected(scenario=args.scenario, recording=args.record))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
     result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time,
-                       ros_args=args.ros_args, foxglove=args.foxglove)
+                       ros_args=args.ros_args, foxglove=args.foxglove, force=args.force)
     return _finish(reports, result)
 
 
@@ -300,7 +320,7 @@ def _cmd_play(args: argparse.Namespace) -> int:
                       record=args.record, seed=args.seed, delay=args.delay, wait_for=args.wait_for, remap=args.remap,
                       topics=args.topics, start_offset=args.start_offset,
                       clock_hz=args.clock if args.clock is not None else 100.0, ros_args=args.ros_args,
-                      foxglove=args.foxglove)
+                      foxglove=args.foxglove, force=args.force)
     return _finish(reports, result)
 
 
@@ -308,7 +328,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
 
     result = api.record(args.topics, args.output, every=args.all, duration=args.duration,
-                        use_sim_time=args.use_sim_time, ros_args=args.ros_args)
+                        use_sim_time=args.use_sim_time, ros_args=args.ros_args, force=args.force)
     for topic, count in sorted(result.counts.items()):
         print(f'  {count:>9}  {topic}')
     for topic in result.missing:
@@ -357,7 +377,8 @@ def _cmd_test(args: argparse.Namespace) -> int:
     reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
     result = api.test(scenario, args.inputs, args.output, system=_system_overrides(args), seed=args.seed,
-                      rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs, foxglove=args.foxglove)
+                      rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs, foxglove=args.foxglove,
+                      force=args.force)
     return _finish(reports, result)
 
 
@@ -376,7 +397,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         raise UsageError('campaign: -o DIR is required (or --dry-run)')
     try:
         result = api.campaign(campaign, args.output_dir, workers=args.workers, ray=args.ray, resume=args.resume,
-                              progress=JobProgress())
+                              progress=JobProgress(), force=args.force)
     except KeyboardInterrupt:
         print(f'bagfault: interrupted; finished jobs are kept in {args.output_dir / "jobs"}, --resume continues',
               file=sys.stderr)
@@ -401,7 +422,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
 def _cmd_recover(args: argparse.Namespace) -> int:
     from bagfault import api  # noqa: PLC0415
 
-    done = api.recover(args.recording, args.output)
+    done = api.recover(args.recording, args.output, force=args.force)
     state = 'complete (nothing was lost)' if done.complete else f'cut short ({done.stopped})'
     print(f'{done.source}: {state}')
     print(f'recovered {done.messages} messages on {done.channels} channels into {done.output}')
@@ -482,7 +503,8 @@ def _cmd_latency(args: argparse.Namespace) -> int:
     bags = [Path(item) for item in items[1:]]
     for option, path in (('--json', args.json), ('--html', args.html)):
         if path is not None:
-            check_output(path, f'{option} report', _protected(architecture=Path(items[0]), input=bags))
+            check_output(path, f'{option} report', _protected(architecture=Path(items[0]), input=bags),
+                         force=args.force)
     report = measure(items[0], items[1:], path=args.path, stamp_origin=args.stamp_origin)
     print(render_text(report))
     if args.json:

@@ -25,7 +25,7 @@ from bagfault.campaign.plan import make_plan, scenario_file
 from bagfault.campaign.results import make_table, parquet_available, render_report, write_csv, write_parquet
 from bagfault.campaign.search import find_breaking_points
 from bagfault.errors import CampaignError
-from bagfault.io.outputs import write_atomic
+from bagfault.io.outputs import Protected, check_output, write_atomic
 from bagfault.progress import _clock
 
 if TYPE_CHECKING:
@@ -105,6 +105,9 @@ class JobProgress:
             self.stream.flush()
 
 
+TABLES = ('results.csv', 'results.parquet', 'campaign.json', 'report.html')  # what a campaign writes at the top
+
+
 class _Store:
     """DIR/jobs: finished results by key; DIR/outputs: the kept output files."""
 
@@ -115,14 +118,26 @@ class _Store:
         self.outputs = directory / 'outputs'
         self.results: dict[str, dict[str, Any]] = {}
 
-    def check(self, resume: bool) -> None:
-        """A folder, and one without results unless resuming."""
+    def check(self, resume: bool, *, force: bool = False) -> None:
+        """A folder, one without results unless resuming, and whose files replace nothing the campaign reads
+        nor (unless `force`) files bagfault did not write."""
         if self.directory.exists() and not self.directory.is_dir():
             raise CampaignError(f'{self.directory}: not a folder (-o names the campaign folder)')
         stored = list(self.jobs.glob('*.json')) if self.jobs.is_dir() else []
         if stored and not resume:
             raise CampaignError(f'{self.directory}: holds {len(stored)} results of a campaign already; '
                                 f'--resume continues it (reruns only what is missing or changed), or choose another -o')
+        campaign = self.plan.campaign
+        read = [('the campaign file', campaign.source)] if campaign.source is not None else []
+        read += [('the scenario', campaign.scenario), *(('the bag', bag) for bag in self.plan.bags)]
+        protected = Protected.of(read)
+        where = self.directory.resolve()
+        for name, path in read:
+            if path.is_dir() and (where == path.resolve() or path.resolve() in where.parents):
+                raise CampaignError(f'{self.directory}: the campaign folder would be inside {name} {path}; '
+                                    'choose another -o')
+        for name in TABLES if self.directory.is_dir() else ():
+            check_output(self.directory / name, 'a campaign file', protected, force=force)
 
     def open(self, resume: bool) -> None:
         """Make the folders; load what is there when resuming."""
@@ -160,11 +175,11 @@ class _Store:
 
 
 def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = None, ray: str | None = None,
-                 resume: bool = False, progress: JobProgress | None = None) -> CampaignResult:
+                 resume: bool = False, progress: JobProgress | None = None, force: bool = False) -> CampaignResult:
     """Every job of the plan (and the search rounds), then the tables and the report in `directory`."""
     plan = make_plan(campaign)
     store = _Store(directory, plan)
-    store.check(resume)
+    store.check(resume, force=force)
     bar = progress or JobProgress(enabled=False)
     ran = 0
     # the engine before any folder is made: an engine that cannot start leaves nothing

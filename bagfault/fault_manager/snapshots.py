@@ -16,9 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bagfault.errors import OutputError
 from bagfault.io.mcap_sink import McapSink
-from bagfault.io.outputs import written_by_bagfault
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -146,9 +144,6 @@ class SnapshotRecorder:
         number = self._numbers.get(capture.code, 0) + 1
         self._numbers[capture.code] = number
         path = self.blackbox_base.parent / f'{self.blackbox_base.stem}.blackbox.{capture.code}.{number}.mcap'
-        if path.exists() and not written_by_bagfault(path):  # the name derives from -o: it can be anyone's file
-            raise OutputError(f'{path}: a black box would replace this file, which bagfault did not write; '
-                              'nothing replaced (choose another -o name or move the file)')
         sink = McapSink(path)
         channels = {}
         for topic in capture.topics:

@@ -1,37 +1,127 @@
-"""Output paths that are safe to write, and writes that never leave half a file under the requested name."""
+"""Output paths that are safe to write, and writes that never leave half a file under the requested name.
+
+An output may not be anything the command reads, by file identity (device and inode, so neither a hard
+link nor a symlink gets past): an input, a file inside an input folder, an SQLite input's `-wal`, `-shm`
+and `-journal` sidecars (a stray `-wal` beside a database is replayed into it by the next reader), the
+scenario, a `--msg-path` file. It must be a regular file or a new name, and an existing file must be one
+bagfault wrote (its header or first line says so), unless the caller forces it.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bagfault.errors import OutputError
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterable, Sequence
+
+SIDECARS = ('-wal', '-shm', '-journal')
+FOLDER_FILES_MAX = 100_000  # files of a protected folder looked at (a msg path is a tree)
 
 
-def check_output(path: Path, what: str, protected: Sequence[tuple[str, Path]]) -> None:
-    """Refuse an output that is a folder, lands in a missing folder, or would replace or go inside a protected path.
+@dataclass
+class Protected:
+    """What a command reads or writes besides one output: names and file identities."""
 
-    `protected` names what the command reads or writes besides this output
-    (inputs, the scenario, the main output, other reports).
+    named: list[tuple[str, Path]] = field(default_factory=list)
+    identities: dict[tuple[int, int], tuple[str, Path]] = field(default_factory=dict)
+    names: dict[Path, tuple[str, Path]] = field(default_factory=dict)  # resolved names, existing or not
+
+    @classmethod
+    def of(cls, pairs: Iterable[tuple[str, Path]]) -> Protected:
+        """Each (what, path): the path, the files of a folder, an SQLite file's sidecars."""
+        out = cls()
+        for name, path in pairs:
+            out.named.append((name, path))
+            out._add(name, path, path)
+            if path.is_dir():
+                for count, inner in enumerate(_walk(path)):
+                    if count >= FOLDER_FILES_MAX:
+                        break
+                    out._add(name, path, inner)
+            elif path.is_file():
+                for suffix in SIDECARS:
+                    out._add(f"{name}'s SQLite sidecar", path, path.with_name(path.name + suffix))
+        return out
+
+    def _add(self, name: str, top: Path, path: Path) -> None:
+        with contextlib.suppress(OSError, RuntimeError):
+            self.names.setdefault(path.resolve(), (name, path))
+        with contextlib.suppress(OSError):
+            info = path.stat()
+            self.identities.setdefault((info.st_dev, info.st_ino), (name, top if path == top else path))
+
+
+def _walk(folder: Path) -> Iterable[Path]:
+    for root, _dirs, files in os.walk(folder):
+        for name in files:
+            yield Path(root) / name
+
+
+def check_output(path: Path, what: str, protected: Sequence[tuple[str, Path]] | Protected, *,
+                 force: bool = False) -> None:
+    """Refuse an output that is a folder or not a regular file, lands in a missing folder, is (or is inside)
+    something protected, or replaces an existing file bagfault did not write (unless `force`).
+
+    `protected` names what the command reads or writes besides this output (inputs, the scenario, the
+    main output, other reports).
     """
+    guard = protected if isinstance(protected, Protected) else Protected.of(protected)
     if path.is_dir():
         raise OutputError(f'{path}: {what} is a directory; give a file name')
     folder = path.parent if str(path.parent) else Path('.')
     if not folder.is_dir():
         raise OutputError(f'{path}: {what}: folder {folder} does not exist')
-    resolved = path.resolve()
-    for name, other in protected:
-        target = other.resolve()
-        if resolved == target:
-            raise OutputError(f'{path}: {what} would replace {name} {other}; choose another name')
-        if target.is_dir() and target in resolved.parents:
-            raise OutputError(f'{path}: {what} would be written inside {name} {other}; choose another folder')
+    try:
+        resolved = path.resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise OutputError(f'{path}: {what}: cannot resolve the name ({exc})') from None
+    hit = guard.names.get(resolved)
+    if hit is not None:
+        raise OutputError(f'{path}: {what} would replace {hit[0]} {hit[1]}; choose another name')
+    for name, other in guard.named:
+        with contextlib.suppress(OSError, RuntimeError):
+            target = other.resolve()
+            if target.is_dir() and target in resolved.parents:
+                raise OutputError(f'{path}: {what} would be written inside {name} {other}; choose another folder')
+    try:
+        info = path.stat()
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise OutputError(f'{path}: {what}: cannot look at the existing file: {exc.strerror}') from None
+    hit = guard.identities.get((info.st_dev, info.st_ino))
+    if hit is not None:
+        raise OutputError(f'{path}: {what} is the same file as {hit[0]} {hit[1]}; choose another name')
+    if not stat.S_ISREG(info.st_mode):
+        raise OutputError(f'{path}: {what} exists and is not a regular file ({_kind(info.st_mode)}); '
+                          'give a file name')
+    if not force and not written_by_bagfault(path):
+        raise OutputError(f'{path}: {what} exists and bagfault did not write it; nothing replaced '
+                          '(--force replaces it)')
+
+
+def check_derived(base: Path, pattern: str, what: str, protected: Sequence[tuple[str, Path]] | Protected, *,
+                  force: bool = False) -> None:
+    """Every existing file a run may write under names derived from `base` (`pattern` a glob in its folder)."""
+    guard = protected if isinstance(protected, Protected) else Protected.of(protected)
+    folder = base.parent if str(base.parent) else Path('.')
+    with contextlib.suppress(OSError):
+        for path in sorted(folder.glob(pattern)):
+            check_output(path, what, guard, force=force)
+
+
+def _kind(mode: int) -> str:
+    kinds = ((stat.S_ISFIFO, 'a FIFO'), (stat.S_ISCHR, 'a character device'), (stat.S_ISBLK, 'a block device'),
+             (stat.S_ISSOCK, 'a socket'))
+    return next((name for test, name in kinds if test(mode)), 'not a file')
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
@@ -65,17 +155,49 @@ def current_umask() -> int:
 
 
 def written_by_bagfault(path: Path) -> bool:
-    """Whether a file is an MCAP whose header names bagfault as its writer (a file bagfault may replace)."""
+    """Whether bagfault wrote a file (so a run may replace it): an MCAP whose header names bagfault as its
+    library, a report whose first line, root element, generator or `tool` says bagfault, a campaign table."""
     try:
         with path.open('rb') as stream:
-            head = stream.read(8 + 9 + 4 + 256 + 4 + 64)
+            head = stream.read(4096)
+            size = os.fstat(stream.fileno()).st_size
+            if head.lstrip()[:1] in (b'{', b'['):
+                return size <= JSON_SNIFF_MAX and _json_by_bagfault(head + stream.read())
+            if head.startswith(b'PAR1'):  # a campaign's results.parquet carries bagfault.* metadata in its footer
+                stream.seek(max(0, size - (1 << 16)))
+                return b'bagfault.campaign' in stream.read()
     except OSError:
         return False
-    if head[:8] != b'\x89MCAP0\r\n' or len(head) < 21 or head[8] != 0x01:
+    if head[:8] == b'\x89MCAP0\r\n':
+        return _mcap_library(head).startswith(b'bagfault ')  # as McapSink names itself
+    return (head.startswith((b'# bagfault ', b'job,kind,bag,seed,')) or b'<testsuites name="bagfault"' in head[:512]
+            or b'<meta name="generator" content="bagfault' in head or b'<title>bagfault ' in head[:512])
+
+
+JSON_SNIFF_MAX = 64 << 20
+
+
+def _json_by_bagfault(data: bytes) -> bool:
+    import json  # noqa: PLC0415
+
+    try:
+        document = json.loads(data)
+    except ValueError:
         return False
+    if not isinstance(document, dict):
+        return False
+    tool = document.get('tool')  # reports; campaign.json names the version under `bagfault`
+    return (tool == 'bagfault' or (isinstance(tool, dict) and tool.get('name') == 'bagfault')
+            or isinstance(document.get('bagfault'), str))
+
+
+def _mcap_library(head: bytes) -> bytes:
+    """The `library` string of an MCAP header record (b'' when the head is too short or not a header)."""
+    if len(head) < 21 or head[8] != 0x01:
+        return b''
     profile_length = int.from_bytes(head[17:21], 'little')
     at = 21 + profile_length
     if at + 4 > len(head):
-        return False
+        return b''
     library_length = int.from_bytes(head[at:at + 4], 'little')
-    return head[at + 4:at + 4 + library_length].startswith(b'bagfault ')  # as McapSink names itself
+    return head[at + 4:at + 4 + library_length]

@@ -31,6 +31,7 @@ class LatencyReport:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form, per path: statistics of the samples and of each response-time case, per fault window."""
         return {
+            'tool': 'bagfault',
             'architecture': str(self.architecture.source),
             'inputs': self.inputs,
             'warnings': self.architecture.warnings,

@@ -24,6 +24,7 @@ class ReportPaths:
     json: Path | None = None
     junit: Path | None = None
     html: Path | None = None
+    force: bool = False  # replace existing files bagfault did not write
 
     def named(self) -> list[tuple[str, Path]]:
         """(option, path) of every report asked for."""
@@ -35,7 +36,7 @@ class ReportPaths:
         named = self.named()
         for number, (option, path) in enumerate(named):
             others = [(f'the {name} report', other) for name, other in named[:number]]
-            check_output(path, f'{option} report', [*protected, *others])
+            check_output(path, f'{option} report', [*protected, *others], force=self.force)
 
     def collectors(self) -> list[Observer]:
         """Observers the reports need during the run (topic rates for the HTML report)."""

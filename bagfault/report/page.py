@@ -124,7 +124,8 @@ class Page:
 
     def render(self) -> str:
         """The whole document."""
-        return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{escape(self.title)}</title>'
+        return ('<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+                f'<meta name="generator" content="bagfault"><title>{escape(self.title)}</title>'
                 f'<style>{STYLE}</style><script>{plotly_js()}</script><script>{SCRIPT}</script></head>\n<body>\n'
                 + '\n'.join(self.parts) + '\n</body></html>\n')
 

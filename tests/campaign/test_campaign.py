@@ -508,3 +508,25 @@ def test_a_campaign_leaves_no_zombie_behind(corpus: Path) -> None:
                            str(path), '-o', str(corpus / 'out'), '--workers', '2'], capture_output=True, text=True,
                           timeout=300, check=False)
     assert done.stdout.split()[-2:] == ['0', '0'], done.stdout + done.stderr  # exit 0, nothing left to reap
+
+
+def test_a_campaign_folder_replaces_nothing_it_reads_or_did_not_write(
+        corpus: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A results.csv of someone else's in -o stops the campaign before any job (--force replaces it); -o inside a
+    bag folder is refused."""
+    path = campaign_file(corpus, f"""
+        campaign: guard
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+    """)
+    out = corpus / 'guarded'
+    out.mkdir()
+    (out / 'results.csv').write_text('name,score\nmine,1\n')
+    assert main(['campaign', str(path), '-o', str(out), '--workers', '1']) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and 'results.csv' in error and 'bagfault did not write it' in error
+    assert sorted(p.name for p in out.iterdir()) == ['results.csv']
+    assert main(['campaign', str(path), '-o', str(out), '--workers', '1', '--force']) == 0  # 0.02 + 0.2 > 0.1
+    assert (out / 'results.csv').read_text().startswith('job,kind,bag,seed,')
+    assert main(['campaign', str(path), '-o', str(out), '--workers', '1', '--resume']) == 0  # its files are ours now

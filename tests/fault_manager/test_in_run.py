@@ -281,10 +281,17 @@ def test_a_black_box_never_replaces_a_file_bagfault_did_not_write(tmp_path, caps
     scenario = _write(tmp_path, BLACK_BOX_SCENARIO)
     assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')]) == 2
     error = capsys.readouterr().err.strip()
-    assert error.count('\n') == 0 and 'black box would replace' in error and 'bagfault did not write' in error
+    assert error.count('\n') == 0 and 'a black box of' in error and 'would replace the input' in error
     assert bag.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ['out.blackbox.IMU_SPIKE.1.mcap', 'scenario.yaml']
     moved = bag.rename(tmp_path / 'in.mcap')
+    foreign = tmp_path / 'out.blackbox.IMU_SPIKE.1.mcap'
+    foreign.write_bytes(b'someone else\n')
+    assert main(['run', str(scenario), str(moved), '-o', str(tmp_path / 'out.mcap')]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and 'bagfault did not write it' in error and '--force' in error
+    assert foreign.read_bytes() == b'someone else\n' and not (tmp_path / 'out.mcap').exists()
+    foreign.unlink()
     for _ in range(2):  # the second run replaces the first run's black box, which bagfault wrote
         assert main(['run', str(scenario), str(moved), '-o', str(tmp_path / 'out.mcap')]) == 0
     assert (tmp_path / 'out.blackbox.IMU_SPIKE.1.mcap').exists()

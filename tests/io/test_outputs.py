@@ -1,0 +1,163 @@
+"""No output lands on anything a command reads, by file identity; existing files bagfault did not write need --force.
+
+Each case runs the real command line on a small bag and checks the exit code, the single error line, and that
+every file the command reads is byte for byte what it was.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sqlite3
+
+import pytest
+
+from bagfault.cli import main
+from bagfault.io.outputs import written_by_bagfault
+from tests.support.helpers import make_bag
+
+SCENARIO = """
+injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}
+faults:
+  - {id: bias, injector_id: imu, start: 0.5, duration: 1.0, config: {linear_acceleration_z_bias: 1.0}}
+"""
+
+
+@pytest.fixture
+def bag(tmp_path):
+    return make_bag(tmp_path / 'in.mcap', [('/imu', 'sensor_msgs/msg/Imu', 20.0)], 2.0)
+
+
+@pytest.fixture
+def scenario(tmp_path):
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(SCENARIO)
+    return path
+
+
+def _refused(capsys, argv, *needles):
+    """The command exits 2 with one line holding every needle."""
+    assert main(argv) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0, error
+    for needle in needles:
+        assert needle in error, error
+    return error
+
+
+def test_a_hard_link_of_the_input_is_the_input(tmp_path, bag, scenario, capsys):
+    before = bag.read_bytes()
+    os.link(bag, tmp_path / 'alias.mcap')
+    _refused(capsys, ['run', str(scenario), str(bag), '-o', str(tmp_path / 'alias.mcap')], 'same file as the input')
+    assert bag.read_bytes() == before
+
+
+def test_a_symlink_to_the_scenario_is_the_scenario(tmp_path, bag, scenario, capsys):
+    (tmp_path / 'link.mcap').symlink_to(scenario)
+    _refused(capsys, ['run', str(scenario), str(bag), '-o', str(tmp_path / 'link.mcap')], 'the scenario')
+    assert scenario.read_text() == SCENARIO
+
+
+def test_a_report_on_a_msg_path_file_is_refused(tmp_path, bag, scenario, capsys):
+    """A `--msg-path` folder is read: no report may replace one of its definitions (here through a hard link)."""
+    folder = tmp_path / 'defs' / 'my_msgs' / 'msg'
+    folder.mkdir(parents=True)
+    definition = folder / 'Thing.msg'
+    definition.write_text('float64 x\n')
+    os.link(definition, tmp_path / 'report.md')
+    _refused(capsys, ['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--msg-path',
+                      str(tmp_path / 'defs'), '--report', str(tmp_path / 'report.md')], 'the --msg-path')
+    assert definition.read_text() == 'float64 x\n'
+    assert not (tmp_path / 'out.mcap').exists()
+
+
+def test_an_sqlite_inputs_sidecars_are_never_written(tmp_path, scenario, capsys):
+    """A `-wal` written beside a database is replayed into it by the next reader: refused even when absent."""
+    source = make_bag(tmp_path / 'src.mcap', [('/imu', 'sensor_msgs/msg/Imu', 20.0)], 1.0)
+    database = tmp_path / 'bag.db3'
+    database.write_bytes(b'')
+    with sqlite3.connect(database) as connection:
+        connection.execute('CREATE TABLE t (x)')
+    before = database.read_bytes()
+    for suffix in ('-wal', '-shm', '-journal'):
+        _refused(capsys, ['run', str(scenario), str(database), '-o', str(tmp_path / f'bag.db3{suffix}')],
+                 'SQLite sidecar')
+        assert not (tmp_path / f'bag.db3{suffix}').exists()
+    assert database.read_bytes() == before
+    assert source.exists()
+
+
+def test_a_file_inside_an_input_folder_by_identity(tmp_path, scenario, capsys):
+    """A rosbag2 folder's storage file, hard-linked elsewhere, is still the input."""
+    folder = tmp_path / 'rosbag'
+    folder.mkdir()
+    inner = make_bag(folder / 'rosbag_0.mcap', [('/imu', 'sensor_msgs/msg/Imu', 20.0)], 1.0)
+    before = inner.read_bytes()
+    os.link(inner, tmp_path / 'elsewhere.mcap')
+    _refused(capsys, ['run', str(scenario), str(folder), '-o', str(tmp_path / 'elsewhere.mcap')],
+             'same file as the input')
+    _refused(capsys, ['run', str(scenario), str(folder), '-o', str(folder / 'new.mcap')], 'inside the input')
+    assert inner.read_bytes() == before
+
+
+@pytest.mark.parametrize('kind', ['fifo', 'device', 'socket'])
+def test_outputs_that_are_not_regular_files(tmp_path, bag, scenario, capsys, kind):
+    """A FIFO, a device or a socket is not replaced by a rename (it used to be: /dev/null became a file)."""
+    target = tmp_path / 'special'
+    if kind == 'fifo':
+        os.mkfifo(target)
+        expected = 'a FIFO'
+    elif kind == 'device':
+        target = tmp_path / 'null'
+        os.symlink('/dev/null', target)  # not writing to /dev/null: the check is on what the name points at
+        expected = 'a character device'
+    else:
+        import socket
+
+        server = socket.socket(socket.AF_UNIX)
+        server.bind(str(target))
+        expected = 'a socket'
+    _refused(capsys, ['run', str(scenario), str(bag), '-o', str(target)], 'not a regular file', expected)
+    assert os.stat('/dev/null').st_rdev == os.makedev(1, 3)
+
+
+def test_a_folder_name_is_not_made_a_file(tmp_path, bag, scenario, capsys):
+    with pytest.raises(SystemExit) as stopped:
+        main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'newdir') + '/'])
+    assert stopped.value.code == 2
+    assert 'names a folder' in capsys.readouterr().err
+    assert not (tmp_path / 'newdir').exists()
+
+
+def test_a_file_bagfault_did_not_write_needs_force(tmp_path, bag, scenario, capsys):
+    out = tmp_path / 'out.mcap'
+    out.write_bytes(b'my own data\n')
+    _refused(capsys, ['run', str(scenario), str(bag), '-o', str(out)], 'bagfault did not write it', '--force')
+    assert out.read_bytes() == b'my own data\n'
+    capsys.readouterr()
+    assert main(['run', str(scenario), str(bag), '-o', str(out), '--force']) == 0
+    assert written_by_bagfault(out)
+
+
+def test_every_report_bagfault_wrote_is_replaced_without_force(tmp_path, bag, scenario, capsys):
+    """Run twice with every report: the second run recognises each file as bagfault's own."""
+    names = {'--report': 'r.md', '--json': 'r.json', '--junit': 'r.xml', '--html': 'r.html'}
+    argv = ['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')]
+    for option, name in names.items():
+        argv += [option, str(tmp_path / name)]
+    assert main(argv) == 0
+    for name in [*names.values(), 'out.mcap']:
+        assert written_by_bagfault(tmp_path / name), name
+    assert main(argv) == 0
+    shutil.copy(tmp_path / 'r.json', tmp_path / 'keep.json')
+    (tmp_path / 'r.json').write_text('{"tool": "someone"}\n')
+    capsys.readouterr()
+    _refused(capsys, argv, 'r.json', 'bagfault did not write it')
+
+
+def test_black_boxes_are_checked_before_the_run(tmp_path, bag, scenario, capsys):
+    """A file at a black box name of the output, bagfault's or not, is looked at before anything is written."""
+    (tmp_path / 'out.blackbox.ANY.3.mcap').write_text('notes\n')
+    _refused(capsys, ['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')], 'a black box of',
+             'bagfault did not write it')
+    assert not (tmp_path / 'out.mcap').exists()
