@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import os
 import signal
 import sys
@@ -14,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from bagfault import __version__
 from bagfault.errors import BagfaultError, UsageError
-from bagfault.io.outputs import check_output
+from bagfault.io.outputs import PUBLISHED, check_output
 from bagfault.log import console
 
 if TYPE_CHECKING:
@@ -542,12 +543,35 @@ ROS_COMMANDS = ('proxy', 'play', 'record')  # commands that make a node: they ta
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the `bagfault` command: exit 0 passed, 1 an assertion failed, 2 could not run."""
+    """Entry point of the `bagfault` command: exit 0 passed, 1 an assertion failed, 2 could not run.
+
+    A terminal that cannot take the messages (stdout or stderr on a full device) is exit 2 too: a verdict
+    whose reasons were lost is not a verdict.
+    """
+    try:
+        code = _main(argv)
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except OSError:  # stderr itself failed while saying why
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stderr.fileno())
+        return EXIT_ERROR
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     ros_args: list[str] = []
     if '--ros-args' in words:  # as `ros2 run` and launch pass them: everything after it is for ROS
         at = words.index('--ros-args')
         words, ros_args = words[:at], [w for w in words[at + 1:] if w not in ('--ros-args', '--')]
+    try:
+        os.getcwd()
+    except OSError:
+        print('bagfault: error: the current directory no longer exists (deleted?); cd somewhere that does',
+              file=sys.stderr)
+        return EXIT_ERROR
     args = _parser().parse_args(words)
     args.ros_args = ros_args
     console(debug=args.debug)
@@ -555,6 +579,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'bagfault: error: --ros-args: only {", ".join(ROS_COMMANDS)} make a ROS node', file=sys.stderr)
         return EXIT_ERROR
     began = time.monotonic()
+    PUBLISHED.clear()
     try:
         with _terminating_signals():
             return COMMANDS[args.command](args)
@@ -570,15 +595,24 @@ def main(argv: Sequence[str] | None = None) -> int:
             for line in tail:
                 print(f'  | {line}', file=sys.stderr)
         return EXIT_ERROR
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         if args.debug:
             traceback.print_exc()
-        print('bagfault: interrupted; nothing was written under the requested names', file=sys.stderr)
+        print(f'bagfault: {_stopped_by(exc)}; {_written()}', file=sys.stderr)
         _junit_error(args, 'interrupted', began)
         return EXIT_ERROR
     except BrokenPipeError:  # `bagfault schema | head`: the reader left, nothing is wrong
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+    except OSError as exc:  # the machine, not bagfault: a full device, a vanished file, a terminal that failed
+        if args.debug:
+            traceback.print_exc()
+        where = f'{exc.filename}: ' if exc.filename else 'the terminal (stdout): ' if exc.errno in TERMINAL else ''
+        if where.startswith('the terminal'):  # the summary was lost: nothing more goes to stdout
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        print(f'bagfault: error: {where}{exc.strerror or exc}; {_written()}', file=sys.stderr)
+        _junit_error(args, f'{where}{exc.strerror or exc}', began)
+        return EXIT_ERROR
     except Exception as exc:  # noqa: BLE001 - a bug must still end with the documented exit code
         if args.debug:
             traceback.print_exc()
@@ -586,6 +620,22 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)
         _junit_error(args, f'internal error: {type(exc).__name__}: {exc}', began)
         return EXIT_ERROR
+
+
+TERMINAL = (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG)
+
+
+def _stopped_by(exc: KeyboardInterrupt) -> str:
+    """'interrupted' (Ctrl-C) or 'stopped by SIGTERM' (the name _terminating_signals gives)."""
+    name = str(exc)
+    return f'stopped by {name}' if name.startswith('SIG') else 'interrupted'
+
+
+def _written() -> str:
+    """What the command had put under its final names before it stopped: true whenever it stops."""
+    if not PUBLISHED:
+        return 'nothing was written under the requested names'
+    return 'written before that: ' + ', '.join(str(p) for p in PUBLISHED)
 
 
 def _junit_error(args: argparse.Namespace, reason: str, began: float) -> None:

@@ -16,6 +16,8 @@ from support.helpers import counts, tree_digest
 from bagfault.cli import main
 from bagfault.progress import ProgressBar
 
+FIXTURES_SQLITE = Path(__file__).parent / 'fixtures' / 'rover_3s_sqlite3'
+
 
 def run_cli(capsys, *args):
     code = main([str(a) for a in args])
@@ -200,3 +202,108 @@ def test_a_bug_still_ends_with_exit_2_and_one_line(capsys, tmp_path, scenarios, 
     assert code == 2 and 'Traceback' in err
 
 
+
+
+def _bagfault(*args, cwd=None, stdout=subprocess.PIPE, stderr=subprocess.PIPE):
+    """The installed command in a subprocess (for what needs its own cwd or terminal)."""
+    return subprocess.run([sys.executable, '-m', 'bagfault', *map(str, args)], cwd=cwd, stdout=stdout,
+                          stderr=stderr, text=True, timeout=120, check=False)
+
+
+def test_an_input_symlink_loop_is_one_line(capsys, tmp_path, scenarios):
+    (tmp_path / 'a').symlink_to(tmp_path / 'b')
+    (tmp_path / 'b').symlink_to(tmp_path / 'a')
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', tmp_path / 'a', '-o', tmp_path / 'o.mcap')
+    assert code == 2 and err.count('\n') == 1 and 'symbolic link that leads nowhere' in err, err
+
+
+def test_a_deleted_current_directory_is_one_line(tmp_path, scenarios, rover_bag):
+    gone = tmp_path / 'gone'
+    gone.mkdir()
+    script = (f'import os, subprocess, sys; os.chdir({str(gone)!r}); os.rmdir({str(gone)!r}); '
+              f'sys.exit(subprocess.run([sys.executable, "-m", "bagfault", "run", {str(scenarios / "odom.yaml")!r}, '
+              f'{str(rover_bag)!r}, "-o", "o.mcap"]).returncode)')
+    done = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2 and done.stderr.count('\n') == 1, done.stderr
+    assert 'current directory no longer exists' in done.stderr
+
+
+def test_stdout_on_a_full_device_is_exit_2_and_says_the_output_was_written(tmp_path, scenarios, rover_bag):
+    """The summary cannot be printed: exit 2, one line on stderr, which says truly that the output exists."""
+    with open('/dev/full', 'w') as full:
+        done = _bagfault('run', scenarios / 'odom.yaml', rover_bag, '-o', tmp_path / 'o.mcap', stdout=full)
+    assert done.returncode == 2 and done.stderr.count('\n') == 1, done.stderr
+    assert 'No space left on device' in done.stderr and f'written before that: {tmp_path / "o.mcap"}' in done.stderr
+    assert _bagfault('run', scenarios / 'odom.yaml', rover_bag, '-o', tmp_path / 'ref.mcap').returncode == 0
+    assert counts(tmp_path / 'o.mcap') == counts(tmp_path / 'ref.mcap')
+
+
+def test_a_verdict_whose_warnings_cannot_be_shown_is_exit_2(tmp_path, rover_bag):
+    """A failing run (exit 1) with a warning, stderr on a full device: the reason is lost, so exit 2."""
+    scenario = tmp_path / 'warn.yaml'
+    scenario.write_text("""
+injectors: [{id: imu, type: imu, input_topic: /nothere, output_topic: /nothere_out}]
+faults: [{id: f1, injector_id: imu, start: 1.0, duration: 1.0, config: {linear_acceleration_z_bias: 1.0}}]
+assertions: [{id: a1, type: fault_event, fault_id: f1, state: active, within: 0.5}]
+""")
+    done = _bagfault('run', scenario, rover_bag, '-o', tmp_path / 'o.mcap')
+    assert done.returncode == 1 and 'not in the bag' in done.stderr  # f1 starts at 1.0 s, after `within`
+    with open('/dev/full', 'w') as full:
+        done = _bagfault('run', scenario, rover_bag, '-o', tmp_path / 'o2.mcap', stderr=full)
+    assert done.returncode == 2
+
+
+def test_a_full_tmpdir_while_expanding_a_compressed_split_is_one_line(capsys, tmp_path, scenarios, monkeypatch):
+    """A FILE-compressed rosbag2 part is decompressed into TMPDIR; no room there is an input error, not a bug."""
+    import errno
+
+    import zstandard
+
+    from bagfault.io import rosbag2_source
+
+    folder = tmp_path / 'bag'
+    shutil.copytree(FIXTURES_SQLITE, folder)
+    storage = folder / 'rover_3s_sqlite3.db3'
+    (folder / 'rover_3s_sqlite3.db3.zstd').write_bytes(zstandard.ZstdCompressor().compress(storage.read_bytes()))
+    storage.unlink()
+    metadata = (folder / 'metadata.yaml').read_text()
+    (folder / 'metadata.yaml').write_text(metadata.replace('rover_3s_sqlite3.db3', 'rover_3s_sqlite3.db3.zstd')
+                                          .replace("compression_mode: ''", 'compression_mode: FILE')
+                                          .replace("compression_format: ''", 'compression_format: zstd'))
+
+    def full(*_args, **_kwargs):
+        raise OSError(errno.ENOSPC, 'No space left on device')
+
+    monkeypatch.setattr(rosbag2_source.shutil, 'copyfileobj', full)
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', folder, '-o', tmp_path / 'o.mcap')
+    assert code == 2 and err.count('\n') == 1, err
+    assert 'cannot decompress it into' in err and 'No space left on device' in err and 'TMPDIR' in err
+    assert not (tmp_path / 'o.mcap').exists()
+
+
+def test_a_system_command_or_env_no_process_can_take_is_a_scenario_error(capsys, tmp_path):
+    for key, text, message in (('command', '"a\\0b"', 'NUL character'),
+                               ('env', '{"A=B": "1"}', 'not a variable name'),
+                               ('env', '{A: "x\\0y"}', 'NUL character')):
+        body = 'command: sleep 1' if key == 'env' else ''
+        scenario = tmp_path / 'sut.yaml'
+        scenario.write_text(f'injectors: []\nfaults: []\nsystem_under_test:\n  {body}\n  {key}: {text}\n')
+        code, _, err = run_cli(capsys, 'validate', scenario)
+        assert code == 2 and f'system_under_test.{key}' in err and message in err, err
+
+
+def test_a_signal_after_the_output_is_published_says_it_was_written(capsys, tmp_path, scenarios, rover_bag,
+                                                                    monkeypatch):
+    """SIGTERM while the reports are written (the last moments of a run): the output is complete under its name,
+    and the last line says so instead of 'nothing was written'."""
+    from bagfault.report.files import ReportPaths
+
+    def signalled(*_args, **_kwargs):
+        raise KeyboardInterrupt('SIGTERM')  # what _terminating_signals raises on SIGTERM
+
+    monkeypatch.setattr(ReportPaths, 'write', signalled)
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', rover_bag, '-o', tmp_path / 'o.mcap',
+                           '--json', tmp_path / 'r.json')
+    assert code == 2
+    assert err == f'bagfault: stopped by SIGTERM; written before that: {tmp_path / "o.mcap"}\n'
+    assert counts(tmp_path / 'o.mcap')['/odom'] > 0 and not (tmp_path / 'r.json').exists()

@@ -26,7 +26,7 @@ from mcap.records import Schema as McapSchema
 
 from bagfault.errors import OutputError
 from bagfault.io.mcap_writer import CopiedChunk, McapWriter
-from bagfault.io.outputs import current_umask
+from bagfault.io.outputs import PUBLISHED, current_umask
 from bagfault.io.qos import DEFAULT_QOS, normalized
 
 if TYPE_CHECKING:
@@ -202,6 +202,7 @@ class McapSink:
             os.replace(self._tmp, self.path)
         except OSError as exc:
             raise self._failed(exc) from None
+        PUBLISHED.append(self.path)
         self._ended = True
 
     def abort(self) -> None:

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence
 
 SIDECARS = ('-wal', '-shm', '-journal')
+PUBLISHED: list[Path] = []  # every file this process has put under its final name, in order (what a stop says)
 FOLDER_FILES_MAX = 100_000  # files of a protected folder looked at (a msg path is a tree)
 
 
@@ -137,6 +138,7 @@ def write_atomic(path: Path, data: bytes | str) -> None:
             stream.write(payload)
         os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
+        PUBLISHED.append(path)
     except OSError as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)

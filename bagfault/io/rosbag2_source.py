@@ -116,14 +116,18 @@ class Rosbag2Source(MergedSource):
 
     def _expand(self, file: Path) -> Path:
         """Decompress a FILE-compressed storage file into a private temporary directory."""
-        if self._tmp is None:
-            self._tmp = tempfile.TemporaryDirectory(prefix='bagfault-')
-        target = Path(self._tmp.name) / file.name.removesuffix('.zstd')
         try:
+            if self._tmp is None:
+                self._tmp = tempfile.TemporaryDirectory(prefix='bagfault-')
+            target = Path(self._tmp.name) / file.name.removesuffix('.zstd')
             with file.open('rb') as src, target.open('wb') as dst:
                 shutil.copyfileobj(zstandard.ZstdDecompressor().stream_reader(src), dst)
         except zstandard.ZstdError as exc:
             raise InputError(f'{file}: corrupt zstd file ({one_line(exc)})') from None
+        except OSError as exc:
+            where = self._tmp.name if self._tmp is not None else tempfile.gettempdir()
+            raise InputError(f'{file}: cannot decompress it into {where}: {exc.strerror or exc} '
+                             '(TMPDIR names where; it needs room for the decompressed file)') from None
         return target
 
     def _declared(self) -> Callable[[Channel], Channel]:

@@ -32,6 +32,8 @@ class InputFile:
 def open_source(path: Path, *, salvage: bool = False) -> Source:
     """Open an MCAP file, a rosbag2 directory or storage file, or a ROS 1 bag."""
     if not path.exists():
+        if path.is_symlink():
+            raise InputError(f'{path}: a symbolic link that leads nowhere (its target is missing, or links loop)')
         raise InputError(f'{path}: no such file or directory')
     if path.is_dir():
         return Rosbag2Source(path, salvage=salvage)

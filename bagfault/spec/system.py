@@ -105,12 +105,19 @@ def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], 
         system.command = [str(c) for c in command]
     else:
         problem((*path, 'command'), 'must be a command line: a string or a list of arguments')
+    if any('\0' in part for part in system.command):
+        problem((*path, 'command'), 'holds a NUL character, which no command line can carry')
     env = node.get('env', {})
     if not isinstance(env, dict) or not all(isinstance(k, str) and isinstance(v, (str, int, float, bool))
                                             for k, v in env.items()):
         problem((*path, 'env'), 'must map variable names to values')
     else:
         system.env = {k: _text(v) for k, v in env.items()}
+        for name, value in system.env.items():
+            if not name or '=' in name or '\0' in name:
+                problem((*path, 'env', name), 'not a variable name (empty, or holds = or NUL)')
+            elif '\0' in value:
+                problem((*path, 'env', name), 'the value holds a NUL character, which no environment can carry')
     if 'cwd' in node:
         cwd = node['cwd']
         if not isinstance(cwd, str) or not cwd:
