@@ -111,14 +111,16 @@ def run(
     msg_paths: Sequence[str | Path] = (),
     chunk_copy: bool = True,
     force: bool = False,
+    verify: bool = False,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP.
 
     `observers` see every output record in time order (report collectors). Corruption the file formats
     detect (CRCs, record lengths, impossible rows) stops the run; with `salvage` what can be read is copied
     and every skipped part is a warning. With `chunk_copy` (a single MCAP input), chunks nothing touches
-    are copied as they are; False takes the reference path that decompresses and rewrites every chunk.
-    An existing output (or black box) that bagfault did not write is refused unless `force`.
+    are copied as they are (checked against their indexes, not decompressed; `verify` also decompresses
+    and counts them on a second thread); False takes the reference path that decompresses and rewrites every
+    chunk. An existing output (or black box) that bagfault did not write is refused unless `force`.
     """
     loaded = scenario_of(scenario)
     paths = _paths(inputs)
@@ -127,7 +129,7 @@ def run(
     return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
                        start_offset=_seconds('--start', start_offset), compression=compression, batch=batch,
                        progress=progress, observers=observers, salvage=salvage,
-                       msg_paths=[Path(p) for p in msg_paths], chunk_copy=chunk_copy)
+                       msg_paths=[Path(p) for p in msg_paths], chunk_copy=chunk_copy, verify=verify)
 
 
 def check(

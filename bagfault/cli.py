@@ -55,6 +55,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument('--no-chunk-copy', action='store_true',
                      help='decompress and rewrite every chunk (the reference path; default: chunks of a single '
                           'MCAP input that no fault, assertion or report touches are copied as they are)')
+    run.add_argument('--verify', action='store_true',
+                     help='also decompress, CRC-check and count every copied chunk, on a second thread (copied '
+                          'chunks are otherwise checked against their indexes only)')
     _report_options(run)
 
     check = sub.add_parser('check', help="evaluate a scenario's assertions on an existing recording")
@@ -271,6 +274,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
             start_offset=args.start, compression=args.compression, progress=bar, observers=collectors,
             salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy, force=args.force,
+            verify=args.verify,
         )
     finally:
         bar.close()

@@ -14,6 +14,8 @@ mutated messages are written in chunks of their own.
 from __future__ import annotations
 
 import struct
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING
 
 from bagfault.errors import InputError, one_line
@@ -31,8 +33,9 @@ if TYPE_CHECKING:
     from bagfault.io.sources import InputSet
     from bagfault.spec.model import Scenario
 
-def chunk_copy_for(inputs: InputSet) -> ChunkCopy | None:
-    """A chunk copy plan when the inputs are one indexed MCAP file whose chunks follow each other in time."""
+def chunk_copy_for(inputs: InputSet, *, verify: bool = False) -> ChunkCopy | None:
+    """A chunk copy plan when the inputs are one indexed MCAP file whose chunks follow each other in time;
+    with `verify`, each copied chunk is also read again and checked on a second thread."""
     from bagfault.io.mcap_source import McapSource  # noqa: PLC0415
 
     if len(inputs.parts) != 1 or not isinstance(inputs.parts[0], McapSource):
@@ -43,21 +46,58 @@ def chunk_copy_for(inputs: InputSet) -> ChunkCopy | None:
     refs = source.chunk_refs()
     if not refs or not any(ref.index_offsets for ref in refs):
         return None
-    return ChunkCopy(source, refs)
+    return ChunkCopy(source, refs, ChunkVerifier(source) if verify else None)
+
+
+class ChunkVerifier:
+    """`--verify`: every copied chunk decompressed, CRC-checked and its records counted, on a second thread
+    (zstd and crc32 release the GIL), so the copy does not wait for it; the first failure stops the run."""
+
+    def __init__(self, source: McapSource) -> None:
+        self.source = source
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-verify')
+        self._pending: deque[Future[None]] = deque()
+        self.verified = 0
+
+    def submit(self, ref: ChunkRef) -> None:
+        """Check this copied chunk; raise the failure of an earlier one as soon as it is known."""
+        self._pending.append(self._pool.submit(self.source.verify_chunk, ref))
+        while self._pending and self._pending[0].done():
+            self._pending.popleft().result()
+            self.verified += 1
+
+    def wait(self) -> int:
+        """Every check done (or its failure raised); how many chunks were verified."""
+        while self._pending:
+            self._pending.popleft().result()
+            self.verified += 1
+        return self.verified
+
+    def close(self) -> None:
+        """Stop checking (a failed run does not wait for the rest)."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 class ChunkCopy:
     """Which chunks of one MCAP input are copied as they are; built before routing, completed after it."""
 
-    def __init__(self, source: McapSource, refs: list[ChunkRef]) -> None:
+    def __init__(self, source: McapSource, refs: list[ChunkRef], verifier: ChunkVerifier | None = None) -> None:
         self.source = source
         self.refs = refs
+        self.verifier = verifier
         self._numbers = {cid: source.channel_number(cid) for cid in source.channel_records}
         self._ids = {number: cid for cid, number in self._numbers.items()}
         self.kept: set[int] = set()  # input channel numbers registered under their input id
         self.passthrough: set[int] = set()  # input channel ids whose messages may be copied
         self.in_place: dict[int, InjectorRuntime] = {}  # input channel id -> its in-place injector
         self.relevant: dict[int, set[str]] = {}  # input channel id -> faults (and their leaders) of that injector
+
+    def __enter__(self) -> ChunkCopy:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.verifier is not None:
+            self.verifier.close()
 
     def reserve(self, sink: McapSink) -> None:
         """New output channels and schemas are numbered above the input's."""

@@ -8,6 +8,7 @@ messages to the same Run with nothing injected. `run_to_file` wraps
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -153,9 +154,11 @@ def run_to_file(
     salvage: bool = False,
     msg_paths: Sequence[Path] = (),
     chunk_copy: bool = True,
+    verify: bool = False,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing); with
-    `chunk_copy`, the untouched chunks of a single MCAP input are copied as they are."""
+    `chunk_copy`, the untouched chunks of a single MCAP input are copied as they are (and with `verify`
+    read again, decompressed and checked on a second thread)."""
     definitions = load_definitions([*msg_paths, *scenario.msg_paths])
     stop = threading.Event()
     hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
@@ -165,13 +168,15 @@ def run_to_file(
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
             with McapSink(output, compression=compression, ros_distro=inputs.ros_distro or '') as sink:
-                chunks = chunk_copy_for(inputs) if chunk_copy and batch else None
-                if chunks is not None:
-                    chunks.reserve(sink)
-                sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(), inputs.start_time or 0)
-                run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
-                                start_offset=start_offset, batch=batch, progress=progress, observers=observers,
-                                blackbox_base=output, chunks=chunks)
+                chunks = chunk_copy_for(inputs, verify=verify) if chunk_copy and batch else None
+                with chunks if chunks is not None else contextlib.nullcontext():
+                    if chunks is not None:
+                        chunks.reserve(sink)
+                    sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
+                                        inputs.start_time or 0)
+                    run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
+                                    start_offset=start_offset, batch=batch, progress=progress, observers=observers,
+                                    blackbox_base=output, chunks=chunks)
                 with run:
                     check_declared(inputs, run, paths, salvage=salvage)
                     sink.flush()  # the copied chunks go to the file while the hash completes, not after it

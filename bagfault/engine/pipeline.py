@@ -140,12 +140,16 @@ class Pipeline:
                     self.run.read(sum(chunk.counts.values()), ref.end)
                     self.run.copy_chunk(chunk, topic_of)
                     self.run.stats.chunks_copied += 1
+                    if chunks.verifier is not None:
+                        chunks.verifier.submit(ref)
                     if self.progress is not None:
                         self.progress(self.run.stats.input_messages, ref.end)
                     continue
             for item in source.messages_of(ref, source.records_of(ref, source.read_record(ref))):
                 batches.add(item)
         batches.flush()
+        if chunks.verifier is not None:
+            self.run.stats.chunks_verified = chunks.verifier.wait()
         self._flush_injectors()
         self.run.emit(self._merge.drain())
 

@@ -32,6 +32,7 @@ class RunStats:
     malformed_first: dict[str, tuple[int, str]] = field(default_factory=dict)  # input topic -> (time, reason)
     chunks: int = 0  # chunk copy: the input's chunks ...
     chunks_copied: int = 0  # ... and those written as they are
+    chunks_verified: int = 0  # ... of which read again and checked (--verify)
 
     def add(self, other: RunStats) -> None:
         """Fold a later pass (play --loop) into these totals; the first pass keeps the origin."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 import heapq
 import io
 import itertools
+import os
 import struct
 import zlib
 from dataclasses import dataclass
@@ -24,6 +25,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 import lz4.frame
+import numpy as np
 import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, SeekingReader
@@ -43,7 +45,8 @@ if TYPE_CHECKING:
 
 
 MAGIC = b'\x89MCAP0\r\n'
-OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x03, 0x04, 0x05, 0x06
+OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x07, 0x0F
+_INDEX_HEAD = struct.Struct('<BQHI')  # message index: opcode, length, channel id, entries length
 _U16 = struct.Struct('<H')
 _U32 = struct.Struct('<I')
 _U64 = struct.Struct('<Q')
@@ -74,6 +77,7 @@ class _Chunk:
     compression: str = ''
     compressed_size: int = 0
     uncompressed_size: int = 0
+    counts: dict[int, int] | None = None  # channel id -> entries of its message index (None: not looked at)
 
 
 @dataclass(frozen=True)
@@ -134,8 +138,10 @@ class McapSource:
         self._schemas: dict[int, tuple[str, str, str]] = {}
         self._pending_channels: dict[int, tuple[int, str, str, dict[str, str]]] = {}
         self._chunks: list[_Chunk] = []
+        self._by_offset: dict[int, _Chunk] = {}
         self._memory: list[Split] = []
         self._indexed = False
+        self._data_end = 0  # where the data section ends (the summary's start, else the footer's)
         self.schema_records: dict[int, Schema] = {}  # as the summary holds them (indexed files)
         self.channel_records: dict[int, McapChannel] = {}
         try:
@@ -190,12 +196,18 @@ class McapSource:
         for index in summary.chunk_indexes:
             if index.chunk_start_offset + index.chunk_length > self._size or index.chunk_start_offset < 8:
                 raise Corrupt(f'a chunk index points outside the file (offset {index.chunk_start_offset})')
-        self._chunks = sorted(
-            (_Chunk(c.message_start_time, c.message_end_time, c.chunk_start_offset, c.chunk_length,
-                    dict(c.message_index_offsets), c.message_index_length, c.compression, c.compressed_size,
-                    c.uncompressed_size) for c in summary.chunk_indexes),
-            key=lambda c: (c.start, c.offset),
-        )
+        unique: dict[int, _Chunk] = {}
+        for c in summary.chunk_indexes:
+            if c.chunk_start_offset in unique:
+                self._lost(f'chunk at offset {c.chunk_start_offset}', 'indexed twice in the summary (its messages '
+                           'would be read twice); read once')
+                continue
+            unique[c.chunk_start_offset] = _Chunk(
+                c.message_start_time, c.message_end_time, c.chunk_start_offset, c.chunk_length,
+                dict(c.message_index_offsets), c.message_index_length, c.compression, c.compressed_size,
+                c.uncompressed_size)
+        self._chunks = sorted(unique.values(), key=lambda c: (c.start, c.offset))
+        self._check_layout()
         self.schema_records = dict(summary.schemas)
         self.channel_records = dict(summary.channels)
         referenced = {cid for c in summary.chunk_indexes for cid in c.message_index_offsets}
@@ -213,12 +225,99 @@ class McapSource:
         for channel_id in sorted(self._pending_channels):
             self._register(channel_id)
 
+    def _check_layout(self) -> None:
+        """The data section against the summary, without decompressing: each indexed chunk's record (type,
+        length, times, compression, sizes) against its chunk index, its message index records (type, channel,
+        entries inside the chunk's extent and time range) against the offsets the index gives, and every
+        chunk the file holds against the chunk index. Record headers only: one read per chunk and one for its
+        message indexes, walking record by record only where something unindexed lies."""
+        indexed = {c.offset: c for c in self._chunks}
+        fd, position, end = self._file.fileno(), 8, self._data_end
+        while position + 9 <= end:
+            chunk = indexed.get(position)
+            if chunk is not None:
+                self._check_chunk(fd, chunk)
+                position = chunk.offset + chunk.length
+                if chunk.index_offsets and min(chunk.index_offsets.values()) == position:
+                    position += chunk.index_length
+                continue
+            head = os.pread(fd, 9 + 16, position)
+            if len(head) < 9:
+                break
+            opcode, length = _REC.unpack_from(head)
+            if opcode == OP_DATA_END:
+                break
+            if position + 9 + length > end:
+                self._lost(f'record at offset {position}', f'claims {length} bytes, past the data section; the '
+                                                           'file is not read beyond it')
+                break
+            if opcode == OP_CHUNK:
+                start, stop = struct.unpack_from('<QQ', head, 9) if len(head) >= 25 else (0, 0)
+                self._lost(f'chunk at offset {position}', 'not in the chunk index, which readers follow (its '
+                                                          'messages would be skipped); read as well')
+                self._chunks.append(_Chunk(start, stop, position, 9 + length))
+            position += 9 + length
+        self._chunks.sort(key=lambda c: (c.start, c.offset))
+        self._by_offset = {c.offset: c for c in self._chunks}
+
+    def _check_chunk(self, fd: int, chunk: _Chunk) -> None:
+        """One indexed chunk's record header and message index records against its chunk index."""
+        head = os.pread(fd, 9 + _CHUNK_HEAD.size + 4 + 64, chunk.offset)
+        where = f'chunk at offset {chunk.offset}'
+        if len(head) < 9 + _CHUNK_HEAD.size + 4:
+            self._lost(where, 'the chunk index points past the end of the file')
+            return
+        opcode, length = _REC.unpack_from(head)
+        start, end, size, _ = _CHUNK_HEAD.unpack_from(head, 9)
+        (name_length,) = _U32.unpack_from(head, 9 + _CHUNK_HEAD.size)
+        name = bytes(head[9 + _CHUNK_HEAD.size + 4:][:name_length])
+        told = (OP_CHUNK, chunk.length, chunk.start, chunk.end, chunk.uncompressed_size, chunk.compression.encode())
+        found = (opcode, 9 + length, start, end, size, name)
+        if found != told:
+            fields = ('type', 'length', 'start time', 'end time', 'uncompressed size', 'compression')
+            differ = '; '.join(f'{f} {a!r} in the record, {b!r} in the index'
+                               for f, a, b in zip(fields, found, told, strict=True) if a != b)
+            self._lost(where, f'the record and its chunk index disagree ({differ})')
+            return
+        if not chunk.index_offsets:
+            return
+        first = min(chunk.index_offsets.values())
+        data = os.pread(fd, chunk.index_length, first) if first >= chunk.offset + chunk.length else b''
+        counts, at, parts = {}, 0, []
+        try:
+            while at < len(data):
+                opcode, length, channel_id, entries_length = _INDEX_HEAD.unpack_from(data, at)
+                if opcode != OP_MESSAGE_INDEX or at + 9 + length > len(data) or 6 + entries_length > length:
+                    raise Corrupt(f'a record of type {opcode:#x} where its message indexes should be')
+                if chunk.index_offsets.get(channel_id) != first + at:
+                    raise Corrupt(f'a message index of channel {channel_id} the chunk index does not list there')
+                counts[channel_id] = entries_length // 16
+                parts.append(data[at + 15:at + 15 + entries_length // 16 * 16])
+                at += 9 + length
+            entries = np.frombuffer(b''.join(parts), '<u8').reshape(-1, 2)  # (log time, offset), every channel
+            if len(entries) and (int(entries[:, 1].max()) + 9 + MESSAGE_HEAD > size or
+                                 int(entries[:, 0].min()) < start or int(entries[:, 0].max()) > end):
+                raise Corrupt('its message indexes point outside the chunk (an offset past its records, or a '
+                              'time outside its range)')
+        except (struct.error, ValueError) as exc:
+            self._lost(where, f'its message indexes cannot be read ({one_line(exc)})')
+            return
+        except Corrupt as exc:
+            self._lost(where, str(exc))
+            return
+        if set(counts) != set(chunk.index_offsets):
+            self._lost(where, f'its chunk index lists message indexes of channels {sorted(chunk.index_offsets)}, '
+                              f'the file holds {sorted(counts)}')
+            return
+        chunk.counts = counts
+
     def _read_summary(self) -> tuple[Summary | None, list[Metadata]]:
         """The summary section (its CRC checked) and the metadata records its index points at; without a
         summary, the metadata records found by reading the file through."""
         try:
             summary_start, crc = read_footer(self._file, self._size)
             footer = self._size - 8 - FOOTER_LENGTH
+            self._data_end = summary_start or footer
             if not summary_start:
                 self._file.seek(0)
                 return None, list(SeekingReader(self._file).iter_metadata())
@@ -335,7 +434,10 @@ class McapSource:
             key, p = _string(data, p, stop)
             value, p = _string(data, p, stop)
             metadata[key] = value
-        self._pending_channels.setdefault(channel_id, (schema_id, topic, encoding, metadata))
+        known = self._pending_channels.setdefault(channel_id, (schema_id, topic, encoding, metadata))
+        if known[:3] != (schema_id, topic, encoding):
+            raise Corrupt(f'channel {channel_id} is defined as {known[1]!r} and again as {topic!r} (schema '
+                          f'{known[0]}/{schema_id}, encoding {known[2]!r}/{encoding!r})')
 
     def _split(self, data: memoryview, offset: int) -> list[Split]:
         """Messages of a decompressed chunk; a record that cannot be read ends the chunk (an error or a loss)."""
@@ -357,11 +459,27 @@ class McapSource:
                     out.append((log_time, publish_time, channel_id, pos, data[body + MESSAGE_HEAD : body + length]))
                 elif opcode in (OP_SCHEMA, OP_CHANNEL):
                     self._definition(opcode, data, body, body + length)
+                else:  # a flipped bit in a message's opcode looks like this, and every reader skips it
+                    self._lost(f'chunk at offset {offset}', f'a record of type {opcode:#x} at {pos} inside it (only '
+                                                            'schemas, channels and messages belong there); skipped')
             except (Corrupt, struct.error, UnicodeDecodeError) as exc:
                 self._lost(f'chunk at offset {offset}', f'{one_line(exc)}; {len(out)} messages before it are kept')
                 return out
             pos = body + length
         return out
+
+    def _check_counts(self, chunk: _Chunk, items: list[Split]) -> None:
+        """The messages found in a chunk, per channel, against the entries of its message indexes."""
+        if not chunk.counts:
+            return
+        found: dict[int, int] = {}
+        for item in items:
+            found[item[2]] = found.get(item[2], 0) + 1
+        if found != chunk.counts:
+            differ = ', '.join(f'channel {cid}: {chunk.counts.get(cid, 0)} indexed, {found.get(cid, 0)} found'
+                               for cid in sorted(set(found) | set(chunk.counts))
+                               if found.get(cid, 0) != chunk.counts.get(cid, 0))
+            self._lost(f'chunk at offset {chunk.offset}', f'its messages and its message indexes disagree ({differ})')
 
     def _scan_unindexed(self) -> None:
         """Files without chunk index: read every record once, keep messages in memory."""
@@ -424,6 +542,8 @@ class McapSource:
         for number, chunk in enumerate(chunks):
             data = self._chunk_at(chunk.offset)
             items = self._split(data, chunk.offset) if data is not None else []
+            if data is not None:
+                self._check_counts(chunk, items)
             horizon = chunks[number + 1].start if number + 1 < len(chunks) else None
             in_order = all(items[i][0] <= items[i + 1][0] for i in range(len(items) - 1))
             if not pending and in_order and (horizon is None or not items or items[-1][0] <= horizon):
@@ -498,9 +618,39 @@ class McapSource:
     def messages_of(self, ref: ChunkRef, records: memoryview) -> list[RawItem]:
         """The messages of a decompressed chunk, in its order (chunks of the copy path are in time order)."""
         items = self._split(records, ref.offset)
+        self._check_counts(self._by_offset[ref.offset], items)
         if any(items[i][0] > items[i + 1][0] for i in range(len(items) - 1)):
             items.sort(key=lambda m: (m[0], m[3]))
         return list(self._known(items))
+
+    def verify_chunk(self, ref: ChunkRef) -> None:
+        """`--verify` of a copied chunk (from any thread; nothing of the source changes): read again,
+        decompressed, CRC-checked, its records walked and counted against its message indexes."""
+        record = os.pread(self._file.fileno(), ref.length, ref.offset)
+        if len(record) != ref.length:
+            raise InputError(f'{self.path}: truncated chunk at offset {ref.offset}')
+        data = self.records_of(ref, record)
+        counts: dict[int, int] = {}
+        pos, end = 0, len(data)
+        where = f'{self.path}: corrupt MCAP file: chunk at offset {ref.offset} (copied, then verified)'
+        while pos < end:
+            if pos + 9 > end:
+                raise InputError(f'{where}: {end - pos} stray bytes after the last record')
+            opcode, length = _REC.unpack_from(data, pos)
+            if pos + 9 + length > end:
+                raise InputError(f'{where}: record at {pos} claims {length} bytes, past the end of the chunk')
+            if opcode == OP_MESSAGE:
+                if length < MESSAGE_HEAD:
+                    raise InputError(f'{where}: message record at {pos} is shorter than its header')
+                (channel_id,) = _U16.unpack_from(data, pos + 9)
+                counts[channel_id] = counts.get(channel_id, 0) + 1
+            elif opcode not in (OP_SCHEMA, OP_CHANNEL):
+                raise InputError(f'{where}: a record of type {opcode:#x} at {pos} inside it')
+            pos += 9 + length
+        expected = self._by_offset[ref.offset].counts
+        if expected is not None and counts != expected:
+            raise InputError(f'{where}: its message indexes list {sum(expected.values())} messages, it holds '
+                             f'{sum(counts.values())}')
 
     def close(self) -> None:
         """Release the file."""

@@ -30,7 +30,10 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
     sources = ', '.join(str(p) for p in result.inputs) if result.inputs else f'live topics {live}'.rstrip()
     print(f'inputs    {sources}', file=out)
     if result.output is not None:
-        copied = f'; {stats.chunks_copied} of {stats.chunks} chunks copied as they are' if stats.chunks else ''
+        unverified = stats.chunks_copied - stats.chunks_verified
+        copied = (f'; {stats.chunks_copied} of {stats.chunks} chunks copied as they are'
+                  + (f', {unverified} unverified (--verify reads them)' if unverified else
+                     ' and verified' if stats.chunks_copied else '')) if stats.chunks else ''
         print(f'output    {result.output}  ({stats.output_messages} messages from {stats.input_messages} read{copied})',
               file=out)
     elif result.mode == 'check':
