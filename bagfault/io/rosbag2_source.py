@@ -99,6 +99,11 @@ class Rosbag2Source(MergedSource):
         files = [self.path / name for name in names]
         if missing := [str(x) for x in files if not x.exists()]:
             raise InputError(f'{self.path}: files listed in metadata.yaml are missing: {", ".join(missing)}')
+        if unlisted := sorted(x.name for x in self.path.iterdir() if _is_storage(x) and x.name not in names):
+            # a warning, not an error: rosbag2's own test bags carry such files (Dashing's cdr_test holds a
+            # test.db3 beside cdr_test.db3) and `ros2 bag` plays them, reading the listed files only
+            self._notes.append(f'{meta}: {", ".join(unlisted)} in the folder but not listed in metadata.yaml: not '
+                               'read, as rosbag2 reads only the listed files')
         return files
 
     def _open_part(self, file: Path) -> McapSource | SqliteSource:

@@ -69,3 +69,21 @@ def test_a_rosbag2_folder_whose_metadata_claims_more_than_its_storage_holds(tmp_
     code = main(['check', str(tmp_path / 's.yaml'), str(bag)])
     err = capsys.readouterr().err
     assert code == 2 and f'the input declares {held + 32} messages and {held} were read' in err
+
+
+def test_a_rosbag2_folder_holding_a_storage_file_its_metadata_does_not_list(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A split metadata.yaml does not list (a stray copy, or rosbag2's own Dashing test bag, which holds a
+    test.db3 beside cdr_test.db3): rosbag2 reads only the listed files, and so does bagfault, saying so."""
+    import shutil
+
+    folder = tmp_path / 'bag'
+    shutil.copytree(FIXTURES / 'rover_3s_sqlite3', folder)
+    shutil.copy(folder / 'rover_3s_sqlite3.db3', folder / 'rover_3s_sqlite3_1.db3')
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text(SCENARIO)
+    out = tmp_path / 'out.mcap'
+    assert main(['run', str(scenario), str(folder), '-o', str(out)]) == 0
+    captured = capsys.readouterr()
+    assert 'rover_3s_sqlite3_1.db3 in the folder but not listed in metadata.yaml: not read' in captured.err
+    assert 'from 780 read' in captured.out  # the listed file's 780 messages, once
