@@ -602,3 +602,24 @@ def test_a_ros1_bag_whose_header_claims_fewer_chunks_than_it_holds(tmp_path, cap
     assert not (tmp_path / 'out.mcap').exists()
     assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--salvage']) == 0
     assert f'salvage skipped {bag}: the bag holds {chunks} chunks' in capsys.readouterr().err
+
+
+def test_a_ros1_bag_whose_header_claims_fewer_connections_than_its_index_holds(tmp_path, capsys):
+    """conn_count says how many connection records the index section holds; one that says fewer must not lose
+    the other connection's messages in silence (the index section is walked and its connection records
+    counted; rosbags also finds the stray record)."""
+    bag = ros1_bag(tmp_path / 'two.bag', None)
+    data = bytearray(bag.read_bytes())
+    at = data.index(b'conn_count=') + len(b'conn_count=')
+    connections = struct.unpack_from('<I', data, at)[0]
+    assert connections > 1
+    struct.pack_into('<I', data, at, connections - 1)
+    bag.write_bytes(bytes(data))
+    scenario = tmp_path / 'scenario.yaml'
+    scenario.write_text('injector: {id: i, type: imu, input_topic: /imu, output_topic: /imu_out}\nfaults: []\n')
+    code = main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count('\n') == 1, err
+    # rosbags finds the extra connection record itself (a record of an unexpected type after the chunk infos)
+    assert 'index looks damaged' in err or f'its header says conn_count={connections - 1}' in err
+    assert not (tmp_path / 'out.mcap').exists()

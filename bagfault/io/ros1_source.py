@@ -34,23 +34,21 @@ READ_ERRORS = (AnyReaderError, ReaderError, TypesysError, SerdeError, AssertionE
                ValueError, KeyError, IndexError, EOFError, struct.error, zlib.error, UnicodeDecodeError, MemoryError)
 
 
-def count_chunk_records(path: Path) -> int | None:
-    """Chunk records (op 0x05) between the bag header and the index, each record's header read and its data
-    skipped; None when the walk does not find the layout (the reader reports that file on its own)."""
+def count_chunk_records(path: Path) -> tuple[int, int] | None:
+    """(chunk records between the bag header and the index, connection records in the index section), each
+    record's header read and its data skipped; None when the walk does not find the layout (the reader
+    reports that file on its own)."""
     try:
         with path.open('rb') as stream:
             if stream.read(13) != b'#ROSBAG V2.0\n':
                 return None
             index_pos = None
-            count = 0
+            chunks = connections = 0
             first = True
             while True:
-                start = stream.tell()
-                if index_pos is not None and start >= index_pos:
-                    return count
                 raw = stream.read(4)
                 if len(raw) < 4:
-                    return count if index_pos is not None else None
+                    return (chunks, connections) if index_pos is not None else None
                 header = stream.read(struct.unpack('<I', raw)[0])
                 fields = _fields(header)
                 size = struct.unpack('<I', stream.read(4))[0]
@@ -60,8 +58,10 @@ def count_chunk_records(path: Path) -> int | None:
                     if op != b'\x03' or b'index_pos' not in fields:
                         return None
                     index_pos = struct.unpack('<Q', fields[b'index_pos'])[0]
-                elif op == b'\x05':
-                    count += 1
+                elif op == b'\x05' and stream.tell() <= index_pos:
+                    chunks += 1
+                elif op == b'\x07' and stream.tell() > index_pos:
+                    connections += 1
                 stream.seek(size, 1)
     except (OSError, struct.error):
         return None
@@ -118,15 +118,23 @@ class Ros1Source:
         it indexes would be read in part, its own counts agreeing with that part. An error (or with salvage a
         listed loss: the indexed chunks are read)."""
         indexed = len(getattr(self._reader.readers[0], 'chunk_infos', ()) or ())
-        found = count_chunk_records(self.path)
-        if found is None or found <= indexed:
+        walked = count_chunk_records(self.path)
+        if walked is None:
             return
-        text = f'{self.path}: the bag holds {found} chunks and its index lists {indexed} (its header says ' \
-               f'chunk_count={indexed}): the other chunks would not be read'
-        if not self.salvage:
-            self._reader.close()
-            raise InputError(text + ' (--salvage reads the indexed ones and says so)')
-        self.losses.append(text)
+        found, connections = walked
+        known = len(getattr(self._reader.readers[0], 'connections', ()) or ())
+        problems = []
+        if found > indexed:
+            problems.append(f'the bag holds {found} chunks and its index lists {indexed} (its header says '
+                            f'chunk_count={indexed}): the other chunks would not be read')
+        if connections > known:
+            problems.append(f'its index holds {connections} connection records and its header says '
+                            f'conn_count={known}: the messages of the others would not be read')
+        for text in problems:
+            if not self.salvage:
+                self._reader.close()
+                raise InputError(f'{self.path}: {text} (--salvage reads the indexed ones and says so)')
+            self.losses.append(f'{self.path}: {text}')
 
     def _setup(self) -> None:
         source = self._reader.typestore
