@@ -42,7 +42,7 @@ def count_chunk_records(path: Path) -> tuple[int, int] | None:
         with path.open('rb') as stream:
             if stream.read(13) != b'#ROSBAG V2.0\n':
                 return None
-            index_pos = None
+            index_pos: int | None = None
             chunks = connections = 0
             first = True
             while True:
@@ -58,9 +58,9 @@ def count_chunk_records(path: Path) -> tuple[int, int] | None:
                     if op != b'\x03' or b'index_pos' not in fields:
                         return None
                     index_pos = struct.unpack('<Q', fields[b'index_pos'])[0]
-                elif op == b'\x05' and stream.tell() <= index_pos:
+                elif op == b'\x05' and index_pos is not None and stream.tell() <= index_pos:
                     chunks += 1
-                elif op == b'\x07' and stream.tell() > index_pos:
+                elif op == b'\x07' and index_pos is not None and stream.tell() > index_pos:
                     connections += 1
                 stream.seek(size, 1)
     except (OSError, struct.error):
@@ -106,8 +106,11 @@ class Ros1Source:
         except READ_ERRORS as exc:
             self._reader.close()
             raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({one_line(exc)})') from None
-        connections = self._reader.connections
-        self.message_count: int | None = sum(c.msgcount for c in connections)
+        # what the chunk infos declare (each chunk's messages per connection), not the index data's entries the
+        # reader counts: an index data record whose connection id is damaged drops its entries from both
+        infos = getattr(self._reader.readers[0], 'chunk_infos', None) or []
+        declared = sum(sum(info.connection_counts.values()) for info in infos)
+        self.message_count: int | None = declared if infos else sum(c.msgcount for c in self._reader.connections)
         self._check_chunks()
         self.start_time = self._reader.start_time if self.message_count else None
         self.end_time = self._reader.end_time - 1 if self.message_count else None
