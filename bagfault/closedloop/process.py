@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import signal
 import subprocess
 import threading
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Literal
 
+from bagfault.closedloop.watchdog import MARK, marked
 from bagfault.errors import ClosedLoopError
 
 Ending = Literal['running', 'exited', 'SIGINT', 'SIGTERM', 'SIGKILL']
@@ -102,13 +104,13 @@ def _interruptible_children() -> Iterator[None]:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _watchdog(leader: int, start: int) -> subprocess.Popen[bytes] | None:
+def _watchdog(leader: int, start: int, token: str) -> subprocess.Popen[bytes] | None:
     """The watchdog of closedloop/watchdog.py for a system's session (None if it cannot start: then only a live
     bagfault stops the system)."""
     import sys  # noqa: PLC0415
 
     try:
-        return subprocess.Popen([sys.executable, '-m', 'bagfault.closedloop.watchdog', str(leader), str(start)],
+        return subprocess.Popen([sys.executable, '-m', 'bagfault.closedloop.watchdog', str(leader), str(start), token],
                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                 start_new_session=True, close_fds=True)
     except OSError:
@@ -129,6 +131,8 @@ class SystemProcess:
         self._out: IO[bytes] = self.stdout_path.open('wb')
         self._err: IO[bytes] = self.stderr_path.open('wb')
         argv: str | list[str] = command[0] if shell else command
+        self.token = secrets.token_hex(8)  # in every process of the system, daemons that left its session included
+        env = {**env, MARK: self.token}
         try:
             with _interruptible_children():
                 self.popen = subprocess.Popen(argv, shell=shell, env=env, cwd=cwd, stdin=subprocess.DEVNULL,
@@ -139,7 +143,7 @@ class SystemProcess:
                                   f'{exc.strerror or exc}') from None
         self.pid = self.popen.pid
         self._known: dict[int, int] = family(self.pid, {})  # the group: the new process at least
-        self._watchdog = _watchdog(self.pid, self._known.get(self.pid, 0))
+        self._watchdog = _watchdog(self.pid, self._known.get(self.pid, 0), self.token)
 
     @property
     def returncode(self) -> int | None:
@@ -154,11 +158,15 @@ class SystemProcess:
         """Remember the current descendants, so those that leave the group are still stopped."""
         self._known |= family(self.pid, self._known)
 
+    def _marked(self) -> set[int]:
+        """Processes carrying the run's mark: a daemon that left the session and whose parent has gone."""
+        return set(marked(self.token))
+
     def pids(self) -> set[int]:
         """Every process of the system seen so far (the group and its descendants, looked at again now)."""
         if self.alive():
             self.watch()
-        return {self.pid, *self._known}
+        return {self.pid, *self._known, *self._marked()}
 
     def stop(self, timeout: float) -> Ending:
         """SIGINT, SIGTERM, SIGKILL to the group and its descendants, `timeout` apart; how it ended (the last
@@ -200,7 +208,7 @@ class SystemProcess:
 
     def leftovers(self) -> set[int]:
         """Processes of the system still running (its group and the descendants seen)."""
-        return set(family(self.pid, self._known)) - {os.getpid()}
+        return (set(family(self.pid, self._known)) | self._marked()) - {os.getpid()}
 
     def tail(self, lines: int = TAIL_LINES) -> list[str]:
         """The last lines the system wrote, stderr's after stdout's."""

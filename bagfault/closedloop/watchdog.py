@@ -19,6 +19,7 @@ import sys
 import time
 
 GRACE = 2.0  # seconds between SIGTERM and SIGKILL
+MARK = 'BAGFAULT_SYSTEM_RUN'  # environment variable holding the run's token in every process of the system
 
 
 def _stat(pid: int) -> list[str] | None:
@@ -41,20 +42,44 @@ def session_members(leader: int) -> list[int]:
     return found
 
 
+def marked(token: str) -> list[int]:
+    """Live processes whose environment holds the run's mark (zombies and this process excluded)."""
+    needle = f'{MARK}={token}'.encode() + b'\0'
+    found = []
+    for entry in os.listdir('/proc'):
+        if not entry.isdigit() or int(entry) == os.getpid():
+            continue
+        try:
+            with open(f'/proc/{entry}/environ', 'rb') as handle:
+                environment = handle.read() + b'\0'
+        except OSError:
+            continue
+        if needle in environment:
+            fields = _stat(int(entry))
+            if fields is not None and fields[0] != 'Z':
+                found.append(int(entry))
+    return found
+
+
 def main(argv: list[str]) -> int:
-    """`watchdog LEADER_PID LEADER_START`: wait for `done` on stdin; without it, end the leader's session."""
+    """`watchdog LEADER_PID LEADER_START [TOKEN]`: wait for `done` on stdin; without it, end the leader's session
+    and every process marked with the run's token."""
     leader, start = int(argv[0]), int(argv[1])
+    token = argv[2] if len(argv) > 2 else ''
     if sys.stdin.readline().strip() == 'done':
         return 0
     fields = _stat(leader)
-    if fields is not None and int(fields[19]) != start:
-        return 0  # the pid is another program's now, and so is its session
+    ours = fields is None or int(fields[19]) == start  # else the pid is another program's now, and its session
+
+    def members() -> set[int]:
+        return set(session_members(leader) if ours else ()) | set(marked(token) if token else ())
+
     for number in (signal.SIGTERM, signal.SIGKILL):
-        for pid in session_members(leader):
+        for pid in members():
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.kill(pid, number)
         deadline = time.monotonic() + GRACE
-        while session_members(leader) and time.monotonic() < deadline:
+        while members() and time.monotonic() < deadline:
             time.sleep(0.05)
     return 0
 

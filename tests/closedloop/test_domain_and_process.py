@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import random
@@ -226,3 +227,46 @@ def test_process_table_matches_ps() -> None:
     ppid, pgid, elapsed = (int(v) for v in ps.stdout.split())
     assert [ours.ppid, ours.pgid] == [ppid, pgid]
     assert abs(uptime - ours.start / os.sysconf('SC_CLK_TCK') - elapsed) < 2.0   # start: ticks since boot
+
+
+DAEMON = (f"{sys.executable} -c 'import os, sys, time\n"
+          "if os.fork(): sys.exit(0)\n"
+          "os.setsid()\n"
+          "if os.fork(): sys.exit(0)\n"
+          "time.sleep(300)'")  # the classic double fork: a new session, its parent gone before anyone looks
+
+
+def daemon_of(process: SystemProcess, token: str) -> int | None:
+    """The daemon: a process of the token in a session other than the system's."""
+    for pid in running_with(f'{token}-daemon'):
+        with contextlib.suppress(ProcessLookupError):
+            if pid != process.pid and os.getsid(pid) not in (process.pid, os.getsid(0)):
+                return pid
+    return None
+
+
+def test_a_daemon_that_double_forked_out_of_the_session_is_stopped_too(tmp_path: Path) -> None:
+    """Never seen as a descendant (its parents exit at once, it is re-parented and leads a session of its own):
+    it still carries the run's mark in its environment."""
+    token = uuid.uuid4().hex
+    process = start(tmp_path, f'{DAEMON} {token}-daemon; {SLEEP} {token}', token)
+    wait_for(lambda: daemon_of(process, token) is not None)
+    daemon = daemon_of(process, token)
+    assert daemon is not None and os.getsid(daemon) != process.pid  # it left the system's session
+    assert daemon not in family(process.pid, {})  # and no walk of the system's descendants finds it
+    assert daemon in process.pids()  # so the isolation check does not take it for a stranger
+    process.stop(timeout=2.0)
+    assert running_with(token) == []
+
+
+def test_the_watchdog_ends_a_daemon_when_bagfault_dies(tmp_path: Path) -> None:
+    """bagfault SIGKILLed: the watchdog's pipe closes without `done`; it ends the session and the marked daemon."""
+    token = uuid.uuid4().hex
+    process = start(tmp_path, f'{DAEMON} {token}-daemon; {SLEEP} {token}', token)
+    wait_for(lambda: daemon_of(process, token) is not None)
+    watchdog = process._watchdog
+    assert watchdog is not None and watchdog.stdin is not None
+    watchdog.stdin.close()  # as the kernel closes it when bagfault is killed
+    wait_for(lambda: running_with(token) == [], timeout=10.0)
+    watchdog.wait(timeout=5)
+    process.popen.wait(timeout=5)
