@@ -216,6 +216,7 @@ class McapSource:
             self._scan_definitions()  # a valid layout may keep schemas (or channels) in the data section only
         if summary.statistics is not None:
             self.message_count = summary.statistics.message_count
+            self._check_channel_counts(dict(summary.statistics.channel_message_counts))
             if summary.statistics.message_count:
                 self.start_time = summary.statistics.message_start_time
                 self.end_time = summary.statistics.message_end_time
@@ -259,6 +260,23 @@ class McapSource:
             position += 9 + length
         self._chunks.sort(key=lambda c: (c.start, c.offset))
         self._by_offset = {c.offset: c for c in self._chunks}
+
+    def _check_channel_counts(self, declared: dict[int, int]) -> None:
+        """The Statistics record's messages per channel against the message indexes of every chunk (each of
+        which is checked against its chunk's records when that chunk is decompressed, or under --verify)."""
+        if not declared or any(c.counts is None and c.index_offsets is not None for c in self._chunks):
+            return
+        indexed: dict[int, int] = {}
+        for chunk in self._chunks:
+            for channel_id, count in (chunk.counts or {}).items():
+                indexed[channel_id] = indexed.get(channel_id, 0) + count
+        if any(c.index_offsets is None for c in self._chunks):  # unindexed chunks (salvage): not countable here
+            return
+        differ = [f'channel {cid}: {declared.get(cid, 0)} declared, {indexed.get(cid, 0)} indexed'
+                  for cid in sorted(set(declared) | set(indexed)) if declared.get(cid, 0) != indexed.get(cid, 0)]
+        if differ:
+            self._lost('the Statistics record', f'its messages per channel and the message indexes disagree '
+                                                f'({"; ".join(differ[:3])})')
 
     def _check_chunk(self, fd: int, chunk: _Chunk) -> None:
         """One indexed chunk's record header and message index records against its chunk index."""

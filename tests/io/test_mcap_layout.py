@@ -197,3 +197,25 @@ def test_a_channel_id_defined_again_with_another_topic(tmp_path: Path, capsys: p
     code, out = run(tmp_path, bag, '--no-chunk-copy')
     error = capsys.readouterr().err.strip()
     assert code == 2 and 'channel 1' in error and "'/a'" in error and "'/z'" in error and not out.exists()
+
+
+def test_statistics_that_move_messages_between_channels(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The total is right, the per-channel counts are not (3 of /b's counted as /a's): found against the
+    message indexes, whose counts are themselves checked against the chunks."""
+    bag = tmp_path / 'bag.mcap'
+    with bag.open('wb') as stream:
+        writer = Writer(stream, chunk_size=300, compression=CompressionType.ZSTD)
+        writer.start(profile='', library='test')
+        schema = writer.register_schema('raw', 'jsonschema', b'{}')
+        channels = [writer.register_channel(t, 'json', schema, {'offered_qos_profiles': ''}) for t in TOPICS]
+        for k in range(PER_TOPIC):
+            for number, channel in enumerate(channels):
+                writer.add_message(channel, 10**9 + k * 10**7 + number, b'{}', 0)
+        statistics = writer._Writer__statistics  # type: ignore[attr-defined]
+        statistics.channel_message_counts[channels[0]] += 3
+        statistics.channel_message_counts[channels[1]] -= 3
+        writer.finish()
+    code, out = run(tmp_path, bag)
+    error = capsys.readouterr().err.strip()
+    assert code == 2 and error.count('\n') == 0 and 'messages per channel and the message indexes disagree' in error
+    assert f'channel {channels[0]}: {PER_TOPIC + 3} declared, {PER_TOPIC} indexed' in error and not out.exists()
