@@ -307,3 +307,35 @@ def test_a_signal_after_the_output_is_published_says_it_was_written(capsys, tmp_
     assert code == 2
     assert err == f'bagfault: stopped by SIGTERM; written before that: {tmp_path / "o.mcap"}\n'
     assert counts(tmp_path / 'o.mcap')['/odom'] > 0 and not (tmp_path / 'r.json').exists()
+
+
+def test_an_unreadable_split_or_folder_is_one_line(capsys, tmp_path, scenarios, monkeypatch):
+    """As a non-root user meets them (root reads everything, so the refusal is the kernel's, raised here)."""
+    import errno
+
+    folder = tmp_path / 'bag'
+    shutil.copytree(FIXTURES_SQLITE, folder)
+    storage = folder / 'rover_3s_sqlite3.db3'
+    real_open = Path.open
+
+    def denied(self, *args, **kwargs):
+        if self == storage:
+            raise PermissionError(errno.EACCES, 'Permission denied', str(self))
+        return real_open(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, 'open', denied)
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', folder, '-o', tmp_path / 'o.mcap')
+    assert code == 2 and err.count('\n') == 1 and 'Permission denied' in err and str(storage) in err, err
+    monkeypatch.undo()
+
+    real_iterdir = Path.iterdir
+
+    def unlistable(self):
+        if self == folder:
+            raise PermissionError(errno.EACCES, 'Permission denied', str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, 'iterdir', unlistable)
+    code, _, err = run_cli(capsys, 'run', scenarios / 'odom.yaml', folder, '-o', tmp_path / 'o.mcap')
+    assert code == 2 and err.count('\n') == 1 and 'Permission denied' in err and str(folder) in err, err
+    assert not (tmp_path / 'o.mcap').exists()
