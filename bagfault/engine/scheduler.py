@@ -143,28 +143,30 @@ class FaultScheduler:
             f.id: FaultRandom(_fault_seed(scenario, f, seed), f.id) for f in scenario.faults
         }
         self.active: dict[str, int] = {}
-        self._order = {f.id: i for i, f in enumerate(scenario.faults)}
-        self._heap: list[tuple[int, int, int, str, bool, FaultSource]] = []
-        self._sequences: dict[str, tuple[Iterator[tuple[int, bool]], FaultSource]] = {}
+        self._order = {f.id: i for i, f in reversed(list(enumerate(scenario.faults)))}  # an id at its first place
+        self._heap: list[tuple[int, int, int, str, bool, FaultSource, int]] = []
+        # each definition's schedule (a fault id defined twice has two, which both switch it, as in the anchor)
+        self._sequences: dict[int, tuple[str, Iterator[tuple[int, bool]], FaultSource]] = {}
         self._counter = 0
         self._followers: dict[str, list[FaultSpec]] = {}
         requested: dict[str, list[Activation]] = {}
         for activation in activations:
             requested.setdefault(activation.fault_id, []).append(activation)
-        for fault in scenario.faults:
+        for number, fault in enumerate(scenario.faults):
             if fault.id in requested:
-                windows = sorted(requested[fault.id], key=lambda a: a.start)
-                self._add(fault.id, self._windows(windows), 'cli')
+                if scenario.fault(fault.id) is fault:  # once per id, whatever its definitions say
+                    windows = sorted(requested[fault.id], key=lambda a: a.start)
+                    self._add(number, fault.id, self._windows(windows), 'cli')
             elif fault.after is not None:
                 self._followers.setdefault(fault.after.fault, []).append(fault)
             elif fault.repeat is not None:
-                self._add(fault.id, _repeat(fault), 'scheduled')
+                self._add(number, fault.id, _repeat(fault), 'scheduled')
             elif fault.probability_per_second is not None:
-                self._add(fault.id, _random(fault, self.random[fault.id]), 'scheduled')
+                self._add(number, fault.id, _random(fault, self.random[fault.id]), 'scheduled')
             elif fault.active_on_startup:
-                self._add(fault.id, _plain(*_anchor_window(fault)), 'startup')
+                self._add(number, fault.id, _plain(*_anchor_window(fault)), 'startup')
             elif fault.start is not None:
-                self._add(fault.id, _plain(*_anchor_window(fault)), 'scheduled')
+                self._add(number, fault.id, _plain(*_anchor_window(fault)), 'scheduled')
 
     @staticmethod
     def _windows(windows: list[Activation]) -> Iterator[tuple[int, bool]]:
@@ -172,19 +174,19 @@ class FaultScheduler:
             begin = seconds_to_ns(window.start)
             yield from _plain(begin, None if window.duration is None else begin + seconds_to_ns(window.duration))
 
-    def _add(self, fault_id: str, sequence: Iterator[tuple[int, bool]], source: FaultSource) -> None:
-        self._sequences[fault_id] = (sequence, source)
-        self._pull(fault_id)
+    def _add(self, number: int, fault_id: str, sequence: Iterator[tuple[int, bool]], source: FaultSource) -> None:
+        self._sequences[number] = (fault_id, sequence, source)
+        self._pull(number)
 
-    def _pull(self, fault_id: str) -> None:
-        sequence, source = self._sequences[fault_id]
+    def _pull(self, number: int) -> None:
+        fault_id, sequence, source = self._sequences[number]
         step = next(sequence, None)
         if step is not None:
-            self._push(self.origin + step[0], fault_id, step[1], source)
+            self._push(self.origin + step[0], fault_id, step[1], source, number)
 
-    def _push(self, time: int, fault_id: str, state: bool, source: FaultSource) -> None:
+    def _push(self, time: int, fault_id: str, state: bool, source: FaultSource, number: int = -1) -> None:
         self._counter += 1
-        heapq.heappush(self._heap, (time, self._order[fault_id], self._counter, fault_id, state, source))
+        heapq.heappush(self._heap, (time, self._order[fault_id], self._counter, fault_id, state, source, number))
 
     def next_time(self) -> int | None:
         """Bag time (ns) of the next pending change, or None."""
@@ -198,11 +200,11 @@ class FaultScheduler:
         """Apply every change due at or before `now`; return their events in order."""
         events = []
         while self._heap and self._heap[0][0] <= now:
-            time, _, _, fault_id, state, source = heapq.heappop(self._heap)
+            time, _, _, fault_id, state, source, number = heapq.heappop(self._heap)
             if source == 'startup' and not state:
                 source = 'scheduled'  # the end of a startup fault's duration is a timer, as in the anchor
-            if fault_id in self._sequences:
-                self._pull(fault_id)
+            if number in self._sequences:
+                self._pull(number)
             event = self.set_state(fault_id, state, time, source)
             if event is not None:
                 events.append(event)

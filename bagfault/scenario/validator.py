@@ -40,8 +40,12 @@ def validate_scenario(scenario: Scenario, out: _Collector) -> None:
 
 
 def _duplicates(scenario: Scenario, out: _Collector) -> None:
-    for kind, items in (('injector', scenario.injectors), ('fault', scenario.faults),
-                        ('assertion', scenario.assertions)):
+    """Injector and assertion ids are unique, as the anchor's validator requires. A fault id defined again is
+    loaded by the anchor (scenario_validator.cpp has no such check): its injector keeps faults in a map by id
+    (fault_injector_base.cpp add_fault), so the last definition's config is used, and its scheduler sets a
+    timer for every definition, so each schedule switches that id. bagfault does the same, with a warning; a
+    repeated id on two injectors (two faults of one name, switched independently) is refused."""
+    for kind, items in (('injector', scenario.injectors), ('assertion', scenario.assertions)):
         counts = Counter(x.id for x in items if x.id)
         seen: set[str] = set()
         for item in items:
@@ -49,6 +53,18 @@ def _duplicates(scenario: Scenario, out: _Collector) -> None:
                 if item.id in seen:
                     out.add((*item.path, 'id'), f'duplicate {kind} id {item.id!r}')
                 seen.add(item.id)
+    first: dict[str, FaultSpec] = {}
+    for fault in scenario.faults:
+        earlier = first.setdefault(fault.id, fault) if fault.id else fault
+        if earlier is fault:
+            continue
+        if earlier.injector_id != fault.injector_id:
+            out.add((*fault.path, 'id'), f'fault id {fault.id!r} is also a fault of injector {earlier.injector_id!r}: '
+                                         'one id on two injectors would be two faults switched apart; rename one')
+        else:
+            out.warn((*fault.path, 'id'), f'fault id {fault.id!r} is defined again: as the anchor, this last '
+                                          "definition's config is used and every definition's schedule switches "
+                                          'the fault')
 
 
 def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:

@@ -127,7 +127,7 @@ class _Index:
         for x in injectors:
             self.injectors.setdefault(x.id, x)
         for f in faults:
-            self.faults.setdefault(f.id, f)
+            self.faults[f.id] = f  # a fault id defined again: the last definition's config, as the anchor's map
 
     def matches(self, injectors: list[InjectorSpec], faults: list[FaultSpec]) -> bool:
         """Made from these lists, which have not grown or shrunk since."""
@@ -172,9 +172,17 @@ class Scenario:
         return self._ids().injectors.get(injector_id)
 
     def fault(self, fault_id: str) -> FaultSpec | None:
-        """Fault with this id (the first, if repeated), if any; a lookup by id, whatever the file's size."""
+        """Fault with this id (the last definition, if repeated: the anchor's injector keeps its faults in a map
+        by id, so a second definition replaces the first's config), if any; a lookup by id."""
         return self._ids().faults.get(fault_id)
 
     def faults_of(self, injector_id: str) -> list[FaultSpec]:
-        """Faults owned by one injector, in file order."""
-        return [x for x in self.faults if x.injector_id == injector_id]
+        """Faults owned by one injector, in file order, each id once (at its first place, its last definition)."""
+        index = self._ids().faults
+        seen: set[str] = set()
+        out = []
+        for x in self.faults:
+            if x.injector_id == injector_id and x.id not in seen:
+                seen.add(x.id)
+                out.append(index.get(x.id, x))
+        return out

@@ -298,3 +298,42 @@ def test_a_topic_hz_within_shorter_than_its_window_is_the_anchors_advisory_warni
         ['assertions[0].within', "assertion 'hz' has within smaller than window; it may fail before a full "
                                  'measurement window is available']]
     assert parse_scenario(text.replace('within: 1.0', 'within: 2.0')).warnings == []
+
+
+def test_a_fault_id_defined_twice_runs_as_the_anchor_runs_it(tmp_path, odom_bag):
+    """The anchor loads it (scenario_validator.cpp checks injector and assertion ids only): the injector's map
+    keeps the second definition's config (fault_injector_base.cpp add_fault: faults_[id] = config) and the
+    scheduler sets timers for both definitions (fault_scheduler.cpp schedule: a loop over every FaultConfig).
+    So x_bias 5.0 during both windows, [1, 2) s and [4, 5) s."""
+    text = textwrap.dedent("""
+        injector: {id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}
+        faults:
+          - {id: shift, injector_id: odom, start: 1.0, duration: 1.0, config: {x_bias: 1.0}}
+          - {id: shift, injector_id: odom, start: 4.0, duration: 1.0, config: {x_bias: 5.0}}
+    """)
+    scenario = parse_scenario(text)
+    assert len(scenario.warnings) == 1 and 'faults[1].id' in scenario.warnings[0]
+    assert 'defined again' in scenario.warnings[0]
+    with pytest.raises(ScenarioError):
+        parse_scenario(text, strict=True)
+    out, result = run_inline(tmp_path, text, odom_bag)
+    events = [(e.fault_id, e.state, round(seconds(e.time), 3)) for e in result.stats.events]
+    assert events == [('shift', 'active', 1.0), ('shift', 'inactive', 2.0), ('shift', 'active', 4.0),
+                      ('shift', 'inactive', 5.0)]
+    raw = {t: m.pose.pose.position.x for t, m in decoded(odom_bag, ['/odom_raw'])['/odom_raw']}
+    shifted = {round(seconds(t), 2): m.pose.pose.position.x - raw[t] for t, m in decoded(out, ['/odom'])['/odom']}
+    assert shifted[0.5] == 0.0 and shifted[1.5] == pytest.approx(5.0) and shifted[3.0] == 0.0
+    assert shifted[4.5] == pytest.approx(5.0) and shifted[5.5] == 0.0
+
+
+def test_one_fault_id_on_two_injectors_is_refused():
+    text = textwrap.dedent("""
+        injectors:
+          - {id: a, type: odom, input_topic: /odom_raw, output_topic: /odom}
+          - {id: b, type: odom, input_topic: /odom2_raw, output_topic: /odom2}
+        faults:
+          - {id: shift, injector_id: a, start: 1.0, config: {x_bias: 1.0}}
+          - {id: shift, injector_id: b, start: 1.0, config: {x_bias: 1.0}}
+    """)
+    with pytest.raises(ScenarioError, match="also a fault of injector 'a'"):
+        parse_scenario(text)

@@ -140,14 +140,14 @@ def test_validation_reports_every_problem_with_its_location():
     assert ('faults[1].start', '-1.0 is negative') in found
     assert ('faults[2].duration', '-2 is negative') in found
     assert ('injectors[1].id', "duplicate injector id 'odom'") in found
-    assert ('faults[1].id', "duplicate fault id 'a'") in found
+    assert not any(p == 'faults[1].id' for p, _ in found)  # a fault id defined again is the anchor's warning
     assert not any(p == 'injectors[1].type' for p, _ in found)  # an unknown type is a warning (the anchor's)
     assert ('faults[0].config.drop_probability', '1.5 is above the maximum 1.0') in found
     assert ('faults[1].config.x_bias', "'fast' is not a number") in found
     assert any(p == 'faults[2].injector_id' and "unknown injector 'nowhere'" in m for p, m in found)
     assert any(p == 'assertions[0].fault_id' and "unknown fault 'ghost'" in m for p, m in found)
     assert where['faults[0].config.drop_probability'] == '14:25'
-    assert len(info.value.problems) == 8  # the unknown config key and the unknown type are warnings, as in the anchor
+    assert len(info.value.problems) == 7  # the unknown config key, the unknown type, the repeated fault id: warnings
     with pytest.raises(ScenarioError) as strict:
         parse_scenario(BAD, strict=True)
     assert any(p.path == 'faults[1].config.bogus_key' and "unknown key 'bogus_key' for injector type 'odom'"
