@@ -182,8 +182,15 @@ def _node(raw: dict[str, Any], warnings: list[str]) -> Node:
             warnings.append(f'{ctx_where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)}); '
                             'context dropped')
             continue
-        node.contexts.append(MessageContext(kind, _topic(_required(context, 'subscription_topic_name', ctx_where)),
-                                            _topic(_required(context, 'publisher_topic_name', ctx_where))))
+        subscribed = _topic(_required(context, 'subscription_topic_name', ctx_where))
+        published = _topic(_required(context, 'publisher_topic_name', ctx_where))
+        missing = [f'{role} {topic}' for role, topic, known in (('subscribe to', subscribed, node.subscribes),
+                                                                  ('publish', published, node.publishes))
+                   if topic is not None and topic not in known]
+        if missing:  # caret finds no subscription or publisher struct for it, and the context is not made
+            warnings.append(f'{ctx_where}: the node does not {" or ".join(missing)}; context dropped')
+            continue
+        node.contexts.append(MessageContext(kind, subscribed, published))
     return node
 
 

@@ -128,6 +128,20 @@ def test_unknown_context_type_drops_that_context_and_a_callback_chain_takes_its_
         measure(path, [], path='target')
 
 
+def test_a_context_over_a_topic_its_node_does_not_have_is_dropped_with_a_warning(tmp_path, caret_file):
+    """caret builds a context from the node's own subscription and publisher of those topics; with neither
+    there is no context (and a callback chain, if any, takes its place): a warning, not a silent change."""
+    text = caret_file.read_text().replace('context_type: use_latest_message\n    subscription_topic_name: /topic3',
+                                          'context_type: use_latest_message\n    subscription_topic_name: /nowhere',
+                                          1)
+    path = tmp_path / 'arch.yaml'
+    path.write_text(text)
+    architecture = load_architecture(path)
+    assert any('node /timer_driven_node: message_contexts[0]: the node does not subscribe to /nowhere; context '
+               'dropped' in w for w in architecture.warnings), architecture.warnings
+    assert load_architecture(caret_file).warnings == []  # the file as it is: no such warning
+
+
 def test_a_hop_without_context_ends_the_measurement_at_its_input(caret_file, target_bag, tmp_path):
     """UNDEFINED context and no callback chain (the subscription callback publishes nothing): caret's record
     merge stops at that node, so the path is measured /topic1 -> /topic3 with a note."""
