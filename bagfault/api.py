@@ -21,6 +21,7 @@ from bagfault.engine.result import RunResult
 from bagfault.engine.scheduler import Activation
 from bagfault.engine.stop import StopFlag
 from bagfault.errors import BagfaultError, Problem, ScenarioError, UsageError
+from bagfault.io.objects import is_remote, staged_folder
 from bagfault.io.outputs import Protected, check_derived, check_output
 from bagfault.io.recover import Recovered, partial_of, requested_name
 from bagfault.io.recover import recover as copy_readable
@@ -347,13 +348,18 @@ def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int
              force: bool = False) -> CampaignResult:
     """Run a campaign file's jobs (bag x sweep point x seed, and the search) on a local pool of `workers`
     processes (default: one per core) or, with `ray` ('' for a local instance, or a cluster address), as Ray
-    tasks; results, tables and report in `directory`."""
+    tasks; results, tables and report in `directory` (a folder, or a bucket prefix such as 's3://bucket/run1')."""
     from bagfault.campaign.loader import load_campaign  # noqa: PLC0415
     from bagfault.campaign.runner import run_campaign  # noqa: PLC0415
 
     if workers is not None and workers < 1:
         raise UsageError(f'--workers {workers}: must be 1 or more')
     loaded = file if not isinstance(file, (str, Path)) else load_campaign(file)
+    if is_remote(str(directory)):  # a bucket prefix: written here, uploaded at the end (and on a stop)
+        with staged_folder(str(directory), resume=resume) as staged:
+            return run_campaign(loaded, staged.path, workers=workers, ray=ray, resume=resume, progress=progress,
+                                force=True,  # the staging folder holds nothing but what was downloaded into it
+                                kept_elsewhere=staged.outputs)
     return run_campaign(loaded, Path(directory), workers=workers, ray=ray, resume=resume, progress=progress,
                         force=force)
 

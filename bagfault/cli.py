@@ -171,7 +171,7 @@ def _parser() -> argparse.ArgumentParser:
                               usage='bagfault campaign FILE -o DIR [--workers N] [--ray [ADDRESS]] [--resume] '
                                     '[--dry-run]')
     campaign.add_argument('campaign', type=Path, metavar='FILE')
-    campaign.add_argument('-o', '--output-dir', type=Path, metavar='DIR',
+    campaign.add_argument('-o', '--output-dir', type=_folder_or_url, metavar='DIR',
                           help='results.parquet, results.csv, campaign.json, report.html, jobs/, outputs/')
     _force_option(campaign)
     campaign.add_argument('--workers', type=int, default=None, metavar='N',
@@ -200,6 +200,13 @@ def output_file(text: str) -> Path:
     if not text or text.endswith(('/', os.sep)) or text in ('.', '..'):
         raise argparse.ArgumentTypeError(f'{text!r} names a folder; give a file name')
     return Path(text)
+
+
+def _folder_or_url(text: str) -> Path | str:
+    """A campaign's -o: a local folder, or a bucket prefix (s3://, gs://, az://) kept as written."""
+    from bagfault.io.objects import is_remote  # noqa: PLC0415
+
+    return text if is_remote(text) else Path(text)
 
 
 def _force_option(parser: argparse.ArgumentParser) -> None:
@@ -404,8 +411,8 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         result = api.campaign(campaign, args.output_dir, workers=args.workers, ray=args.ray, resume=args.resume,
                               progress=JobProgress(), force=args.force)
     except KeyboardInterrupt:
-        print(f'bagfault: interrupted; finished jobs are kept in {args.output_dir / "jobs"}, --resume continues',
-              file=sys.stderr)
+        print(f'bagfault: interrupted; finished jobs are kept in {_under(args.output_dir, "jobs")}, --resume '
+              'continues', file=sys.stderr)
         return EXIT_ERROR
     c = result.counts
     search = f', {len(result.table.rows) - len(result.table.sweep_rows())} search jobs' \
@@ -418,10 +425,15 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         print(f'breaking point {point.parameter} on {point.bag.name}: {where} ({point.note})')
     for note in result.notes:
         print(f'note: {note}')
-    parquet = [str(args.output_dir / 'results.parquet')] if result.parquet else []
-    print(f'results   {", ".join([*parquet, str(args.output_dir / "results.csv")])}')
-    print(f'report    {args.output_dir / "report.html"}')
+    parquet = [_under(args.output_dir, 'results.parquet')] if result.parquet else []
+    print(f'results   {", ".join([*parquet, _under(args.output_dir, "results.csv")])}')
+    print(f'report    {_under(args.output_dir, "report.html")}')
     return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _under(folder: Path | str, name: str) -> str:
+    """A file of a campaign's folder or bucket prefix, as the user would name it."""
+    return f'{folder.rstrip("/")}/{name}' if isinstance(folder, str) else str(folder / name)
 
 
 def _cmd_recover(args: argparse.Namespace) -> int:

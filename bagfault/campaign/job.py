@@ -8,9 +8,23 @@ depend on which worker ran what.
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+
+@contextlib.contextmanager
+def _local(spec: dict[str, Any]) -> Iterator[str]:
+    """The job's bag on local disk: as given, or a bucket's bag from this machine's cache (fetched once)."""
+    if not spec.get('remote'):
+        yield spec['bag']
+        return
+    from bagfault.io.objects import RemoteBag, fetched  # noqa: PLC0415
+
+    with fetched(RemoteBag.from_dict(spec['remote'])) as bag:
+        yield str(bag.path)
 
 
 def run_job(spec: dict[str, Any]) -> dict[str, Any]:
@@ -22,11 +36,12 @@ def run_job(spec: dict[str, Any]) -> dict[str, Any]:
     output = Path(spec['output']) if spec.get('output') else None
     try:
         scenario = parse_scenario(spec['scenario_text'], source=Path(spec['scenario_source']))
-        if spec['mode'] == 'test':
-            result = api.test(scenario, [spec['bag']], output, seed=spec['seed'])
-        else:
-            assert output is not None
-            result = api.run(scenario, [spec['bag']], output, seed=spec['seed'])
+        with _local(spec) as bag:
+            if spec['mode'] == 'test':
+                result = api.test(scenario, [bag], output, seed=spec['seed'])
+            else:
+                assert output is not None
+                result = api.run(scenario, [bag], output, seed=spec['seed'])
     except Exception as exc:  # noqa: BLE001 - any failure of a job is its row, never the campaign's end
         message = ' '.join(str(exc).split()) or type(exc).__name__
         return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {}, 'warnings': [],

@@ -14,13 +14,15 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from bagfault import __version__
 from bagfault.campaign.edit import expanded, scenario_data
-from bagfault.errors import CampaignError
+from bagfault.errors import CampaignError, InputError
+from bagfault.io.objects import RemoteBag, is_remote, list_bags
 from bagfault.io.sources import fingerprint
 
 if TYPE_CHECKING:
     from bagfault.campaign.model import Campaign
 
 Kind = Literal['sweep', 'search']
+Bag = Path | RemoteBag  # a local file or folder, or a bag in a bucket
 
 
 @dataclass(frozen=True)
@@ -28,7 +30,7 @@ class Job:
     """One run: a bag, swept values, a seed, and the scenario they make."""
 
     index: int
-    bag: Path
+    bag: Bag
     values: dict[str, Any]
     seed: int
     scenario_text: str
@@ -44,7 +46,9 @@ class Job:
     def spec(self, campaign: Campaign, output: Path | None) -> dict[str, Any]:
         """What a worker needs (plain JSON)."""
         return {'mode': campaign.mode, 'scenario_text': self.scenario_text,
-                'scenario_source': str(campaign.scenario.resolve()), 'bag': str(self.bag.resolve()), 'seed': self.seed,
+                'scenario_source': str(campaign.scenario.resolve()),
+                'bag': str(self.bag) if isinstance(self.bag, RemoteBag) else str(self.bag.resolve()), 'seed': self.seed,
+                'remote': self.bag.to_dict() if isinstance(self.bag, RemoteBag) else None,
                 'output': str(output) if output else None,
                 'timeout': campaign.timeout}
 
@@ -54,7 +58,7 @@ class Plan:
     """Every job of the sweep, in table order; the bags with their fingerprints."""
 
     campaign: Campaign
-    bags: list[Path]
+    bags: list[Bag]
     jobs: list[Job] = field(default_factory=list)
     fingerprints: dict[str, str] = field(default_factory=dict)  # bag -> digest of its files
 
@@ -103,13 +107,21 @@ def search_jobs(campaign: Campaign) -> int:
     return (2 + halvings) * len(campaign.seeds) * s.samples(campaign.mode)
 
 
-def bags_of(campaign: Campaign) -> list[Path]:
-    """Each glob expanded (sorted), relative to the campaign file; CampaignError for a glob that finds nothing."""
+def bags_of(campaign: Campaign) -> list[Bag]:
+    """Each glob expanded (sorted), relative to the campaign file, or listed in its bucket; CampaignError for a
+    glob that finds nothing or a store that refuses."""
     base = campaign.source.parent if campaign.source is not None else Path('.')
-    found: list[Path] = []
+    found: list[Bag] = []
     for pattern in campaign.bags:
-        full = pattern if Path(pattern).is_absolute() else str(base / pattern)
-        matches = sorted(Path(m.rstrip('/')) for m in glob.glob(full))
+        matches: list[Bag]
+        if is_remote(pattern):
+            try:
+                matches = list(list_bags(pattern))
+            except InputError as exc:
+                raise CampaignError(f'{campaign.source}: bags: {exc}') from None
+        else:
+            full = pattern if Path(pattern).is_absolute() else str(base / pattern)
+            matches = [Path(m) for m in sorted(m.rstrip('/') for m in glob.glob(full))]
         if not matches:
             raise CampaignError(f'{campaign.source}: bags: {pattern!r} matches no file or folder')
         found += [m for m in matches if m not in found]
@@ -136,9 +148,11 @@ def _grid_point(axes: list[list[Any]], index: int) -> tuple[Any, ...]:
     return tuple(reversed(values))
 
 
-def bag_digest(path: Path) -> str:
-    """One digest over the bag's files (names, sizes, BLAKE3 digests)."""
-    return hashlib.sha256(json.dumps([asdict(f) for f in fingerprint(path)], sort_keys=True).encode()).hexdigest()
+def bag_digest(bag: Bag) -> str:
+    """One digest over the bag's files (names, sizes, BLAKE3 digests; in a bucket, names, sizes and ETags)."""
+    if isinstance(bag, RemoteBag):
+        return bag.digest
+    return hashlib.sha256(json.dumps([asdict(f) for f in fingerprint(bag)], sort_keys=True).encode()).hexdigest()
 
 
 def job_key(bag_sha: str, scenario_text: str, seed: int, mode: str, sample: int = 0) -> str:
@@ -181,7 +195,7 @@ def make_plan(campaign: Campaign) -> Plan:
     return plan
 
 
-def search_job(plan: Plan, index: int, bag: Path, value: float, seed: int, sample: int = 0) -> Job:
+def search_job(plan: Plan, index: int, bag: Bag, value: float, seed: int, sample: int = 0) -> Job:
     """A job of the bisection: the searched parameter at `value` (with the first sweep point's other values), the
     `sample`th run of that value and seed."""
     campaign = plan.campaign

@@ -19,7 +19,7 @@ from bagfault.io.outputs import write_atomic
 from bagfault.report.page import LEGEND, Page, title
 
 if TYPE_CHECKING:
-    from bagfault.campaign.plan import Job, Plan
+    from bagfault.campaign.plan import Bag, Job, Plan
     from bagfault.campaign.search import BreakingPoint
 
 FIXED = ('job', 'kind', 'bag', 'seed')
@@ -40,8 +40,10 @@ class Table:
         return [r for r in self.rows if r['kind'] == 'sweep']
 
 
-def bag_name(plan: Plan, bag: Path) -> str:
-    """A bag as the table shows it: relative to the campaign file's folder when inside it."""
+def bag_name(plan: Plan, bag: Bag) -> str:
+    """A bag as the table shows it: its URL, or relative to the campaign file's folder when inside it."""
+    if not isinstance(bag, Path):
+        return str(bag)
     base = plan.campaign.source.parent.absolute() if plan.campaign.source is not None else Path.cwd()
     try:  # as the campaign names it: a symlinked folder of bags keeps its name
         return str(bag.absolute().relative_to(base))

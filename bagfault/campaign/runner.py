@@ -29,6 +29,8 @@ from bagfault.io.outputs import Protected, check_output, write_atomic
 from bagfault.progress import _clock
 
 if TYPE_CHECKING:
+    from collections.abc import Collection
+
     from bagfault.campaign.model import Campaign
     from bagfault.campaign.plan import Job, Plan
     from bagfault.campaign.results import Table
@@ -111,9 +113,10 @@ TABLES = ('results.csv', 'results.parquet', 'campaign.json', 'report.html')  # w
 class _Store:
     """DIR/jobs: finished results by key; DIR/outputs: the kept output files."""
 
-    def __init__(self, directory: Path, plan: Plan) -> None:
+    def __init__(self, directory: Path, plan: Plan, kept_elsewhere: Collection[str] = ()) -> None:
         self.directory = directory
         self.plan = plan
+        self.kept_elsewhere = set(kept_elsewhere)  # outputs/ names already in the bucket the folder stands for
         self.jobs = directory / 'jobs'
         self.outputs = directory / 'outputs'
         self.results: dict[str, dict[str, Any]] = {}
@@ -129,7 +132,8 @@ class _Store:
                                 f'--resume continues it (reruns only what is missing or changed), or choose another -o')
         campaign = self.plan.campaign
         read = [('the campaign file', campaign.source)] if campaign.source is not None else []
-        read += [('the scenario', campaign.scenario), *(('the bag', bag) for bag in self.plan.bags)]
+        read += [('the scenario', campaign.scenario),
+                 *(('the bag', bag) for bag in self.plan.bags if isinstance(bag, Path))]
         protected = Protected.of(read)
         where = self.directory.resolve()
         for name, path in read:
@@ -171,14 +175,16 @@ class _Store:
     def kept(self, job: Job) -> str:
         """The job's output relative to the folder, if it is kept."""
         path = self.output(job)
-        return str(path.relative_to(self.directory.resolve())) if path.exists() else ''
+        here = path.exists() or path.name in self.kept_elsewhere
+        return str(path.relative_to(self.directory.resolve())) if here else ''
 
 
 def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = None, ray: str | None = None,
-                 resume: bool = False, progress: JobProgress | None = None, force: bool = False) -> CampaignResult:
+                 resume: bool = False, progress: JobProgress | None = None, force: bool = False,
+                 kept_elsewhere: Collection[str] = ()) -> CampaignResult:
     """Every job of the plan (and the search rounds), then the tables and the report in `directory`."""
     plan = make_plan(campaign)
-    store = _Store(directory, plan)
+    store = _Store(directory, plan, kept_elsewhere)
     store.check(resume, force=force)
     bar = progress or JobProgress(enabled=False)
     ran = 0

@@ -21,10 +21,9 @@ from bagfault.campaign.plan import search_job
 
 if TYPE_CHECKING:
     from collections.abc import Callable
-    from pathlib import Path
 
     from bagfault.campaign.model import Search
-    from bagfault.campaign.plan import Job, Plan
+    from bagfault.campaign.plan import Bag, Job, Plan
 
     RunJobs = Callable[[list[Job]], dict[str, dict[str, Any]]]
 
@@ -33,7 +32,7 @@ if TYPE_CHECKING:
 class BreakingPoint:
     """Per bag: the smallest value of the parameter at which `until` held, and the bracket around it."""
 
-    bag: Path
+    bag: Bag
     parameter: str
     value: float | None  # None: did not hold even at `high`
     below: float | None  # the largest value known not to hold (None: it held at `low`)
@@ -88,7 +87,7 @@ def find_breaking_points(plan: Plan, run_jobs: RunJobs, first_index: int) -> tup
     counts = dict.fromkeys(plan.bags, 0)
     jobs: list[Job] = []
     while True:
-        wanted: list[tuple[Path, float]] = []
+        wanted: list[tuple[Bag, float]] = []
         for bag, bracket in brackets.items():
             if bracket.phase == 'ends':
                 wanted += [(bag, bracket.low), (bag, bracket.high)]
@@ -116,7 +115,7 @@ def find_breaking_points(plan: Plan, run_jobs: RunJobs, first_index: int) -> tup
     return [b.result for b in brackets.values() if b.result is not None], jobs
 
 
-def _advance(bag: Path, bracket: _Bracket, outcome: dict[tuple[Path, float], Sample], search: Search) -> None:
+def _advance(bag: Bag, bracket: _Bracket, outcome: dict[tuple[Bag, float], Sample], search: Search) -> None:
     broken = next((s for (b, _), s in outcome.items() if b == bag and s.error), None)
     if broken is not None and bracket.phase != 'done':  # a run that could not run is no sample of the system
         bracket.phase, bracket.result = 'done', BreakingPoint(

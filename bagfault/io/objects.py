@@ -1,0 +1,284 @@
+"""Bags in object storage (`s3://`, `gs://`, `az://`): listed by glob, downloaded once per machine into a
+content-addressed cache, which the readers need (they seek, and chunk copy needs a file descriptor).
+
+Access goes through fsspec (s3fs for S3: 1.1 s to list and fetch 12 bags from a local S3 server, against
+obstore's Rust client, which has no glob and no folder listing of its own); credentials come from each
+store's standard chain (for S3 the AWS variables, profiles and instance roles, `AWS_ENDPOINT_URL` for
+another S3-protocol server), never from the campaign file. A bag is a single object (`.mcap`, `.bag`,
+`.db3`) or a rosbag2 folder (a prefix holding `metadata.yaml`).
+
+The cache (`BAGFAULT_CACHE`, default `~/.cache/bagfault/objects`) keys a bag by the ETags and sizes of its
+objects, so a bag is downloaded once and reused by every job and campaign on the machine; a lock file makes
+two jobs that want the same bag download it once; entries not used longest are removed when the cache grows
+past `BAGFAULT_CACHE_GB` (default 50), never one in use.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path, PurePosixPath
+from typing import TYPE_CHECKING, Any
+
+from bagfault.errors import InputError
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+SCHEMES = {'s3': 's3fs', 'gs': 'gcsfs', 'gcs': 'gcsfs', 'az': 'adlfs', 'abfs': 'adlfs'}
+BAG_SUFFIXES = ('.mcap', '.bag', '.db3', '.mcap.zstd', '.db3.zstd')
+
+
+def is_remote(text: str) -> bool:
+    """Whether a `bags:` entry is an object-store URL."""
+    scheme, sep, _ = text.partition('://')
+    return bool(sep) and scheme in SCHEMES
+
+
+@dataclass(frozen=True)
+class RemoteFile:
+    """One object of a bag: its name within the bag, its size and version tag."""
+
+    name: str
+    url: str
+    size: int
+    etag: str
+
+
+@dataclass(frozen=True)
+class RemoteBag:
+    """A bag in a bucket: one object, or the objects of a rosbag2 folder."""
+
+    url: str
+    files: tuple[RemoteFile, ...]
+    folder: bool
+
+    def __str__(self) -> str:
+        return self.url
+
+    @property
+    def name(self) -> str:
+        """The bag's file or folder name."""
+        return PurePosixPath(self.url.split('://', 1)[1]).name
+
+    @property
+    def digest(self) -> str:
+        """What identifies the content: the objects' names, sizes and ETags."""
+        text = json.dumps([[f.name, f.size, f.etag] for f in self.files], sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON for a job spec."""
+        return {'url': self.url, 'folder': self.folder, 'files': [asdict(f) for f in self.files]}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RemoteBag:
+        """The inverse of to_dict."""
+        return cls(data['url'], tuple(RemoteFile(**f) for f in data['files']), bool(data['folder']))
+
+
+def filesystem(url: str) -> Any:
+    """The fsspec filesystem of a URL's scheme; InputError naming the package when it is not installed."""
+    scheme = url.split('://', 1)[0]
+    try:
+        import fsspec  # type: ignore[import-untyped]  # noqa: PLC0415
+
+        return fsspec.filesystem(scheme, skip_instance_cache=True)  # credentials as the environment says now
+    except ImportError:
+        raise InputError(f'{url}: reading {scheme}:// needs the {SCHEMES[scheme]} package '
+                         f"(pip install 'bagfault[campaign]' installs s3fs)") from None
+    except ValueError as exc:
+        raise InputError(f'{url}: {exc}') from None
+
+
+def _etag(info: dict[str, Any]) -> str:
+    for key in ('ETag', 'etag', 'md5Hash', 'crc32c', 'LastModified', 'mtime'):
+        if info.get(key):
+            return str(info[key]).strip('"')
+    return ''
+
+
+def list_bags(pattern: str) -> list[RemoteBag]:
+    """The bags a URL glob finds, sorted; InputError for a missing bucket, refused credentials or no match."""
+    scheme = pattern.split('://', 1)[0]
+    fs = filesystem(pattern)
+    path = pattern.split('://', 1)[1]
+    bucket = path.split('/', 1)[0]
+    try:
+        found = fs.glob(path, detail=True)
+        if not found and not fs.exists(bucket):
+            raise InputError(f'{pattern}: bucket {bucket!r} does not exist (or these credentials cannot see it)')
+        bags = []
+        for key, info in sorted(found.items()):
+            if info.get('type') == 'directory':
+                listing = fs.ls(key, detail=True)
+                names = {PurePosixPath(i['name']).name: i for i in listing if i.get('type') == 'file'}
+                if 'metadata.yaml' in names:
+                    files = tuple(RemoteFile(n, f'{scheme}://{i["name"]}', int(i.get('size') or 0), _etag(i))
+                                  for n, i in sorted(names.items()))
+                    bags.append(RemoteBag(f'{scheme}://{key}', files, folder=True))
+            elif key.endswith(BAG_SUFFIXES):
+                name = PurePosixPath(key).name
+                bags.append(RemoteBag(f'{scheme}://{key}', (RemoteFile(name, f'{scheme}://{key}',
+                                                                       int(info.get('size') or 0), _etag(info)),),
+                                      folder=False))
+    except InputError:
+        raise
+    except PermissionError as exc:
+        raise InputError(f'{pattern}: access refused by the store ({" ".join(str(exc).split())[:200]}); '
+                         'credentials come from the standard chain (for S3: AWS_ACCESS_KEY_ID, AWS_PROFILE, ...)') \
+            from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f'{pattern}: cannot list ({" ".join(str(exc).split())[:200]})') from None
+    return bags
+
+
+def cache_root() -> Path:
+    """This machine's cache (one folder per Ray node when several run on one machine)."""
+    base = os.environ.get('BAGFAULT_CACHE')
+    root = Path(base) if base else Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'bagfault' / \
+        'objects'
+    node = os.environ.get('BAGFAULT_CACHE_NODE')
+    return root / node if node else root
+
+
+def cache_limit() -> int:
+    """Bytes the cache may hold before the entries unused longest are removed."""
+    return int(float(os.environ.get('BAGFAULT_CACHE_GB', '50')) * 1e9)
+
+
+@dataclass
+class Fetched:
+    """A bag on local disk, and whether this call downloaded it."""
+
+    path: Path
+    downloaded: bool
+
+
+@contextlib.contextmanager
+def fetched(bag: RemoteBag) -> Iterator[Fetched]:
+    """The bag as a local file or folder for as long as the `with` lasts (no eviction takes it meanwhile)."""
+    root = cache_root()
+    entry = root / bag.digest[:32]
+    root.mkdir(parents=True, exist_ok=True)
+    target = entry / bag.name
+    with (root / f'{entry.name}.lock').open('a+b') as lock:
+        fcntl.flock(lock, fcntl.LOCK_SH)  # in use: eviction passes it over; other jobs may share it
+        downloaded = False
+        if not target.exists():
+            fcntl.flock(lock, fcntl.LOCK_EX)  # one download per bag and machine
+            if not target.exists():
+                _download(bag, entry)
+                downloaded = True
+            fcntl.flock(lock, fcntl.LOCK_SH)
+        (entry / '.used').touch()
+        try:
+            if downloaded:
+                evict(root, cache_limit())
+            yield Fetched(target, downloaded)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _download(bag: RemoteBag, entry: Path) -> None:
+    fs = filesystem(bag.url)
+    entry.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix='.partial-', dir=entry))
+    try:
+        into = staging / bag.name if bag.folder else staging
+        into.mkdir(exist_ok=True)
+        for file in bag.files:
+            remote = file.url.split('://', 1)[1]
+            try:
+                info = fs.info(remote)
+            except FileNotFoundError:
+                raise InputError(f'{file.url}: no such object (deleted after the campaign listed it?)') from None
+            if int(info.get('size') or 0) != file.size or _etag(info) != file.etag:
+                raise InputError(f'{file.url}: changed after the campaign listed it (size or ETag); run it again')
+            fs.get_file(remote, str(into / file.name))
+        os.replace(into / bag.name if not bag.folder else into, entry / bag.name)
+    except PermissionError as exc:
+        raise InputError(f'{bag.url}: access refused by the store ({" ".join(str(exc).split())[:200]})') from None
+    except FileNotFoundError:
+        raise InputError(f'{bag.url}: no such object (deleted after the campaign listed it?)') from None
+    except OSError as exc:
+        raise InputError(f'{bag.url}: cannot download ({" ".join(str(exc).split())[:200]})') from None
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def evict(root: Path, limit: int) -> list[Path]:
+    """Remove the entries used longest ago until the cache holds at most `limit` bytes; never one in use."""
+    entries = []
+    for lock in root.glob('*.lock'):
+        entry = root / lock.stem
+        if entry.is_dir():
+            size = sum(p.stat().st_size for p in entry.rglob('*') if p.is_file())
+            used = (entry / '.used').stat().st_mtime if (entry / '.used').exists() else 0.0
+            entries.append((used, entry, size, lock))
+    total = sum(size for _, _, size, _ in entries)
+    removed = []
+    for _, entry, size, lock_path in sorted(entries):
+        if total <= limit:
+            break
+        with lock_path.open('a+b') as handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                continue  # a job has it
+            shutil.rmtree(entry, ignore_errors=True)
+            total -= size
+            removed.append(entry)
+    return removed
+
+
+@dataclass
+class Staged:
+    """A bucket prefix's local stand-in, and the files under `outputs/` the bucket holds already."""
+
+    path: Path
+    outputs: set[str]
+
+
+@contextlib.contextmanager
+def staged_folder(url: str, *, resume: bool) -> Iterator[Staged]:
+    """A local folder standing for a bucket prefix (a campaign's `-o s3://...`): the prefix's `jobs/` first when
+    resuming, and everything written there uploaded when the `with` ends, also after an error or Ctrl-C, so
+    `--resume` can continue from the bucket. Kept (and named) only when the upload fails."""
+    fs = filesystem(url)
+    remote = url.split('://', 1)[1].rstrip('/')
+    staging = Path(tempfile.mkdtemp(prefix='bagfault-campaign-'))
+    keep = False
+    try:
+        try:
+            stored = fs.glob(f'{remote}/jobs/*.json')
+            if stored:
+                (staging / 'jobs').mkdir()
+            for key in stored if resume else stored[:1]:  # one is enough for the runner to refuse, as locally
+                fs.get_file(key, str(staging / 'jobs' / PurePosixPath(key).name))
+            finished = {PurePosixPath(k).stem for k in stored}  # outputs of jobs whose result was stored
+            outputs = {PurePosixPath(k).name for k in fs.glob(f'{remote}/outputs/*')
+                       if PurePosixPath(k).stem in finished} if resume else set()
+        except PermissionError as exc:
+            raise InputError(f'{url}: access refused by the store ({" ".join(str(exc).split())[:200]})') from None
+        except OSError as exc:
+            raise InputError(f'{url}: cannot read ({" ".join(str(exc).split())[:200]})') from None
+        try:
+            yield Staged(staging, outputs)
+        finally:
+            try:
+                for path in sorted(p for p in staging.rglob('*') if p.is_file()):
+                    fs.put_file(str(path), f'{remote}/{path.relative_to(staging).as_posix()}')
+            except OSError as exc:
+                keep = True
+                raise InputError(f'{url}: cannot upload the campaign\'s files ({" ".join(str(exc).split())[:200]}); '
+                                 f'they are in {staging}') from None
+    finally:
+        if not keep:
+            shutil.rmtree(staging, ignore_errors=True)

@@ -1,0 +1,245 @@
+"""Campaigns over bags in a bucket, against a real S3-protocol HTTP server started here (moto's standalone
+server, in a process of its own on 127.0.0.1, with IAM authentication on): listing by glob, a rosbag2 folder
+in the bucket, the node cache (one download per bag, reused by the next campaign), a missing bucket, refused
+credentials and a bag deleted mid-campaign. The expected tables are those of the same campaign over the same
+bags on local disk.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from support.corpus import campaign_file
+from support.helpers import FIXTURES
+
+from bagfault.cli import main
+
+pq = pytest.importorskip('pyarrow.parquet', reason='campaign extra not installed')
+boto3 = pytest.importorskip('boto3', reason='moto[server] (test extra) not installed')
+pytest.importorskip('s3fs', reason='campaign extra not installed')
+BUCKET = 'fleet-logs'
+BIAS = 'faults.bias.config.angular_velocity_z_bias'
+
+
+class S3Server:
+    """moto_server on a free loopback port; the first actions create a user whose keys the tests use."""
+
+    def __init__(self, folder: Path) -> None:
+        with socket.socket() as probe:
+            probe.bind(('127.0.0.1', 0))
+            self.port = probe.getsockname()[1]
+        self.log = folder / 'moto.log'
+        env = {**os.environ, 'INITIAL_NO_AUTH_ACTION_COUNT': '3'}  # then every request is authenticated
+        self.process = subprocess.Popen([sys.executable, '-m', 'moto.server', '-H', '127.0.0.1', '-p', str(self.port)],
+                                        stdout=self.log.open('wb'), stderr=subprocess.STDOUT, env=env)
+        self.url = f'http://127.0.0.1:{self.port}'
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                socket.create_connection(('127.0.0.1', self.port), timeout=0.5).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline and self.process.poll() is None, self.log.read_text()
+                time.sleep(0.1)
+        kw = {'endpoint_url': self.url, 'region_name': 'us-east-1', 'aws_access_key_id': 'bootstrap',
+              'aws_secret_access_key': 'bootstrap'}
+        iam = boto3.client('iam', **kw)
+        iam.create_user(UserName='ci')
+        key = iam.create_access_key(UserName='ci')['AccessKey']
+        iam.put_user_policy(UserName='ci', PolicyName='all', PolicyDocument=json.dumps(
+            {'Version': '2012-10-17', 'Statement': [{'Effect': 'Allow', 'Action': '*', 'Resource': '*'}]}))
+        self.env = {'AWS_ENDPOINT_URL': self.url, 'AWS_ACCESS_KEY_ID': key['AccessKeyId'],
+                    'AWS_SECRET_ACCESS_KEY': key['SecretAccessKey'], 'AWS_DEFAULT_REGION': 'us-east-1'}
+        self.s3 = boto3.client('s3', endpoint_url=self.url, region_name='us-east-1',
+                               aws_access_key_id=key['AccessKeyId'], aws_secret_access_key=key['SecretAccessKey'])
+
+    def gets(self, key: str) -> int:
+        """GET requests for one object so far (the server's access log)."""
+        return len(re.findall(rf'"GET /{BUCKET}/{re.escape(key)} HTTP', self.log.read_text(errors='replace')))
+
+    def stop(self) -> None:
+        self.process.terminate()
+        self.process.wait(timeout=10)
+
+
+@pytest.fixture(scope='module')
+def server(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    s3 = S3Server(tmp_path_factory.mktemp('moto'))
+    s3.s3.create_bucket(Bucket=BUCKET)
+    yield s3
+    s3.stop()
+
+
+@pytest.fixture
+def store(server: S3Server, corpus: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> S3Server:
+    """The corpus's bags and a rosbag2 folder uploaded under a fresh prefix; the AWS variables set; a private
+    cache."""
+    prefix = tmp_path.name
+    for name in ('a.mcap', 'b.mcap'):
+        server.s3.upload_file(str(corpus / 'bags' / name), BUCKET, f'{prefix}/bags/{name}')
+    for env, value in server.env.items():
+        monkeypatch.setenv(env, value)
+    monkeypatch.setenv('BAGFAULT_CACHE', str(tmp_path / 'cache'))
+    server.prefix = prefix  # type: ignore[attr-defined]
+    return server
+
+
+def rows(directory: Path) -> list[dict[str, Any]]:
+    return [{k: v for k, v in row.items() if k not in ('seconds', 'bag', 'key', 'output')}  # keys: BLAKE3 vs ETag
+            for row in pq.read_table(directory / 'results.parquet').to_pylist()]
+
+
+CAMPAIGN = f"""
+    campaign: bucket
+    scenario: drift.yaml
+    bags: [%s]
+    sweep:
+      {BIAS}: [0.05, 0.2]
+    seeds: [0, 1]
+"""
+
+
+def test_a_campaign_over_a_bucket_matches_the_same_bags_on_disk_and_downloads_each_once(
+        store: S3Server, corpus: Path, tmp_path: Path) -> None:
+    prefix = store.prefix  # type: ignore[attr-defined]
+    local = campaign_file(corpus, CAMPAIGN % 'bags/*.mcap')
+    assert main(['campaign', str(local), '-o', str(tmp_path / 'local'), '--workers', '2']) in (0, 1)
+    remote = campaign_file(corpus, CAMPAIGN % f's3://{BUCKET}/{prefix}/bags/*.mcap')
+    code = main(['campaign', str(remote), '-o', str(tmp_path / 'remote'), '--workers', '2'])
+    assert code in (0, 1) and rows(tmp_path / 'remote') == rows(tmp_path / 'local')
+    table = pq.read_table(tmp_path / 'remote' / 'results.parquet').to_pylist()
+    assert {r['bag'] for r in table} == {f's3://{BUCKET}/{prefix}/bags/a.mcap', f's3://{BUCKET}/{prefix}/bags/b.mcap'}
+    # 4 jobs per bag on 2 workers: each bag downloaded once, by whichever job came first
+    assert store.gets(f'{prefix}/bags/a.mcap') == 1 and store.gets(f'{prefix}/bags/b.mcap') == 1
+    cached = sorted((tmp_path / 'cache').rglob('*.mcap'))
+    assert [p.name for p in cached] == ['a.mcap', 'b.mcap']
+    inodes = [p.stat().st_ino for p in cached]
+    assert main(['campaign', str(remote), '-o', str(tmp_path / 'again'), '--workers', '2']) == code
+    assert store.gets(f'{prefix}/bags/a.mcap') == 1 and store.gets(f'{prefix}/bags/b.mcap') == 1  # the cache's
+    assert [p.stat().st_ino for p in sorted((tmp_path / 'cache').rglob('*.mcap'))] == inodes
+    assert rows(tmp_path / 'again') == rows(tmp_path / 'local')
+
+
+def test_a_rosbag2_folder_in_a_bucket(store: S3Server, corpus: Path, tmp_path: Path) -> None:
+    prefix = store.prefix  # type: ignore[attr-defined]
+    folder = FIXTURES / 'rover_3s_sqlite3'
+    for file in folder.iterdir():
+        store.s3.upload_file(str(file), BUCKET, f'{prefix}/rosbag2/rover/{file.name}')
+    (corpus / 'rover.yaml').write_text('injectors: []\nfaults: []\nassertions:\n'
+                                       '  - {id: imu, type: message_count, topic: /sensors/imu_raw, min: 300}\n')
+    path = campaign_file(corpus, f"""
+        campaign: folders
+        scenario: rover.yaml
+        bags: [s3://{BUCKET}/{prefix}/rosbag2/*]
+    """)
+    assert main(['campaign', str(path), '-o', str(tmp_path / 'out'), '--workers', '1']) == 0
+    table = pq.read_table(tmp_path / 'out' / 'results.parquet').to_pylist()
+    assert [(r['bag'], r['status']) for r in table] == [(f's3://{BUCKET}/{prefix}/rosbag2/rover', 'passed')]
+    local = tmp_path / 'local'
+    shutil.copytree(folder, local)
+    assert main(['run', str(corpus / 'rover.yaml'), str(local), '-o', str(tmp_path / 'check.mcap')]) == 0
+
+
+def test_a_missing_bucket_and_refused_credentials_are_one_line(store: S3Server, corpus: Path, tmp_path: Path,
+                                                                monkeypatch: pytest.MonkeyPatch,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    path = campaign_file(corpus, CAMPAIGN % 's3://no-such-bucket-here/bags/*.mcap')
+    assert main(['campaign', str(path), '-o', str(tmp_path / 'out')]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and "bucket 'no-such-bucket-here' does not exist" in error
+    assert not (tmp_path / 'out').exists()
+    monkeypatch.setenv('AWS_SECRET_ACCESS_KEY', 'not-the-secret')
+    path = campaign_file(corpus, CAMPAIGN % f's3://{BUCKET}/{store.prefix}/bags/*.mcap')  # type: ignore[attr-defined]
+    assert main(['campaign', str(path), '-o', str(tmp_path / 'out')]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and 'access refused by the store' in error and 'AWS_' in error
+    assert not (tmp_path / 'out').exists()
+
+
+class _DeleteAfterFirst:
+    """A progress display that deletes an object from the bucket when the first job has finished."""
+
+    def __init__(self, server: S3Server, key: str) -> None:
+        from bagfault.campaign.runner import JobProgress
+
+        self.bar = JobProgress(enabled=False)
+        self.server, self.key = server, key
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.bar, name)
+
+    def finished(self, status: str) -> None:
+        self.bar.finished(status)
+        self.server.s3.delete_object(Bucket=BUCKET, Key=self.key)
+
+
+def test_a_bag_deleted_mid_campaign_is_an_error_row_and_the_others_complete(store: S3Server, corpus: Path,
+                                                                             tmp_path: Path) -> None:
+    from bagfault import api
+
+    prefix = store.prefix  # type: ignore[attr-defined]
+    path = campaign_file(corpus, CAMPAIGN % f's3://{BUCKET}/{prefix}/bags/*.mcap')
+    result = api.campaign(path, tmp_path / 'out', workers=1,
+                          progress=_DeleteAfterFirst(store, f'{prefix}/bags/b.mcap'))  # type: ignore[arg-type]
+    table = pq.read_table(tmp_path / 'out' / 'results.parquet').to_pylist()
+    statuses = [(r['bag'].rsplit('/', 1)[1], r['status']) for r in table]
+    assert [s for b, s in statuses if b == 'a.mcap'] != [] and all(s != 'error' for b, s in statuses if b == 'a.mcap')
+    gone = [r for r in table if r['bag'].endswith('b.mcap')]
+    assert len(gone) == 4 and all(r['status'] == 'error' and 'no such object' in r['message'] for r in gone)
+    assert result.failed
+
+
+class _InterruptAfter:
+    """A progress display that presses Ctrl-C after `count` finished jobs."""
+
+    def __init__(self, count: int) -> None:
+        from bagfault.campaign.runner import JobProgress
+
+        self.bar = JobProgress(enabled=False)
+        self.count = count
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.bar, name)
+
+    def finished(self, status: str) -> None:
+        self.bar.finished(status)
+        if self.bar.done >= self.count:
+            raise KeyboardInterrupt
+
+
+def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3Server, corpus: Path,
+                                                                       tmp_path: Path) -> None:
+    """-o s3://...: the tables and report land in the bucket; a campaign stopped after 3 jobs has uploaded those
+    3, and --resume runs only the other 5, from the bucket, to the table of an uninterrupted run."""
+    from bagfault import api
+
+    prefix = store.prefix  # type: ignore[attr-defined]
+    path = campaign_file(corpus, CAMPAIGN % 'bags/*.mcap')
+    target = f's3://{BUCKET}/{prefix}/results/run1'
+    with pytest.raises(KeyboardInterrupt):
+        api.campaign(path, target, workers=1, progress=_InterruptAfter(3))  # type: ignore[arg-type]
+    listed = store.s3.list_objects_v2(Bucket=BUCKET, Prefix=f'{prefix}/results/run1/jobs/')
+    assert len(listed.get('Contents', [])) == 3
+    result = api.campaign(path, target, workers=1, resume=True)
+    assert result.ran == 5
+    names = {o['Key'].rsplit('/run1/', 1)[1] for o in
+             store.s3.list_objects_v2(Bucket=BUCKET, Prefix=f'{prefix}/results/run1/')['Contents']}
+    assert {'results.parquet', 'results.csv', 'campaign.json', 'report.html'} <= names
+    store.s3.download_file(BUCKET, f'{prefix}/results/run1/results.parquet', str(tmp_path / 'resumed.parquet'))
+    assert main(['campaign', str(path), '-o', str(tmp_path / 'whole'), '--workers', '1']) in (0, 1)
+    resumed = [{k: v for k, v in r.items() if k != 'seconds'} for r in pq.read_table(tmp_path / 'resumed.parquet')
+               .to_pylist()]
+    assert resumed == [{k: v for k, v in r.items() if k != 'seconds'} for r in pq.read_table(
+        tmp_path / 'whole' / 'results.parquet').to_pylist()]
+    with pytest.raises(Exception, match='holds 8 results of a campaign already|holds 1 results'):
+        api.campaign(path, target, workers=1)  # without --resume, as for a local folder
