@@ -243,3 +243,21 @@ def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3
         tmp_path / 'whole' / 'results.parquet').to_pylist()]
     with pytest.raises(Exception, match='holds 8 results of a campaign already|holds 1 results'):
         api.campaign(path, target, workers=1)  # without --resume, as for a local folder
+
+
+def test_the_cache_is_bounded_and_never_evicts_a_bag_in_use(store: S3Server, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Room for one bag: fetching b removes a (the entry unused longest); fetching a again while b is in use
+    keeps b (over the limit rather than pulling a bag from under a job); a second holder shares a download."""
+    from bagfault.io.objects import fetched, list_bags
+
+    a, b = list_bags(f's3://{BUCKET}/{store.prefix}/bags/*.mcap')  # type: ignore[attr-defined]
+    monkeypatch.setenv('BAGFAULT_CACHE_GB', str(a.files[0].size * 1.5 / 1e9))
+    with fetched(a) as first, fetched(a) as second:
+        assert first.downloaded and not second.downloaded and second.path == first.path
+    with fetched(b) as other:
+        assert other.downloaded
+    assert not first.path.exists() and other.path.exists()
+    with fetched(b) as held:
+        with fetched(a) as again:
+            assert again.downloaded and held.path.exists()  # b is in use: kept, though over the limit
+        assert held.path.exists()
