@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
-from bagfault.errors import InputError
+from bagfault.errors import InputError, OutputError
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -260,9 +260,12 @@ def staged_folder(url: str, *, resume: bool) -> Iterator[Staged]:
     try:
         try:
             stored = fs.glob(f'{remote}/jobs/*.json')
+            if stored and not resume:
+                raise OutputError(f'{url}: holds {len(stored)} results of a campaign already; --resume continues '
+                                  'it (reruns only what is missing or changed), or choose another -o')
             if stored:
                 (staging / 'jobs').mkdir()
-            for key in stored if resume else stored[:1]:  # one is enough for the runner to refuse, as locally
+            for key in stored:
                 fs.get_file(key, str(staging / 'jobs' / PurePosixPath(key).name))
             finished = {PurePosixPath(k).stem for k in stored}  # outputs of jobs whose result was stored
             outputs = {PurePosixPath(k).name for k in fs.glob(f'{remote}/outputs/*')
