@@ -32,6 +32,7 @@ from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_typestore
 from support.helpers import counts, raw_messages, run_inline, tree_digest
+from support.hold import hold_plugin
 
 from bagfault import api
 from bagfault.cli import main
@@ -479,42 +480,6 @@ def test_impossible_options_are_exit_2(tmp_path, capsys, option):
     err = capsys.readouterr().err
     assert code == 2 and err.count('\n') == 1 and 'Traceback' not in err
     assert not (tmp_path / 'out.mcap').exists()
-
-
-HOLD_INJECTOR = '''
-import os
-import time
-from pathlib import Path
-
-from bagfault.injectors.base import Injector
-from bagfault.schema import double
-
-
-class HoldInjector(Injector):
-    """A test's hand on a run: at its first message it says so and waits until the test opens the gate."""
-
-    type_name = 'hold'
-    description = 'holds the run at its first faulted message until $HOLD_GATE exists'
-    message_types = ('sensor_msgs/msg/Imu',)
-    fields = (double('level', 'unused'),)
-
-    def mutate(self, message, stamp, active):
-        gate = Path(os.environ['HOLD_GATE'])
-        gate.with_name('reached').touch()
-        while not gate.exists():
-            time.sleep(0.01)
-'''
-
-
-def hold_plugin(folder: Path) -> Path:
-    """A folder that, on PYTHONPATH, installs the `hold` injector type (an entry point, as a plugin package has)."""
-    folder.mkdir()
-    (folder / 'hold_injector.py').write_text(HOLD_INJECTOR)
-    info = folder / 'hold_injector-0.dist-info'
-    info.mkdir()
-    (info / 'METADATA').write_text('Metadata-Version: 2.1\nName: hold-injector\nVersion: 0\n')
-    (info / 'entry_points.txt').write_text('[bagfault.injectors]\nhold = hold_injector:HoldInjector\n')
-    return folder
 
 
 @pytest.mark.parametrize('signal_number', [signal.SIGTERM, signal.SIGHUP])

@@ -216,6 +216,9 @@ class LocalEngine:
         cool_down()
 
 
+TASK_RETRIES = 3  # times Ray runs a job again when its worker process or node was lost
+
+
 class RayEngine:
     """Every job a Ray task (one CPU each) on a local Ray instance or the cluster at `address`."""
 
@@ -240,7 +243,8 @@ class RayEngine:
             raise CampaignError(f'--ray: cannot start or reach {where}: {" ".join(str(exc).split())}') from None
         cpus = int(self.ray.cluster_resources().get('CPU', 1))
         self.description = f'Ray at {address} ({cpus} CPUs)' if address else f'a local Ray instance ({cpus} CPUs)'
-        self.task = ray.remote(num_cpus=1, max_retries=0)(execute)
+        # a task whose worker or node dies (not one whose job failed: that is a result) runs again elsewhere
+        self.task = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(execute)
         warm = ray.remote(num_cpus=1)(warm_up)
         ray.get([warm.remote() for _ in range(min(cpus, workers or cpus))])  # each worker's fork server
 
