@@ -18,6 +18,7 @@ import socket
 import sys
 import tempfile
 import threading
+import time
 import types
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
@@ -233,6 +234,9 @@ class RayEngine:
             _reachable(address)
         options: dict[str, Any] = {'include_dashboard': False, 'log_to_driver': False,
                                    'configure_logging': False}
+        # a local instance's processes are this process's descendants; Ray kills its workers at shutdown, and
+        # their fork servers, orphaned, would stay zombies where PID 1 reaps none: adopted and reaped here
+        self._adopting = None if address else _Adoption()
         try:
             if address:
                 ray.init(address=address, **options)
@@ -273,8 +277,51 @@ class RayEngine:
             raise
 
     def close(self) -> None:
-        """Disconnect (and stop the local instance if this campaign started it)."""
+        """Disconnect (and stop the local instance if this campaign started it, reaping what it leaves)."""
         self.ray.shutdown()
+        if self._adopting is not None:
+            self._adopting.reap()
+
+
+PR_SET_CHILD_SUBREAPER = 36
+
+
+class _Adoption:
+    """This process as a subreaper while a local Ray instance runs: processes orphaned inside its tree come here
+    instead of to PID 1, and `reap` collects them when Ray is stopped (only them: children this process had
+    before are left to their owners)."""
+
+    def __init__(self) -> None:
+        self.before = _children()
+        self.libc = ctypes.CDLL(None, use_errno=True)
+        self.libc.prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+
+    def reap(self, timeout: float = 5.0) -> None:
+        """Wait for the adopted processes to end and reap them; then stop adopting."""
+        deadline = time.monotonic() + timeout
+        try:
+            while True:
+                adopted = _children() - self.before
+                for pid in adopted:
+                    with contextlib.suppress(ChildProcessError):
+                        os.waitpid(pid, os.WNOHANG)
+                if not _children() - self.before or time.monotonic() > deadline:
+                    return
+                time.sleep(0.05)
+        finally:
+            self.libc.prctl(PR_SET_CHILD_SUBREAPER, 0, 0, 0, 0)
+
+
+def _children() -> set[int]:
+    """Pids whose parent is this process (from /proc)."""
+    me, found = os.getpid(), set()
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError), \
+                    open(f'/proc/{entry}/stat', encoding='ascii', errors='replace') as handle:
+                if int(handle.read().rsplit(')', 1)[1].split()[1]) == me:
+                    found.add(int(entry))
+    return found
 
 
 def _reachable(address: str) -> None:
