@@ -23,6 +23,9 @@ if TYPE_CHECKING:
     from bagfault.campaign.search import BreakingPoint
 
 FIXED = ('job', 'kind', 'bag', 'seed')
+# the rate tables' colours (hue 0 at 0 % passed to 120 at 100 %): plotly.js has no 'RdYlGn', and its fallback
+# drew 100 % passed in deep red
+PASS_COLORS = [[0.0, 'hsl(0,65%,60%)'], [0.5, 'hsl(60,65%,60%)'], [1.0, 'hsl(120,65%,45%)']]
 TAIL = ('status', 'message', 'warnings')
 
 
@@ -217,7 +220,7 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
         page.html(str(parts.grid_table(first, second, [_label(x) for x in xs], lines)))
         rates = [[_rate([r for r in rows if r[first] == y and r[second] == x]) for x in xs] for y in ys]
         page.figure([{'type': 'heatmap', 'x': [_label(x) for x in xs], 'y': [_label(y) for y in ys], 'z': rates,
-                      'zmin': 0, 'zmax': 100, 'colorscale': 'RdYlGn', 'colorbar': {'title': {'text': '% passed'}},
+                      'zmin': 0, 'zmax': 100, 'colorscale': PASS_COLORS, 'colorbar': {'title': {'text': '% passed'}},
                       'hovertemplate': f'{second} %{{x}}, {first} %{{y}}: %{{z:.0f}}% passed<extra></extra>'}],
                     {'title': title(f'jobs passed: {first} against {second}'), 'height': 320,
                      'xaxis': {'type': 'category', 'title': {'text': second}},

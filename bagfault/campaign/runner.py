@@ -26,6 +26,7 @@ from bagfault.campaign.results import make_table, parquet_available, render_repo
 from bagfault.campaign.search import find_breaking_points
 from bagfault.errors import CampaignError
 from bagfault.io.outputs import Protected, check_output, write_atomic
+from bagfault.log import log
 from bagfault.progress import _clock
 
 if TYPE_CHECKING:
@@ -186,6 +187,9 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     plan = make_plan(campaign)
     store = _Store(directory, plan, kept_elsewhere)
     store.check(resume, force=force)
+    if not parquet_available():  # said before the jobs, not after an hour of them
+        log.warning('pyarrow is not installed: results.csv and report.html will hold the table, not '
+                    'results.parquet (pip install "bagfault[campaign]")')
     bar = progress or JobProgress(enabled=False)
     ran = 0
     # the engine before any folder is made: an engine that cannot start leaves nothing
@@ -223,6 +227,8 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     if parquet_available():
         made = {'campaign': campaign.name, 'version': __version__,
                 'scenario_sha256': hashlib.sha256(campaign.scenario.read_bytes()).hexdigest()}
+        if campaign.source is not None:
+            made['campaign_sha256'] = hashlib.sha256(campaign.source.read_bytes()).hexdigest()
         write_parquet(table, directory / 'results.parquet', made)
     else:  # the jobs ran: their table is in results.csv and the report, whatever is missing here
         notes.append('results.parquet not written: pyarrow is not installed (pip install "bagfault[campaign]"); '

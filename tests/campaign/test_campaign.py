@@ -437,6 +437,7 @@ def test_without_pyarrow_the_table_and_the_report_are_still_written(corpus: Path
     done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'campaign', str(path), '-o', str(corpus / 'out'),
                            '--workers', '1'], env=env, capture_output=True, text=True, timeout=300, check=False)
     assert done.returncode == 0, done.stderr
+    assert done.stderr.startswith('bagfault: pyarrow is not installed: results.csv and report.html will hold')
     assert 'note: results.parquet not written: pyarrow is not installed' in done.stdout
     assert (corpus / 'out' / 'results.csv').exists() and (corpus / 'out' / 'report.html').exists()
     assert not (corpus / 'out' / 'results.parquet').exists()
@@ -472,6 +473,7 @@ def test_a_jobs_warnings_and_what_made_the_table_are_in_it(corpus: Path) -> None
     meta = pq.read_schema(corpus / 'out' / 'results.parquet').metadata
     assert meta[b'bagfault.campaign'] == b'warned' and meta[b'bagfault.version'] == __version__.encode()
     assert meta[b'bagfault.scenario_sha256'] == hashlib.sha256((corpus / 'drift.yaml').read_bytes()).hexdigest().encode()
+    assert meta[b'bagfault.campaign_sha256'] == hashlib.sha256(path.read_bytes()).hexdigest().encode()
 
 
 ORPHANS = """
@@ -533,3 +535,31 @@ def test_a_campaign_folder_replaces_nothing_it_reads_or_did_not_write(
     assert main(['campaign', str(path), '-o', str(out), '--workers', '1', '--force']) == 0  # 0.02 + 0.2 > 0.1
     assert (out / 'results.csv').read_text().startswith('job,kind,bag,seed,')
     assert main(['campaign', str(path), '-o', str(out), '--workers', '1', '--resume']) == 0  # its files are ours now
+
+
+def test_the_heatmap_colours_agree_with_the_rate_table(corpus: Path, tmp_path: Path) -> None:
+    """The table shows a rate as hue 120 x rate (green at 100 %, red at 0 %); the heatmap of two parameters
+    must draw the same way round (it drew 100 % in deep red: plotly.js knows no 'RdYlGn')."""
+    import re
+
+    path = campaign_file(corpus, f"""
+        campaign: grid
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        sweep:
+          {BIAS}: [0.05, 0.2]
+          faults.bias.start: [1.0, 1.5]
+    """)
+    assert main(['campaign', str(path), '-o', str(corpus / 'out'), '--workers', '1']) == 1
+    page = corpus / 'out' / 'report.html'
+    heatmap = next(f for name, f in figures(page).items() if name.startswith('heatmap:'))['data'][0]
+    assert heatmap['z'] == [[0.0, 0.0], [100.0, 100.0]]  # 0.02 + 0.05 < 0.1 < 0.02 + 0.2, whatever the start
+
+    def hue(at: float) -> int:
+        stop = next(color for position, color in heatmap['colorscale'] if position == at)
+        return int(re.match(r'hsl\((\d+),', stop).group(1))
+
+    assert (hue(0.0), hue(1.0)) == (0, 120)
+    html = page.read_text()
+    assert 'background:hsl(120,65%,82%)' in html and 'background:hsl(0,65%,82%)' in html  # the table, same way
+    assert rendered(page, tmp_path / 'profile')['errors'] == '0'
