@@ -19,6 +19,7 @@ import tempfile
 import time
 from datetime import date
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 STREAMS = [('/imu', 'sensor_msgs/msg/Imu', 200.0), ('/odom', 'nav_msgs/msg/Odometry', 50.0),
@@ -47,20 +48,11 @@ keep: none
 """
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--bags', type=int, default=4)
-    parser.add_argument('--seconds', type=float, default=60.0)
-    parser.add_argument('--json', type=Path, default=None)
-    args = parser.parse_args()
-    os.environ.setdefault('RAY_USAGE_STATS_ENABLED', '0')
-    from bagfault import api
+def clock_progress() -> Any:
+    """A JobProgress that notes when the jobs began (the engine is up) and when the last one ended."""
     from bagfault.campaign.runner import JobProgress
-    from bagfault.demo import synthetic
 
     class Clock(JobProgress):
-        """When the jobs began (the engine is up) and when the last one ended."""
-
         first: float | None = None
         last = 0.0
 
@@ -71,6 +63,19 @@ def main() -> int:
         def finished(self, status: str) -> None:
             self.last = time.monotonic()
             super().finished(status)
+
+    return Clock(enabled=False)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--bags', type=int, default=4)
+    parser.add_argument('--seconds', type=float, default=60.0)
+    parser.add_argument('--json', type=Path, default=None)
+    args = parser.parse_args()
+    os.environ.setdefault('RAY_USAGE_STATS_ENABLED', '0')
+    from bagfault import api
+    from bagfault.demo import synthetic
 
     with tempfile.TemporaryDirectory(prefix='bagfault-campaign-bench-') as tmp:
         folder = Path(tmp)
@@ -85,7 +90,7 @@ def main() -> int:
         runs = {}
         for name, options in [('local, 1 worker', {'workers': 1}), ('local, 2 workers', {'workers': 2}),
                               ('Ray, 2 CPUs', {'ray': '', 'workers': 2})]:
-            clock = Clock(enabled=False)
+            clock = clock_progress()
             started = time.monotonic()
             result = api.campaign(folder / 'campaign.yaml', folder / name.replace(' ', '').replace(',', '_'),
                                   progress=clock, **options)  # type: ignore[arg-type]

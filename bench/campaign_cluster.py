@@ -26,7 +26,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from campaign import SCENARIO, STREAMS  # noqa: E402 - the same bags and scenario as bench/campaign.py
+from campaign import SCENARIO, STREAMS, clock_progress  # noqa: E402 - the same bags and scenario as bench/campaign.py
 
 CAMPAIGN = """
 campaign: bucket_bench
@@ -69,22 +69,9 @@ def _run(args: argparse.Namespace, folder: Path, log: Path) -> int:
     from ray.cluster_utils import Cluster
 
     from bagfault import api
-    from bagfault.campaign.runner import JobProgress
     from bagfault.demo import synthetic
 
     ray_constants.ENABLE_RAY_CLUSTER = False  # every node on 127.0.0.1
-
-    class Clock(JobProgress):
-        first: float | None = None
-        last = 0.0
-
-        def add(self, total: int, cached: int) -> None:
-            self.first = self.first or time.monotonic()
-            super().add(total, cached)
-
-        def finished(self, status: str) -> None:
-            self.last = time.monotonic()
-            super().finished(status)
 
     s3 = boto3.client('s3')
     s3.create_bucket(Bucket='bench-fleet')
@@ -114,7 +101,7 @@ def _run(args: argparse.Namespace, folder: Path, log: Path) -> int:
             cluster.wait_for_nodes()
             options = {'ray': cluster.address}
         before = downloads()
-        clock = Clock(enabled=False)
+        clock = clock_progress()
         started = time.monotonic()
         try:
             result = api.campaign(folder / 'campaign.yaml', folder / f'out-{nodes}', progress=clock,

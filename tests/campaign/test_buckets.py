@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from support.corpus import campaign_file
+from support.corpus import InterruptAfter, campaign_file
 from support.helpers import FIXTURES
 
 from bagfault.cli import main
@@ -152,24 +152,6 @@ def test_a_bag_deleted_mid_campaign_is_an_error_row_and_the_others_complete(stor
     assert result.failed
 
 
-class _InterruptAfter:
-    """A progress display that presses Ctrl-C after `count` finished jobs."""
-
-    def __init__(self, count: int) -> None:
-        from bagfault.campaign.runner import JobProgress
-
-        self.bar = JobProgress(enabled=False)
-        self.count = count
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.bar, name)
-
-    def finished(self, status: str) -> None:
-        self.bar.finished(status)
-        if self.bar.done >= self.count:
-            raise KeyboardInterrupt
-
-
 def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3Server, corpus: Path,
                                                                        tmp_path: Path) -> None:
     """-o s3://...: the tables and report land in the bucket; a campaign stopped after 3 jobs has uploaded those
@@ -181,7 +163,7 @@ def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3
     path = campaign_file(corpus, CAMPAIGN % 'bags/*.mcap')
     target = f's3://{BUCKET}/{prefix}/results/run1'
     with pytest.raises(KeyboardInterrupt):
-        api.campaign(path, target, workers=1, progress=_InterruptAfter(3))  # type: ignore[arg-type]
+        api.campaign(path, target, workers=1, progress=InterruptAfter(3))  # type: ignore[arg-type]
     listed = store.s3.list_objects_v2(Bucket=BUCKET, Prefix=f'{prefix}/results/run1/jobs/')
     assert len(listed.get('Contents', [])) == 3
     result = api.campaign(path, target, workers=1, resume=True)

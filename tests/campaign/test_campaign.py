@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from support.corpus import SCENARIO, campaign_file, write_imu_bag
+from support.corpus import SCENARIO, InterruptAfter, campaign_file, write_imu_bag
 from support.html_check import figures, rendered
 
 from bagfault import api
@@ -326,24 +326,6 @@ def test_a_corrupt_bag_is_an_error_row_and_the_others_complete(corpus: Path) -> 
     assert 'Jobs that did not pass' in html and 'bags/c.mcap' in html
 
 
-class _InterruptAfter:
-    """A progress display that presses Ctrl-C after `count` finished jobs."""
-
-    def __init__(self, count: int) -> None:
-        from bagfault.campaign.runner import JobProgress
-
-        self.bar = JobProgress(enabled=False)
-        self.count = count
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.bar, name)
-
-    def finished(self, status: str) -> None:
-        self.bar.finished(status)
-        if self.bar.done >= self.count:
-            raise KeyboardInterrupt
-
-
 def test_resume_reruns_only_unfinished_and_changed_jobs(corpus: Path) -> None:
     body = f"""
         campaign: resumable
@@ -355,7 +337,7 @@ def test_resume_reruns_only_unfinished_and_changed_jobs(corpus: Path) -> None:
     path = campaign_file(corpus, body)
     out = corpus / 'out'
     with pytest.raises(KeyboardInterrupt):
-        api.campaign(path, out, workers=1, progress=_InterruptAfter(5))  # type: ignore[arg-type]
+        api.campaign(path, out, workers=1, progress=InterruptAfter(5))  # type: ignore[arg-type]
     stored = {p.name: p.stat().st_mtime_ns for p in (out / 'jobs').glob('*.json')}
     assert len(stored) == 5 and not (out / 'results.parquet').exists()
     assert not [p for p in (out / 'outputs').iterdir() if p.name.endswith('.partial')]

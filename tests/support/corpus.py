@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import textwrap
 from pathlib import Path
+from typing import Any
 
 from mcap.writer import Writer
 from rosbags.typesys import Stores, get_typestore
@@ -59,3 +60,21 @@ def campaign_file(folder: Path, body: str, name: str = 'campaign.yaml') -> Path:
     path = folder / name
     path.write_text(textwrap.dedent(body))
     return path
+
+
+class InterruptAfter:
+    """A progress display that presses Ctrl-C after `count` finished jobs."""
+
+    def __init__(self, count: int) -> None:
+        from bagfault.campaign.runner import JobProgress
+
+        self.bar = JobProgress(enabled=False)
+        self.count = count
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.bar, name)
+
+    def finished(self, status: str) -> None:
+        self.bar.finished(status)
+        if self.bar.done >= self.count:
+            raise KeyboardInterrupt
