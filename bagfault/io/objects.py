@@ -136,9 +136,18 @@ def list_bags(pattern: str) -> list[RemoteBag]:
         raise InputError(f'{pattern}: access refused by the store ({" ".join(str(exc).split())[:200]}); '
                          'credentials come from the standard chain (for S3: AWS_ACCESS_KEY_ID, AWS_PROFILE, ...)') \
             from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f'{pattern}: cannot list ({" ".join(str(exc).split())[:200]})') from None
+    except Exception as exc:  # noqa: BLE001 - each store's client raises its own kinds (botocore's, gcsfs's, ...)
+        raise InputError(f'{pattern}: {_store_problem(exc)}') from None
     return bags
+
+
+def _store_problem(exc: Exception) -> str:
+    """What a store's client said, as one line: missing credentials named as such."""
+    text = ' '.join(str(exc).split())[:200] or type(exc).__name__
+    if 'credential' in type(exc).__name__.lower() or 'credential' in text.lower():
+        return (f'no usable credentials ({text}); they come from the standard chain (for S3: AWS_ACCESS_KEY_ID '
+                'and AWS_SECRET_ACCESS_KEY, AWS_PROFILE, an instance role)')
+    return f'cannot reach the store ({text})'
 
 
 def cache_root() -> Path:
@@ -209,8 +218,10 @@ def _download(bag: RemoteBag, entry: Path) -> None:
         raise InputError(f'{bag.url}: access refused by the store ({" ".join(str(exc).split())[:200]})') from None
     except FileNotFoundError:
         raise InputError(f'{bag.url}: no such object (deleted after the campaign listed it?)') from None
-    except OSError as exc:
-        raise InputError(f'{bag.url}: cannot download ({" ".join(str(exc).split())[:200]})') from None
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the store client's own kinds
+        raise InputError(f'{bag.url}: cannot download: {_store_problem(exc)}') from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
@@ -272,18 +283,20 @@ def staged_folder(url: str, *, resume: bool) -> Iterator[Staged]:
                        if PurePosixPath(k).stem in finished} if resume else set()
         except PermissionError as exc:
             raise InputError(f'{url}: access refused by the store ({" ".join(str(exc).split())[:200]})') from None
-        except OSError as exc:
-            raise InputError(f'{url}: cannot read ({" ".join(str(exc).split())[:200]})') from None
+        except OutputError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the store client's own kinds
+            raise InputError(f'{url}: {_store_problem(exc)}') from None
         try:
             yield Staged(staging, outputs)
         finally:
             try:
                 for path in sorted(p for p in staging.rglob('*') if p.is_file()):
                     fs.put_file(str(path), f'{remote}/{path.relative_to(staging).as_posix()}')
-            except OSError as exc:
+            except Exception as exc:  # noqa: BLE001 - the store client's own kinds
                 keep = True
-                raise InputError(f'{url}: cannot upload the campaign\'s files ({" ".join(str(exc).split())[:200]}); '
-                                 f'they are in {staging}') from None
+                raise InputError(f"{url}: cannot upload the campaign's files: {_store_problem(exc)}; they are in "
+                                 f'{staging}') from None
     finally:
         if not keep:
             shutil.rmtree(staging, ignore_errors=True)

@@ -103,7 +103,7 @@ def test_a_rosbag2_folder_in_a_bucket(store: S3Server, corpus: Path, tmp_path: P
     assert main(['run', str(corpus / 'rover.yaml'), str(local), '-o', str(tmp_path / 'check.mcap')]) == 0
 
 
-def test_a_missing_bucket_and_refused_credentials_are_one_line(store: S3Server, corpus: Path, tmp_path: Path,
+def test_a_missing_bucket_refused_or_missing_credentials_are_one_line(store: S3Server, corpus: Path, tmp_path: Path,
                                                                 monkeypatch: pytest.MonkeyPatch,
                                                                 capsys: pytest.CaptureFixture[str]) -> None:
     path = campaign_file(corpus, CAMPAIGN % 's3://no-such-bucket-here/bags/*.mcap')
@@ -116,6 +116,15 @@ def test_a_missing_bucket_and_refused_credentials_are_one_line(store: S3Server, 
     assert main(['campaign', str(path), '-o', str(tmp_path / 'out')]) == 2
     error = capsys.readouterr().err.strip()
     assert error.count('\n') == 0 and 'access refused by the store' in error and 'AWS_' in error
+    assert not (tmp_path / 'out').exists()
+    for name in ('AWS_ACCESS_KEY_ID', 'AWS_SECRET_ACCESS_KEY', 'AWS_PROFILE', 'AWS_SESSION_TOKEN'):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv('AWS_SHARED_CREDENTIALS_FILE', str(tmp_path / 'none'))
+    monkeypatch.setenv('AWS_CONFIG_FILE', str(tmp_path / 'none'))
+    monkeypatch.setenv('AWS_EC2_METADATA_DISABLED', 'true')  # no instance role to ask on this machine
+    assert main(['campaign', str(path), '-o', str(tmp_path / 'out')]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and 'no usable credentials' in error and 'AWS_ACCESS_KEY_ID' in error
     assert not (tmp_path / 'out').exists()
 
 
