@@ -270,6 +270,9 @@ def staged_folder(url: str, *, resume: bool) -> Iterator[Staged]:
     keep = False
     try:
         try:
+            bucket = remote.split('/', 1)[0]
+            if not fs.exists(bucket):  # before any job: the upload at the end would fail after all of them
+                raise OutputError(f'{url}: bucket {bucket!r} does not exist (or these credentials cannot see it)')
             stored = fs.glob(f'{remote}/jobs/*.json')
             if stored and not resume:
                 raise OutputError(f'{url}: holds {len(stored)} results of a campaign already; --resume continues '

@@ -188,6 +188,8 @@ def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3
         tmp_path / 'whole' / 'results.parquet').to_pylist()]
     with pytest.raises(OutputError, match=f'{target}: holds 8 results of a campaign already'):
         api.campaign(path, target, workers=1)  # without --resume, as for a local folder
+    with pytest.raises(OutputError, match="bucket 'no-results-bucket' does not exist"):
+        api.campaign(path, 's3://no-results-bucket/run1', workers=1)  # said before any job, not at the upload
 
 
 def test_the_cache_is_bounded_and_never_evicts_a_bag_in_use(store: S3Server, monkeypatch: pytest.MonkeyPatch) -> None:
