@@ -17,13 +17,18 @@ from typing import Any
 
 @contextlib.contextmanager
 def _local(spec: dict[str, Any]) -> Iterator[str]:
-    """The job's bag on local disk: as given, or a bucket's bag from this machine's cache (fetched once)."""
+    """The job's bag on local disk: as given, or a bucket's bag from this machine's cache (fetched once); the
+    digests known of its files (hashed by the plan, or when the cache got them) are not computed again."""
+    from bagfault.io.sources import remember_digests  # noqa: PLC0415
+
+    remember_digests({tuple(item[:5]): item[5] for item in spec.get('digests') or []})
     if not spec.get('remote'):
         yield spec['bag']
         return
     from bagfault.io.objects import RemoteBag, fetched  # noqa: PLC0415
 
     with fetched(RemoteBag.from_dict(spec['remote'])) as bag:
+        remember_digests(bag.digests)
         yield str(bag.path)
 
 

@@ -16,7 +16,7 @@ from bagfault import __version__
 from bagfault.campaign.edit import expanded, scenario_data
 from bagfault.errors import CampaignError, InputError
 from bagfault.io.objects import RemoteBag, is_remote, list_bags
-from bagfault.io.sources import fingerprint
+from bagfault.io.sources import digests_of, fingerprint, remember_digests
 
 if TYPE_CHECKING:
     from bagfault.campaign.model import Campaign
@@ -43,12 +43,15 @@ class Job:
         """sha256 of the expanded scenario (as in the output's provenance)."""
         return hashlib.sha256(self.scenario_text.encode()).hexdigest()
 
-    def spec(self, campaign: Campaign, output: Path | None) -> dict[str, Any]:
-        """What a worker needs (plain JSON)."""
+    def spec(self, campaign: Campaign, output: Path | None,
+             digests: dict[str, list[list[Any]]] | None = None) -> dict[str, Any]:
+        """What a worker needs (plain JSON); `digests` the plan's file digests by bag."""
+        digests = digests or {}
         return {'mode': campaign.mode, 'scenario_text': self.scenario_text,
                 'scenario_source': str(campaign.scenario.resolve()),
                 'bag': str(self.bag) if isinstance(self.bag, RemoteBag) else str(self.bag.resolve()), 'seed': self.seed,
                 'remote': self.bag.to_dict() if isinstance(self.bag, RemoteBag) else None,
+                'digests': digests.get(str(self.bag), []),
                 'output': str(output) if output else None,
                 'timeout': campaign.timeout}
 
@@ -61,6 +64,7 @@ class Plan:
     bags: list[Bag]
     jobs: list[Job] = field(default_factory=list)
     fingerprints: dict[str, str] = field(default_factory=dict)  # bag -> digest of its files
+    file_digests: dict[str, list[list[Any]]] = field(default_factory=dict)  # bag -> [stat key..., BLAKE3] per file
 
     def describe(self) -> dict[str, Any]:
         """campaign.json: the expanded plan with hashes."""
@@ -184,7 +188,13 @@ def make_plan(campaign: Campaign) -> Plan:
                             f'{len(campaign.seeds)} seeds'])
         raise CampaignError(f'{campaign.source}: the sweep makes {count:,} jobs ({parts}), more than {MAX_JOBS:,}: '
                             'give fewer values, or design: {random: {samples: N, seed: S}}')
-    plan = Plan(campaign, bags, fingerprints={str(b): bag_digest(b) for b in bags})
+    plan = Plan(campaign, bags)
+    for bag in bags:  # each bag hashed once: the jobs are handed the digests (a job on this machine reads no bag twice)
+        if isinstance(bag, Path):
+            known = digests_of(bag)
+            remember_digests(known)
+            plan.file_digests[str(bag)] = [[*key, digest] for key, digest in known.items()]
+        plan.fingerprints[str(bag)] = bag_digest(bag)
     data = scenario_data(campaign.scenario.read_text(encoding='utf-8'))
     texts = [(point, expanded(data, point, campaign.scenario)[0]) for point in points(campaign)]
     for bag in bags:

@@ -206,7 +206,7 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
                 store.put(todo[i], result)
                 bar.finished(result['status'])
 
-            engine.run([job.spec(campaign, store.output(job)) for job in todo], done)
+            engine.run([job.spec(campaign, store.output(job), plan.file_digests) for job in todo], done)
             ran += len(todo)
             return {job.key: store.results[job.key] for job in jobs}
 

@@ -29,6 +29,7 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import InputError, OutputError
+from bagfault.io.sources import StatKey, digests_of, input_files, stat_key
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -166,10 +167,11 @@ def cache_limit() -> int:
 
 @dataclass
 class Fetched:
-    """A bag on local disk, and whether this call downloaded it."""
+    """A bag on local disk, whether this call downloaded it, and its files' digests (hashed once per node)."""
 
     path: Path
     downloaded: bool
+    digests: dict[StatKey, str]
 
 
 @contextlib.contextmanager
@@ -192,9 +194,24 @@ def fetched(bag: RemoteBag) -> Iterator[Fetched]:
         try:
             if downloaded:
                 evict(root, cache_limit())
-            yield Fetched(target, downloaded)
+            yield Fetched(target, downloaded, _digests(entry, target))
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _digests(entry: Path, target: Path) -> dict[StatKey, str]:
+    """The bag's files' BLAKE3 digests, computed by the first job on this node and kept beside the bag."""
+    record = entry / '.digests.json'
+    with contextlib.suppress(OSError, ValueError, TypeError):
+        stored = {tuple(k): v for *k, v in json.loads(record.read_text())}
+        if all(stat_key(f) in stored for f in input_files(target)):
+            return stored
+    known = digests_of(target)
+    with contextlib.suppress(OSError):
+        staging = record.with_name(f'.digests.{os.getpid()}.json')
+        staging.write_text(json.dumps([[*key, digest] for key, digest in known.items()]))
+        os.replace(staging, record)
+    return known
 
 
 def _download(bag: RemoteBag, entry: Path) -> None:

@@ -195,12 +195,17 @@ def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3
 def test_the_cache_is_bounded_and_never_evicts_a_bag_in_use(store: S3Server, monkeypatch: pytest.MonkeyPatch) -> None:
     """Room for one bag: fetching b removes a (the entry unused longest); fetching a again while b is in use
     keeps b (over the limit rather than pulling a bag from under a job); a second holder shares a download."""
+    import blake3
+
     from bagfault.io.objects import fetched, list_bags
 
     a, b = list_bags(f's3://{BUCKET}/{store.prefix}/bags/*.mcap')  # type: ignore[attr-defined]
     monkeypatch.setenv('BAGFAULT_CACHE_GB', str(a.files[0].size * 1.5 / 1e9))
     with fetched(a) as first, fetched(a) as second:
         assert first.downloaded and not second.downloaded and second.path == first.path
+        # the node hashes the bag once, beside it in the cache; every later job is handed the digest
+        assert list(second.digests.values()) == [blake3.blake3(first.path.read_bytes()).hexdigest()]
+        assert (first.path.parent / '.digests.json').exists()
     with fetched(b) as other:
         assert other.downloaded
     assert not first.path.exists() and other.path.exists()

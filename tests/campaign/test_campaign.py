@@ -545,3 +545,43 @@ def test_the_heatmap_colours_agree_with_the_rate_table(corpus: Path, tmp_path: P
     html = page.read_text()
     assert 'background:hsl(120,65%,82%)' in html and 'background:hsl(0,65%,82%)' in html  # the table, same way
     assert rendered(page, tmp_path / 'profile')['errors'] == '0'
+
+
+def test_a_campaign_hashes_each_bag_once(corpus: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plan hashes each bag (BLAKE3, as `b3sum`) and hands the digests to its jobs: a job does not read the
+    bag a second time to hash it (here its hashing is made to fail, and the job still runs, with the plan's
+    digest in its output's provenance); a bag changed since the plan is hashed again."""
+    import blake3
+
+    from bagfault.campaign.job import run_job
+    from bagfault.campaign.loader import load_campaign
+    from bagfault.campaign.plan import make_plan
+    from bagfault.io import sources
+
+    path = campaign_file(corpus, f"""
+        campaign: once
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+        sweep: {{{BIAS}: [0.2]}}
+    """)
+    plan = make_plan(load_campaign(path))
+    bag = corpus / 'bags' / 'a.mcap'
+    ((*_, size, _, _, digest),) = plan.file_digests[str(bag)]
+    assert (size, digest) == (bag.stat().st_size, blake3.blake3(bag.read_bytes()).hexdigest())
+    spec = plan.jobs[0].spec(plan.campaign, tmp_path / 'out.mcap', plan.file_digests)
+    sources._known.clear()
+
+    def no_hashing(*_args: object) -> str:
+        raise AssertionError('the job hashed the bag again')
+
+    monkeypatch.setattr(sources, '_blake3', no_hashing)
+    result = run_job(spec)
+    assert result['status'] == 'passed', result
+    from mcap.reader import make_reader
+    with (tmp_path / 'out.mcap').open('rb') as stream:
+        provenance = next(m for m in make_reader(stream).iter_metadata() if m.name == 'bagfault')
+    assert digest in provenance.metadata['inputs']
+    sources._known.clear()
+    bag.write_bytes(bag.read_bytes())  # the same bytes, written again: its ctime changed, so it is not trusted
+    result = run_job(plan.jobs[0].spec(plan.campaign, tmp_path / 'again.mcap', plan.file_digests))
+    assert result['status'] == 'error' and 'hashed the bag again' in result['message']
