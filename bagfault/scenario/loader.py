@@ -18,7 +18,7 @@ from bagfault.errors import Problem, ScenarioError, one_line
 from bagfault.spec.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 from bagfault.spec.system import parse_system
 from bagfault.spec.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
-from bagfault.yamlcpp import as_bool
+from bagfault.yamlcpp import as_bool, as_double, as_int
 
 TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager',
             'msg_paths', 'system_under_test', 'bags'}
@@ -193,15 +193,11 @@ def _text(node: dict[str, Any], key: str, path: PathKey, out: _Collector, *, req
 
 def seconds(value: object, path: PathKey, out: _Collector, *, positive: bool = False,
             minimum: float = 0.0) -> float | None:
-    """A time in seconds: a number (or a quoted one, as yaml-cpp reads it), finite, 0..MAX_SECONDS."""
+    """A time in seconds as the anchor reads it (`node.as<double>()`, yamlcpp.as_double of the scalar as written:
+    a quoted number counts, `1_000` and `0x10` do not), finite, 0..MAX_SECONDS."""
     number: float | None = None
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        number = float(value)
-    elif isinstance(value, str):
-        try:
-            number = float(value.strip())
-        except ValueError:
-            number = None
+    if isinstance(value, (int, float, str)) and not isinstance(value, bool):
+        number = as_double(out.located.raw_text(path, value))
     if number is None:
         out.add(path, f'{value!r} is not a number of seconds')
         return None
@@ -286,12 +282,14 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
                                    'as ros2_fault_injection does')
     spec.input_topic = _topic(endpoint, 'input_topic', endpoint_path, out)
     spec.output_topic = _topic(endpoint, 'output_topic', endpoint_path, out)
-    if 'qos_depth' in endpoint:
+    if 'qos_depth' in endpoint:  # the anchor: as<std::size_t>() (a quoted number counts, the base follows 0x/0)
         depth = endpoint['qos_depth']
-        if isinstance(depth, bool) or not isinstance(depth, int) or depth <= 0:
+        read = None if isinstance(depth, (bool, dict, list)) else \
+            as_int(out.located.raw_text((*endpoint_path, 'qos_depth'), depth), unsigned=True)
+        if read is None or read <= 0:
             out.add((*endpoint_path, 'qos_depth'), f'{depth!r} is not a positive integer')
         else:
-            spec.qos_depth = depth
+            spec.qos_depth = read
     return spec
 
 
