@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bagfault.fault_manager.model import CORRELATION_SEVERITY_NAMES, ClusterInfo, MutedFaultInfo
-from bagfault.yamlcpp import as_bool
+from bagfault.yamlcpp import as_bool, as_int
 
 Problem = Callable[[tuple[Any, ...], str], None]
 REPRESENTATIVES = ('first', 'most_recent', 'highest_severity')
@@ -74,6 +74,14 @@ def _codes(value: object, path: tuple[Any, ...], problem: Problem, empty: Proble
     return [wildcard(v) for v in value]
 
 
+def medkit_uint32(value: object) -> int | None:
+    """What config_parser.cpp's get_uint32 (`node.as<uint32_t>()`) reads: a quoted number counts, a float or a
+    negative one does not; None where yaml-cpp throws."""
+    if isinstance(value, bool) or not isinstance(value, (int, str)):
+        return None
+    return as_int(value if isinstance(value, str) else str(value), unsigned=True, bits=32)
+
+
 def medkit_bool(node: dict[str, Any], key: str, default: bool, path: tuple[Any, ...], problem: Problem) -> bool:
     """medkit's `get_bool` (config_parser.cpp): yaml-cpp's `as<bool>()` of a scalar, the default when absent or
     not a scalar; a scalar yaml-cpp cannot convert (where medkit throws) is a problem."""
@@ -95,9 +103,10 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem, war
         problem(path, 'must be a mapping {enabled, default_window_ms, patterns, rules}')
         return None
     config = CorrelationConfig(enabled=medkit_bool(node, 'enabled', False, path, problem))
-    window = node.get('default_window_ms', 500)
-    if isinstance(window, bool) or not isinstance(window, int) or window <= 0:
-        problem((*path, 'default_window_ms'), f'{window!r} must be a positive integer (ms)')
+    written_window = node.get('default_window_ms', 500)
+    window = medkit_uint32(written_window)
+    if window is None or window <= 0:
+        problem((*path, 'default_window_ms'), f'{written_window!r} must be a positive integer (ms)')
     else:
         config.default_window_ms = window
     if 'enabled' not in node:
@@ -181,10 +190,11 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
     if mode is None:
         problem((*where, 'mode'), f"{written!r} is not 'hierarchical' or 'auto_cluster'")
         return None
-    window_ms = item.get('window_ms', default_window_ms)
-    if isinstance(window_ms, bool) or not isinstance(window_ms, int) or window_ms <= 0:
-        problem((*where, 'window_ms'), f'{window_ms!r} must be a positive integer (ms)')
-        window_ms = default_window_ms
+    written_ms = item.get('window_ms', default_window_ms)
+    read_ms = medkit_uint32(written_ms)
+    window_ms = read_ms if read_ms is not None and read_ms > 0 else default_window_ms
+    if read_ms is None or read_ms <= 0:
+        problem((*where, 'window_ms'), f'{written_ms!r} must be a positive integer (ms)')
     elif window_ms > 60_000:
         warn((*where, 'window_ms'), f'{window_ms} ms is over 60 s, which may be too long')
     rule = Rule(item['id'], str(item.get('name', item['id'])), mode, window_ms)
@@ -199,9 +209,10 @@ def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, 
         rule.auto_clear_with_root = medkit_bool(item, 'auto_clear_with_root', True, where, problem)
         return rule
     rule.match_codes = refs(item.get('match'), (*where, 'match'), 'match patterns', inline=False)
-    min_count = item.get('min_count', 3)
-    if isinstance(min_count, bool) or not isinstance(min_count, int) or min_count <= 0:
-        problem((*where, 'min_count'), f'{min_count!r} must be a positive integer')
+    written_count = item.get('min_count', 3)
+    min_count = medkit_uint32(written_count)
+    if min_count is None or min_count <= 0:
+        problem((*where, 'min_count'), f'{written_count!r} must be a positive integer')
     else:
         rule.min_count = min_count
         if min_count < 2:

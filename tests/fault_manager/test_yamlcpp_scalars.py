@@ -81,3 +81,20 @@ def test_snapshots_enabled_is_a_bool_parameter() -> None:
     problems.clear()
     config = parse_fault_manager({'snapshots': {'enabled': False}}, lambda p, m: problems.append(m))
     assert problems == [] and config.snapshots.enabled is False
+
+
+@pytest.mark.parametrize(('written', 'read'), [('250', 250), ("'250'", 250), ('0x100', 256), ('250.0', None),
+                                               ('-5', None), ("'4294967296'", None)])
+def test_correlation_windows_and_counts_are_uint32_as_medkit_reads_them(written: str, read: int | None) -> None:
+    """config_parser.cpp:45 `get_uint32`: node[key].as<uint32_t>() (a quoted number counts; a float, a negative
+    number or one past 2^32-1 throws)."""
+    text = (f"enabled: true\ndefault_window_ms: {written}\npatterns: {{sensors: {{codes: ['S_*']}}}}\nrules:\n"
+            f'  - {{id: b, mode: auto_cluster, match: [{{pattern: sensors}}], min_count: {written}, '
+            f'window_ms: {written}}}\n')
+    config, problems = parsed(text)
+    if read is None:
+        assert len(problems) == 3 and all('must be a positive integer' in p for p in problems)
+    else:
+        assert problems == [] and config.default_window_ms == read
+        (rule,) = config.rules
+        assert (rule.window_ms, rule.min_count) == (read, read)
