@@ -117,3 +117,23 @@ def test_qos_depth_is_read_as_an_unsigned_size(written: str, depth: int | None) 
             parse_scenario(text)
     else:
         assert parse_scenario(text).injectors[0].qos_depth == depth
+
+
+@pytest.mark.parametrize(('written', 'warned'), [('10', False), ('"10"', False), ('1e1', False), ('1_0', True),
+                                                 ('0x10', True)])
+def test_topic_hz_numbers_the_anchor_would_refuse_are_warnings(written: str, warned: bool) -> None:
+    """scenario_config.cpp reads min_hz and window with as<double>(): a spelling it refuses (numbers to PyYAML)
+    is read here with a warning naming the refusal, and refused under --strict."""
+    text = textwrap.dedent(f"""
+        injector: {{id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}}
+        faults: []
+        assertions:
+          - {{id: hz, type: topic_hz, topic: /imu_out, message_type: sensor_msgs/msg/Imu, min_hz: {written},
+             window: 1.0}}
+    """)
+    scenario = parse_scenario(text)
+    assert scenario.assertions[0].params['min_hz'] in (10.0, 16.0)
+    assert any("yaml-cpp refuses it (as<double>" in w for w in scenario.warnings) == warned
+    if warned:
+        with pytest.raises(Exception, match='as<double>'):
+            parse_scenario(text, strict=True)

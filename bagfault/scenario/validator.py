@@ -18,6 +18,7 @@ from bagfault.errors import FieldValueError, InjectorConfigError
 from bagfault.injectors.base import Injector, ServiceInjector
 from bagfault.injectors.registry import get_injector_type, injector_types
 from bagfault.schema import ConfigField
+from bagfault.yamlcpp import as_double
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
@@ -253,6 +254,9 @@ def _check_fault_manager(scenario: Scenario, out: _Collector) -> None:
     scenario.fault_manager_config = config if uses else None
 
 
+ANCHOR_ASSERTIONS = {'topic_hz', 'fault_event'}  # the assertion types ros2_fault_injection has
+
+
 def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> None:
     if not assertion.type:
         return
@@ -273,6 +277,11 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             continue
         assertion.params[key] = _coerce(field, value, path, out)
+        raw = out.located.raw_text(path, value)
+        if assertion.type in ANCHOR_ASSERTIONS and field.type == 'double' and assertion.params[key] is not None \
+                and as_double(raw) is None:  # scenario_config.cpp reads min_hz and window with as<double>()
+            out.warn(path, f"{raw!r} is read here, but ros2_fault_injection's yaml-cpp refuses it (as<double>: a "
+                           "decimal or .inf/.nan only)")
     for field in cls.fields:
         if field.required and field.key not in assertion.params:
             out.add(assertion.path, f'missing required key {field.key!r} for assertion type {assertion.type!r}')
