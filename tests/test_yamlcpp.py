@@ -133,7 +133,7 @@ def test_topic_hz_numbers_the_anchor_would_refuse_are_warnings(written: str, war
     """)
     scenario = parse_scenario(text)
     assert scenario.assertions[0].params['min_hz'] in (10.0, 16.0)
-    assert any("yaml-cpp refuses it (as<double>" in w for w in scenario.warnings) == warned
+    assert any('yaml-cpp refuses it (as<double>' in w for w in scenario.warnings) == warned
     if warned:
         with pytest.raises(Exception, match='as<double>'):
             parse_scenario(text, strict=True)
