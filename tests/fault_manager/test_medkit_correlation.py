@@ -635,3 +635,281 @@ def test_any_rule_on_the_root_with_auto_clear_clears_its_symptoms() -> None:
     assert engine.process_fault('MOTOR_COMM_FL', 'ERROR') is True
     assert engine.engine.process_clear('ESTOP_001') == ['MOTOR_COMM_FL']
     assert engine.muted_count() == 0
+
+
+# -- config parser: type conversions and parsing (test_correlation_config_parser.cpp:32-304) -----------------
+# medkit keeps pattern ids and wildcard strings; bagfault resolves them into patterns when it parses. So where
+# medkit's test compares a stored wildcard, this compares what that wildcard matches: codes it must match and
+# a code it must not, taken from the wildcard itself.
+
+def matches(patterns: list[Any], code: str) -> list[bool]:
+    return [bool(p.fullmatch(code)) for p in patterns]
+
+
+def mode_of(written: str) -> tuple[str | None, list[str]]:
+    config, errors, _ = parse(f"""
+correlation:
+  enabled: true
+  rules:
+    - id: r
+      mode: "{written}"
+      root_cause: {{codes: [R]}}
+      symptoms: [{{codes: [S]}}]
+      match: [{{codes: [S]}}]
+""")
+    return (config.rules[0].mode if config and config.rules else None), errors
+
+
+def representative_of(written: str) -> tuple[str | None, list[str]]:
+    config, errors, _ = parse(f"""
+correlation:
+  enabled: true
+  patterns: {{p: {{codes: [S_*]}}}}
+  rules:
+    - {{id: r, mode: auto_cluster, match: [{{pattern: p}}], representative: "{written}"}}
+""")
+    return (config.rules[0].representative if config and config.rules else None), errors
+
+
+def test_StringToModeHierarchical() -> None:
+    assert [mode_of(w)[0] for w in ('hierarchical', 'HIERARCHICAL', 'Hierarchical')] == ['hierarchical'] * 3
+
+
+def test_StringToModeAutoCluster() -> None:
+    assert [mode_of(w)[0] for w in ('auto_cluster', 'autocluster', 'cluster')] == ['auto_cluster'] * 3
+
+
+def test_StringToModeInvalid() -> None:
+    for written in ('invalid', ''):
+        mode, errors = mode_of(written)
+        assert mode is None and len(errors) == 1  # medkit: std::invalid_argument
+
+
+def test_StringToRepresentative() -> None:
+    assert [representative_of(w)[0] for w in ('first', 'most_recent', 'recent', 'highest_severity', 'severity')] \
+        == ['first', 'most_recent', 'most_recent', 'highest_severity', 'highest_severity']
+
+
+def test_StringToRepresentativeInvalid() -> None:
+    _, errors = representative_of('invalid')
+    assert len(errors) == 1
+
+
+def test_ParseEmptyConfig() -> None:
+    config, errors, _ = parse('# Empty config - no correlation section\n')
+    assert (config.enabled, errors) == (False, [])
+
+
+def test_ParsePatterns() -> None:
+    """Two patterns, motor_errors with MOTOR_COMM_* then MOTOR_TIMEOUT_*; a rule using each shows them."""
+    config, errors, _ = parse("""
+correlation:
+  enabled: true
+  patterns:
+    motor_errors:
+      codes: ["MOTOR_COMM_*", "MOTOR_TIMEOUT_*"]
+    sensor_issues:
+      codes: ["SENSOR_*"]
+  rules:
+    - {id: a, root_cause: {codes: [R]}, symptoms: [{pattern: motor_errors}]}
+    - {id: b, root_cause: {codes: [R]}, symptoms: [{pattern: sensor_issues}]}
+""")
+    assert (config.enabled, errors) == (True, [])
+    motor, sensor = (rule.symptom_codes for rule in config.rules)
+    assert len(motor) == 2 and len(sensor) == 1
+    assert matches(motor, 'MOTOR_COMM_1') == [True, False] and matches(motor, 'MOTOR_TIMEOUT_1') == [False, True]
+    assert matches(sensor, 'SENSOR_LIDAR') == [True] and matches(sensor, 'MOTOR_COMM_1') == [False]
+
+
+def test_ParseHierarchicalRule() -> None:
+    config, errors, _ = parse("""
+correlation:
+  enabled: true
+  patterns:
+    motor_errors:
+      codes: ["MOTOR_COMM_*"]
+  rules:
+    - id: estop_cascade
+      name: "E-Stop Cascade"
+      mode: hierarchical
+      root_cause:
+        codes: ["ESTOP_001"]
+      symptoms:
+        - pattern: motor_errors
+      window_ms: 1000
+      mute_symptoms: true
+      auto_clear_with_root: true
+""")
+    assert (config.enabled, errors, len(config.rules)) == (True, [], 1)
+    rule = config.rules[0]
+    assert (rule.id, rule.name, rule.mode, rule.window_ms) == ('estop_cascade', 'E-Stop Cascade', 'hierarchical',
+                                                               1000)
+    assert matches(rule.root_codes, 'ESTOP_001') == [True] and matches(rule.root_codes, 'ESTOP_0010') == [False]
+    assert matches(rule.symptom_codes, 'MOTOR_COMM_3') == [True]
+    assert (rule.mute_symptoms, rule.auto_clear_with_root) == (True, True)
+
+
+def test_ParseHierarchicalRuleWithInlineCodes() -> None:
+    config, errors, warnings = parse("""
+correlation:
+  enabled: true
+  rules:
+    - id: inline_test
+      name: "Inline Codes Test"
+      mode: hierarchical
+      root_cause:
+        codes: ["ESTOP_001"]
+      symptoms:
+        - codes: ["MOTOR_COMM_*", "MOTOR_TIMEOUT_*"]
+        - codes: ["DRIVE_*"]
+      window_ms: 1000
+""")
+    rule = config.rules[0]
+    assert (rule.id, rule.mode, len(rule.symptom_codes)) == ('inline_test', 'hierarchical', 3)
+    assert [matches(rule.symptom_codes, code) for code in ('MOTOR_COMM_1', 'MOTOR_TIMEOUT_1', 'DRIVE_1')] == [
+        [True, False, False], [False, True, False], [False, False, True]]
+    assert (errors, warnings) == ([], [])  # inline codes count as symptoms: valid
+
+
+def test_ParseHierarchicalRuleMixedSymptoms() -> None:
+    config, errors, warnings = parse("""
+correlation:
+  enabled: true
+  patterns:
+    sensor_errors:
+      codes: ["SENSOR_*"]
+  rules:
+    - id: mixed_test
+      mode: hierarchical
+      root_cause:
+        codes: ["ESTOP_001"]
+      symptoms:
+        - pattern: sensor_errors
+        - codes: ["MOTOR_*", "DRIVE_*"]
+""")
+    (rule,) = config.rules
+    assert [matches(rule.symptom_codes, code) for code in ('SENSOR_1', 'MOTOR_1', 'DRIVE_1')] == [
+        [True, False, False], [False, True, False], [False, False, True]]
+    assert (errors, warnings) == ([], [])
+
+
+def test_ParseAutoClusterRule() -> None:
+    config, errors, _ = parse("""
+correlation:
+  enabled: true
+  patterns:
+    comm_errors:
+      codes: ["*_COMM_*", "*_TIMEOUT"]
+  rules:
+    - id: comm_storm
+      name: "Communication Storm"
+      mode: auto_cluster
+      match:
+        - pattern: comm_errors
+      min_count: 3
+      window_ms: 500
+      show_as_single: true
+      representative: highest_severity
+""")
+    (rule,) = config.rules
+    assert (rule.id, rule.mode, rule.min_count, rule.window_ms, rule.show_as_single, rule.representative) == (
+        'comm_storm', 'auto_cluster', 3, 500, True, 'highest_severity')
+    assert matches(rule.match_codes, 'MOTOR_COMM_FAIL') == [True, False]
+    assert matches(rule.match_codes, 'LIDAR_TIMEOUT') == [False, True] and errors == []
+
+
+def test_ParseMultipleRules() -> None:
+    config, errors, _ = parse("""
+correlation:
+  enabled: true
+  default_window_ms: 500
+  patterns:
+    motor_errors:
+      codes: ["MOTOR_*"]
+    sensor_issues:
+      codes: ["SENSOR_*"]
+  rules:
+    - id: rule1
+      mode: hierarchical
+      root_cause:
+        codes: ["ROOT1"]
+      symptoms:
+        - pattern: motor_errors
+    - id: rule2
+      mode: auto_cluster
+      match:
+        - pattern: sensor_issues
+      min_count: 2
+""")
+    assert [(r.id, r.mode) for r in config.rules] == [('rule1', 'hierarchical'), ('rule2', 'auto_cluster')]
+    assert errors == []
+
+
+def test_ParseDefaultValues() -> None:
+    config, _, _ = parse("""
+correlation:
+  enabled: true
+  rules:
+    - id: minimal_rule
+      root_cause:
+        codes: ["TEST"]
+""")
+    (rule,) = config.rules
+    assert (rule.mode, rule.window_ms, rule.mute_symptoms, rule.auto_clear_with_root) == ('hierarchical', 500,
+                                                                                          True, True)
+
+
+def test_ParseFullExampleConfig() -> None:
+    config, errors, warnings = parse("""
+correlation:
+  enabled: true
+  default_window_ms: 500
+
+  patterns:
+    motor_errors:
+      codes: ["MOTOR_COMM_*", "MOTOR_TIMEOUT_*"]
+    sensor_issues:
+      codes: ["SENSOR_*_TIMEOUT", "SENSOR_*_DISCONNECT"]
+    drive_faults:
+      codes: ["DRIVE_*"]
+
+  rules:
+    - id: estop_cascade
+      name: "E-Stop Cascade"
+      mode: hierarchical
+      root_cause:
+        codes: ["ESTOP_001"]
+      symptoms:
+        - pattern: motor_errors
+        - pattern: drive_faults
+      window_ms: 1000
+      mute_symptoms: true
+      auto_clear_with_root: true
+
+    - id: ota_expected
+      name: "OTA Expected Timeouts"
+      mode: hierarchical
+      root_cause:
+        codes: ["OTA_UPDATE_ACTIVE"]
+      symptoms:
+        - pattern: motor_errors
+        - pattern: sensor_issues
+      window_ms: 5000
+      mute_symptoms: true
+
+    - id: comm_storm
+      name: "Communication Storm"
+      mode: auto_cluster
+      match:
+        - pattern: motor_errors
+        - pattern: sensor_issues
+      min_count: 3
+      window_ms: 500
+      show_as_single: true
+      representative: highest_severity
+""")
+    assert (config.enabled, config.default_window_ms, len(config.rules)) == (True, 500, 3)
+    assert (errors, warnings) == ([], [])  # valid
+    ota = config.rules[1]
+    assert matches(ota.symptom_codes, 'SENSOR_LIDAR_TIMEOUT') == [False, False, True, False]
+    assert matches(ota.symptom_codes, 'SENSOR_LIDAR_STALE') == [False] * 4
