@@ -180,7 +180,7 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
         field = cls.field(str(key))
         if field is None:
             hint = _closest(str(key), keys)
-            out.warn(path, f'unknown key {key!r} for injector type {injector.type!r} is ignored'
+            out.warn(path, f'unknown config key {key!r} for injector type {injector.type!r} is ignored'
                            + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             del fault.config[key]  # still shown in the fault's event details, as the anchor shows it
             continue

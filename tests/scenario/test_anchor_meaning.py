@@ -54,7 +54,7 @@ def test_keys_the_anchor_ignores_are_warnings_and_the_run_goes_on(tmp_path, odom
     assert any("unknown top-level key 'name_of_robot' is ignored" in w for w in result.warnings)
     assert any("injector.launch_prefix: unknown injector key 'launch_prefix' is ignored" in w for w in result.warnings)
     assert any("faults[0].description: unknown fault key 'description' is ignored" in w for w in result.warnings)
-    assert any("faults[0].config.wheel_slip: unknown key 'wheel_slip'" in w for w in result.warnings)
+    assert any("faults[0].config.wheel_slip: unknown config key 'wheel_slip'" in w for w in result.warnings)
     [event] = [e for e in result.stats.events if e.state == 'active']
     assert seconds(event.time) == 1.0
     assert event.details == 'config={wheel_slip=0.3, x_bias=1.0}'  # describe_config() shows every key as written

@@ -150,7 +150,7 @@ def test_validation_reports_every_problem_with_its_location():
     assert len(info.value.problems) == 7  # the unknown config key, the unknown type, the repeated fault id: warnings
     with pytest.raises(ScenarioError) as strict:
         parse_scenario(BAD, strict=True)
-    assert any(p.path == 'faults[1].config.bogus_key' and "unknown key 'bogus_key' for injector type 'odom'"
+    assert any(p.path == 'faults[1].config.bogus_key' and "unknown config key 'bogus_key' for injector type 'odom'"
                in p.message and p.message.endswith('(a warning, an error with --strict)')
                for p in strict.value.problems)
     assert len(strict.value.problems) == 10
@@ -166,7 +166,7 @@ def test_misspelled_key_is_a_warning_with_a_suggestion_and_an_error_with_strict(
     """)
     scenario = parse_scenario(text)
     [warning] = scenario.warnings
-    assert "faults[0].config.angular_velocity_z_bais: unknown key 'angular_velocity_z_bais'" in warning
+    assert "faults[0].config.angular_velocity_z_bais: unknown config key 'angular_velocity_z_bais'" in warning
     assert "is ignored (did you mean 'angular_velocity_z_bias'?)" in warning
     assert scenario.faults[0].config == {}  # ignored, as the anchor's injector ignores it
     assert scenario.faults[0].describe_config() == 'config={angular_velocity_z_bais=1.0}'  # shown as written

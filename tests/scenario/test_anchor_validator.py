@@ -1,0 +1,177 @@
+"""ros2_fault_injection's own validator tests, ported: names, scenarios and expectations from
+reeceholland/ros2_fault_injection test/config/test_scenario_validator.cpp at f104e75.
+
+The C++ tests build a ScenarioConfig in code; here the same scenario is written as the YAML that loads into
+it (the anchor's `fault.duration = 10 s` is `duration: 10.0`, `initially_active_faults` is
+`active_on_startup: true`). "ok" is a scenario that loads; an error is a ScenarioError whose one problem names
+the same key; a warning is one entry of `Scenario.warnings` holding the anchor's own words where bagfault
+uses them.
+"""
+
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from bagfault.errors import ScenarioError
+from bagfault.scenario import parse_scenario
+
+ODOM = """
+injectors:
+  - {id: odom, type: odom, topic: {input_topic: /odom_raw, output_topic: /odom, qos_depth: 10}}
+faults:
+  - id: odom_bias
+    injector_id: odom
+    config: {x_bias: "1.0", drop_probability: "0.25"%(config)s}
+%(fault)s
+"""
+SCAN = """
+injectors:
+  - {id: scan, type: scan, topic: {input_topic: /scan_raw, output_topic: /scan, qos_depth: 10}}
+faults:
+  - {id: scan_front_blind, injector_id: scan, config: {%(config)s}}
+"""
+
+
+def odom(config: str = '', fault: str = '', injectors: str = '') -> str:
+    text = ODOM % {'config': f', {config}' if config else '', 'fault': textwrap.indent(fault, '    ')}
+    return text.replace('injectors:\n', 'injectors:\n' + injectors) if injectors else text
+
+
+def errors_of(text: str) -> list[tuple[str, str]]:
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(text)
+    return [(p.path, p.message) for p in info.value.problems]
+
+
+def test_AcceptsValidOdomScenario() -> None:
+    scenario = parse_scenario(odom())
+    assert scenario.warnings == [] and [f.id for f in scenario.faults] == ['odom_bias']
+
+
+def test_WarnsForExternalPluginInjectorType() -> None:
+    scenario = parse_scenario(odom().replace('type: odom', 'type: camera'))
+    assert len(scenario.warnings) == 2  # the type, then its fault skipped (the anchor: one, and no injector)
+    assert 'assuming external plugin' in scenario.warnings[0]
+
+
+def test_WarnsWhenDurationHasNoStart() -> None:
+    scenario = parse_scenario(odom(fault='duration: 10.0'))
+    assert len(scenario.warnings) == 1 and 'duration' in scenario.warnings[0] and 'start' in scenario.warnings[0]
+
+
+def test_RejectsNegativeDuration() -> None:
+    (error,) = errors_of(odom(fault='start: 1.0\nduration: -1.0'))
+    assert error[0] == 'faults[0].duration' and 'negative' in error[1]
+
+
+def test_RejectsInvalidDropProbability() -> None:
+    (error,) = errors_of(odom().replace('drop_probability: "0.25"', 'drop_probability: "1.5"'))
+    assert error[0] == 'faults[0].config.drop_probability'
+
+
+def test_WarnsOnUnknownScanKey() -> None:
+    scenario = parse_scenario(SCAN % {'config': 'range_noise_stddev: "0.05", x_bias: "1.0"'})
+    assert len(scenario.warnings) == 1 and "unknown config key 'x_bias'" in scenario.warnings[0]
+
+
+def test_RejectsDuplicateInjectorIds() -> None:
+    text = odom(injectors='  - {id: odom, type: odom, topic: {input_topic: /odom_raw, output_topic: /odom}}\n')
+    errors = errors_of(text)
+    assert ('injectors[1].id', "duplicate injector id 'odom'") in errors
+    # bagfault also names what the copy would do (both write /odom); the anchor stops at the id
+    assert [e for e in errors if 'duplicate' not in e[1]] == [('injectors[1].output_topic',
+                                                               "output topic /odom is already written by injector "
+                                                               "'odom'")]
+
+
+def test_AllowsStartupActiveDurationWithoutStartWarning() -> None:
+    scenario = parse_scenario(odom(fault='active_on_startup: true\nduration: 10.0'))
+    assert scenario.warnings == []
+
+
+def test_WarnsWhenStartupActiveFaultAlsoHasStart() -> None:
+    scenario = parse_scenario(odom(fault='active_on_startup: true\nstart: 12.0\nduration: 8.0'))
+    assert len(scenario.warnings) == 1 and 'active_on_startup' in scenario.warnings[0] \
+        and 'start' in scenario.warnings[0]
+
+
+def test_RejectsNegativeYawNoiseStddevDeg() -> None:
+    (error,) = errors_of(odom(config='yaw_noise_stddev_deg: "-1.0"'))
+    assert error[0] == 'faults[0].config.yaw_noise_stddev_deg'
+
+
+IMU = """
+injectors:
+  - {id: imu, type: imu, topic: {input_topic: /sensors/imu_raw, output_topic: /sensors/imu, qos_depth: 10}}
+faults:
+  - {id: imu_accel_noise, injector_id: imu, config: {%s}}
+"""
+
+
+def test_AcceptsValidImuScenario() -> None:
+    scenario = parse_scenario(IMU % ('linear_acceleration_x_noise_stddev: "0.15", '
+                                     'linear_acceleration_y_noise_stddev: "0.15", '
+                                     'linear_acceleration_z_noise_stddev: "0.05"'))
+    assert scenario.warnings == []
+
+
+def test_RejectsNegativeImuNoiseStddev() -> None:
+    (error,) = errors_of(IMU % 'linear_acceleration_x_noise_stddev: "-0.15"')
+    assert error[0] == 'faults[0].config.linear_acceleration_x_noise_stddev'
+
+
+def test_RejectsInvalidSchemaValue() -> None:
+    (error,) = errors_of(odom().replace('x_bias: "1.0"', 'x_bias: "not_a_number"'))
+    assert error[0] == 'faults[0].config.x_bias'
+
+
+def test_RejectsMissingRequiredTfFrame() -> None:
+    (error,) = errors_of("""
+injectors:
+  - {id: tf, type: tf, topic: {input_topic: /tf_raw, output_topic: /tf, qos_depth: 10}}
+faults:
+  - {id: tf_missing_child_frame, injector_id: tf, config: {parent_frame: odom, x_bias: "1.0"}}
+""")
+    assert 'child_frame' in error[0] + error[1]
+
+
+def test_WarnsOnUnknownSchemaKey() -> None:
+    scenario = parse_scenario(odom(config='unexpected_key: some_value'))
+    assert len(scenario.warnings) == 1 and "unknown config key 'unexpected_key'" in scenario.warnings[0]
+
+
+def test_AcceptsSpecialFloatSectorValue() -> None:
+    """Accepted, inf kept. (bagfault adds its advisory that a sector_value without a sector blanks nothing;
+    the anchor accepts that silently and blanks nothing either.)"""
+    scenario = parse_scenario(SCAN % {'config': 'sector_value: "inf"'})
+    assert scenario.faults[0].config['sector_value'] == float('inf')
+    assert all('sector_value without sector_min_deg' in w for w in scenario.warnings)
+
+
+def test_ExternalPluginTypeWarnsButDoesNotFail() -> None:
+    scenario = parse_scenario("""
+injectors:
+  - {id: battery, type: battery_state, topic: {input_topic: /battery_state_raw, output_topic: /battery_state,
+     qos_depth: 10}}
+faults:
+  - {id: battery_voltage_bias, injector_id: battery, config: {voltage_bias: "-1.5"}}
+""")
+    assert scenario.warnings and 'assuming external plugin' in scenario.warnings[0]
+
+
+FAULT_EVENT = odom() + """
+assertions:
+  - {id: %s, type: fault_event, fault_id: %s, state: active, within: 6.0}
+"""
+
+
+def test_AcceptsScenarioWithValidFaultEventAssertion() -> None:
+    scenario = parse_scenario(FAULT_EVENT % ('odom_bias_activates', 'odom_bias'))
+    assert [a.id for a in scenario.assertions] == ['odom_bias_activates']
+
+
+def test_RejectsScenarioWithInvalidFaultEventAssertion() -> None:
+    (error,) = errors_of(FAULT_EVENT % ('invalid_assertion', 'nonexistent_fault'))
+    assert error[0] == 'assertions[0].fault_id'
