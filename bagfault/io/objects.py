@@ -133,18 +133,17 @@ def list_bags(pattern: str) -> list[RemoteBag]:
                                       folder=False))
     except InputError:
         raise
-    except PermissionError as exc:
-        raise InputError(f'{pattern}: access refused by the store ({" ".join(str(exc).split())[:200]}); '
-                         'credentials come from the standard chain (for S3: AWS_ACCESS_KEY_ID, AWS_PROFILE, ...)') \
-            from None
     except Exception as exc:  # noqa: BLE001 - each store's client raises its own kinds (botocore's, gcsfs's, ...)
         raise InputError(f'{pattern}: {_store_problem(exc)}') from None
     return bags
 
 
 def _store_problem(exc: Exception) -> str:
-    """What a store's client said, as one line: missing credentials named as such."""
+    """What a store's client said, as one line: refused access and missing credentials named as such."""
     text = ' '.join(str(exc).split())[:200] or type(exc).__name__
+    if isinstance(exc, PermissionError):
+        return (f'access refused by the store ({text}); credentials come from the standard chain (for S3: '
+                'AWS_ACCESS_KEY_ID, AWS_PROFILE, ...)')
     if 'credential' in type(exc).__name__.lower() or 'credential' in text.lower():
         return (f'no usable credentials ({text}); they come from the standard chain (for S3: AWS_ACCESS_KEY_ID '
                 'and AWS_SECRET_ACCESS_KEY, AWS_PROFILE, an instance role)')
@@ -231,8 +230,6 @@ def _download(bag: RemoteBag, entry: Path) -> None:
                 raise InputError(f'{file.url}: changed after the campaign listed it (size or ETag); run it again')
             fs.get_file(remote, str(into / file.name))
         os.replace(into / bag.name if not bag.folder else into, entry / bag.name)
-    except PermissionError as exc:
-        raise InputError(f'{bag.url}: access refused by the store ({" ".join(str(exc).split())[:200]})') from None
     except FileNotFoundError:
         raise InputError(f'{bag.url}: no such object (deleted after the campaign listed it?)') from None
     except InputError:
@@ -301,8 +298,6 @@ def staged_folder(url: str, *, resume: bool) -> Iterator[Staged]:
             finished = {PurePosixPath(k).stem for k in stored}  # outputs of jobs whose result was stored
             outputs = {PurePosixPath(k).name for k in fs.glob(f'{remote}/outputs/*')
                        if PurePosixPath(k).stem in finished} if resume else set()
-        except PermissionError as exc:
-            raise InputError(f'{url}: access refused by the store ({" ".join(str(exc).split())[:200]})') from None
         except OutputError:
             raise
         except Exception as exc:  # noqa: BLE001 - the store client's own kinds
