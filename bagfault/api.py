@@ -12,6 +12,7 @@ are given is set, or on SIGINT/SIGTERM in the main thread.
 
 from __future__ import annotations
 
+import glob
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -79,7 +80,8 @@ def _check_output(output: Path, what: str, inputs: Sequence[Path], scenario: Sce
     pairs += [('the --msg-path', Path(p)) for p in msg_paths]
     protected = Protected.of(pairs)
     check_output(output, what, protected, force=force)
-    check_derived(output, f'{output.stem}.blackbox.*.mcap', f'a black box of {output}', protected, force=force)
+    check_derived(output, f'{glob.escape(output.stem)}.blackbox.*.mcap', f'a black box of {output}', protected,
+                  force=force)
 
 
 def _activations(scenario: Scenario, texts: Sequence[str | Activation]) -> list[Activation]:

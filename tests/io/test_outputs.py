@@ -161,3 +161,10 @@ def test_black_boxes_are_checked_before_the_run(tmp_path, bag, scenario, capsys)
     _refused(capsys, ['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')], 'a black box of',
              'bagfault did not write it')
     assert not (tmp_path / 'out.mcap').exists()
+
+
+def test_black_box_names_with_glob_characters(tmp_path, bag, scenario, capsys):
+    """`-o 'run[1].mcap'`: its black boxes are `run[1].blackbox.*.mcap`, looked for by that literal name."""
+    (tmp_path / 'run[1].blackbox.ANY.1.mcap').write_text('notes\n')
+    _refused(capsys, ['run', str(scenario), str(bag), '-o', str(tmp_path / 'run[1].mcap')], 'a black box of',
+             'bagfault did not write it')
