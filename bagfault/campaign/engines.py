@@ -243,6 +243,8 @@ class RayEngine:
             else:
                 ray.init(num_cpus=workers or os.cpu_count() or 1, **options)
         except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; all mean "no cluster"
+            if self._adopting is not None:
+                self._adopting.reap(timeout=1.0)  # and this process is no subreaper any more
             where = f'the Ray cluster at {address}' if address else 'a local Ray instance'
             raise CampaignError(f'--ray: cannot start or reach {where}: {" ".join(str(exc).split())}') from None
         cpus = int(self.ray.cluster_resources().get('CPU', 1))
