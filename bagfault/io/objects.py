@@ -184,11 +184,13 @@ def fetched(bag: RemoteBag) -> Iterator[Fetched]:
         fcntl.flock(lock, fcntl.LOCK_SH)  # in use: eviction passes it over; other jobs may share it
         downloaded = False
         if not target.exists():
-            fcntl.flock(lock, fcntl.LOCK_EX)  # one download per bag and machine
-            if not target.exists():
-                _download(bag, entry)
-                downloaded = True
-            fcntl.flock(lock, fcntl.LOCK_SH)
+            # one download per bag and machine, under a lock of its own: a job that waits for another's
+            # download waits for that, never for the other job's whole run (which holds the use lock)
+            with (root / f'{entry.name}.download').open('a+b') as downloading:
+                fcntl.flock(downloading, fcntl.LOCK_EX)
+                if not target.exists():
+                    _download(bag, entry)
+                    downloaded = True
         (entry / '.used').touch()
         try:
             if downloaded:

@@ -213,3 +213,36 @@ def test_the_cache_is_bounded_and_never_evicts_a_bag_in_use(store: S3Server, mon
         with fetched(a) as again:
             assert again.downloaded and held.path.exists()  # b is in use: kept, though over the limit
         assert held.path.exists()
+
+
+def test_a_job_waits_for_a_download_never_for_another_jobs_run(store: S3Server) -> None:
+    """Two jobs of one bag on one node: the second gets the bag while the first still holds it in use, from the
+    first's download. (Before, two jobs that both found the bag missing could leave the second waiting for the
+    first's whole run: the download lock was the use lock; it has one of its own now.)"""
+    import threading
+
+    from bagfault.io.objects import fetched, list_bags
+
+    bag = list_bags(f's3://{BUCKET}/{store.prefix}/bags/a.mcap')[0]  # type: ignore[attr-defined]
+    inside, second_done = threading.Event(), threading.Event()
+    found: list[object] = []
+
+    def first_job() -> None:
+        with fetched(bag) as held:
+            found.append(held.downloaded)
+            inside.set()
+            second_done.wait(timeout=20)  # "running" until the second job has its bag
+
+    def second_job() -> None:
+        inside.wait(timeout=20)
+        with fetched(bag) as held:
+            found.append(held.downloaded)
+        second_done.set()
+
+    threads = [threading.Thread(target=first_job), threading.Thread(target=second_job)]
+    for thread in threads:
+        thread.start()
+    assert second_done.wait(timeout=15), 'the second job waited for the first job to end'
+    for thread in threads:
+        thread.join(timeout=20)
+    assert found == [True, False]  # one download, shared
