@@ -237,10 +237,12 @@ DAEMON = (f"{sys.executable} -c 'import os, sys, time\n"
 
 
 def daemon_of(process: SystemProcess, token: str) -> int | None:
-    """The daemon: a process of the token in a session other than the system's."""
+    """The daemon: a process of the token in a session other than the system's, and not that session's leader
+    (the leader is the middle process of the double fork, which exits at once)."""
     for pid in running_with(f'{token}-daemon'):
         with contextlib.suppress(ProcessLookupError):
-            if pid != process.pid and os.getsid(pid) not in (process.pid, os.getsid(0)):
+            session = os.getsid(pid)
+            if pid != process.pid and session not in (process.pid, os.getsid(0), pid):
                 return pid
     return None
 
