@@ -45,6 +45,12 @@ def table(directory: Path) -> list[dict[str, Any]]:
     return [{k: v for k, v in row.items() if k != 'seconds'} for row in rows]
 
 
+def one_bag(folder: Path, name: str, *lines: str) -> Path:
+    """A campaign of one job: bag a with bias 0.2 (0.02 + 0.2 > 0.1: detected), and any more `key: value` lines."""
+    return campaign_file(folder, '\n'.join([f'campaign: {name}', 'scenario: drift.yaml', 'bags: [bags/a.mcap]',
+                                            f'sweep: {{{BIAS}: [0.2]}}', *lines]) + '\n')
+
+
 @pytest.fixture(scope='module')
 def sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The 2 bags x 3 biases x 2 seeds campaign, run once on one local worker."""
@@ -375,13 +381,7 @@ def test_dry_run_prints_the_plan_and_its_size(corpus: Path, capsys: pytest.Captu
 
 
 def test_a_job_past_its_timeout_is_an_error_row(corpus: Path) -> None:
-    path = campaign_file(corpus, f"""
-        campaign: slow
-        scenario: drift.yaml
-        bags: [bags/a.mcap]
-        sweep: {{{BIAS}: [0.2]}}
-        timeout: 0.001
-    """)
+    path = one_bag(corpus, 'slow', 'timeout: 0.001')
     result = api.campaign(path, corpus / 'out', workers=1)
     (row,) = result.table.rows
     assert (row['status'], row['message']) == ('error', 'timed out after 0.001 s (the campaign timeout)')
@@ -390,12 +390,7 @@ def test_a_job_past_its_timeout_is_an_error_row(corpus: Path) -> None:
 
 def test_a_ray_address_where_nothing_answers_is_one_line_and_leaves_nothing(corpus: Path,
                                                                            capsys: pytest.CaptureFixture[str]) -> None:
-    path = campaign_file(corpus, f"""
-        campaign: nowhere
-        scenario: drift.yaml
-        bags: [bags/a.mcap]
-        sweep: {{{BIAS}: [0.2]}}
-    """)
+    path = one_bag(corpus, 'nowhere')
     assert main(['campaign', str(path), '-o', str(corpus / 'out'), '--ray', f'127.0.0.1:{_free_port()}']) == 2
     err = capsys.readouterr().err
     assert err.startswith('bagfault: error: --ray 127.0.0.1:') and 'no Ray head answers there' in err
@@ -405,13 +400,7 @@ def test_a_ray_address_where_nothing_answers_is_one_line_and_leaves_nothing(corp
 
 def test_without_pyarrow_the_table_and_the_report_are_still_written(corpus: Path) -> None:
     """The jobs ran: results.csv and report.html hold their table; only results.parquet needs the extra."""
-    path = campaign_file(corpus, f"""
-        campaign: no_arrow
-        scenario: drift.yaml
-        bags: [bags/a.mcap]
-        sweep: {{{BIAS}: [0.2]}}
-        keep: none
-    """)
+    path = one_bag(corpus, 'no_arrow', 'keep: none')
     blocked = corpus / 'no_arrow'
     blocked.mkdir()
     (blocked / 'pyarrow.py').write_text('raise ImportError("pyarrow is not installed here")\n')
@@ -483,13 +472,7 @@ def test_a_campaign_leaves_no_zombie_behind(corpus: Path, engine: list[str]) -> 
     were two zombies per campaign on a machine whose PID 1 reaps none (this one); with a local Ray instance,
     the fork servers of Ray's workers were four more. The campaign runs under a subreaper here, which counts
     what it left to be reaped, whatever else runs on the machine."""
-    path = campaign_file(corpus, f"""
-        campaign: tidy
-        scenario: drift.yaml
-        bags: [bags/a.mcap]
-        sweep: {{{BIAS}: [0.2]}}
-        keep: none
-    """)
+    path = one_bag(corpus, 'tidy', 'keep: none')
     env = {**os.environ, 'RAY_USAGE_STATS_ENABLED': '0', 'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER': '0'}
     done = subprocess.run([sys.executable, '-c', ORPHANS, sys.executable, '-m', 'bagfault.cli', 'campaign',
                            str(path), '-o', str(corpus / 'out'), *engine], capture_output=True, text=True,
@@ -501,12 +484,7 @@ def test_a_campaign_folder_replaces_nothing_it_reads_or_did_not_write(
         corpus: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A results.csv of someone else's in -o stops the campaign before any job (--force replaces it); -o inside a
     bag folder is refused."""
-    path = campaign_file(corpus, f"""
-        campaign: guard
-        scenario: drift.yaml
-        bags: [bags/a.mcap]
-        sweep: {{{BIAS}: [0.2]}}
-    """)
+    path = one_bag(corpus, 'guard')
     out = corpus / 'guarded'
     out.mkdir()
     (out / 'results.csv').write_text('name,score\nmine,1\n')
@@ -558,12 +536,7 @@ def test_a_campaign_hashes_each_bag_once(corpus: Path, tmp_path: Path, monkeypat
     from bagfault.campaign.plan import make_plan
     from bagfault.io import sources
 
-    path = campaign_file(corpus, f"""
-        campaign: once
-        scenario: drift.yaml
-        bags: [bags/a.mcap]
-        sweep: {{{BIAS}: [0.2]}}
-    """)
+    path = one_bag(corpus, 'once')
     plan = make_plan(load_campaign(path))
     bag = corpus / 'bags' / 'a.mcap'
     ((*_, size, _, _, digest),) = plan.file_digests[str(bag)]
