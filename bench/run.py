@@ -122,17 +122,47 @@ print('peak-rss', PEAK)
 JOB_ENV = {k: v for k, v in os.environ.items() if k != 'PYTHONDONTWRITEBYTECODE'}
 
 
-def run_job(code: str, **values: str) -> tuple[float, int]:
-    """Run one job in a fresh process; return (wall seconds, its peak RSS in bytes)."""
+class Conditions:
+    """Where jobs run: a cold page cache (dropped before each job) and a memory cgroup that bounds the page
+    cache (input + output larger than it, as for a bag bigger than the machine's memory). Both need root."""
+
+    cold = False
+    cgroup: Path | None = None
+
+    @classmethod
+    def limit_page_cache(cls, gigabytes: float) -> None:
+        """A memory cgroup (v2, else v1) of that size for every job."""
+        unified = Path('/sys/fs/cgroup/cgroup.controllers').exists()
+        root, limit = (Path('/sys/fs/cgroup'), 'memory.max') if unified else \
+            (Path('/sys/fs/cgroup/memory'), 'memory.limit_in_bytes')
+        group = root / 'bagfault-bench'
+        group.mkdir(exist_ok=True)
+        (group / limit).write_text(str(int(gigabytes * 2**30)))
+        cls.cgroup = group
+
+    @classmethod
+    def enter(cls) -> None:
+        """In the job's process before it starts."""
+        if cls.cgroup is not None:
+            (cls.cgroup / 'cgroup.procs').write_text(str(os.getpid()))
+
+
+def run_job(code: str, **values: str) -> tuple[float, int, float]:
+    """Run one job in a fresh process; return (wall seconds, its peak RSS in bytes, its CPU seconds)."""
     prelude = ''.join(f'{k} = {v!r}\n' for k, v in values.items())
     os.sync()  # the previous job's output is written back before this one is timed, not during it
+    if Conditions.cold:
+        Path('/proc/sys/vm/drop_caches').write_text('3')
+    before = os.times()
     started = time.perf_counter()
     done = subprocess.run([sys.executable, '-c', prelude + textwrap.dedent(code) + PEAK_RSS],
-                          stdout=subprocess.PIPE, text=True, check=False, env=JOB_ENV)
+                          stdout=subprocess.PIPE, text=True, check=False, env=JOB_ENV, preexec_fn=Conditions.enter)
     elapsed = time.perf_counter() - started
+    after = os.times()
     if done.returncode != 0:
         raise SystemExit(f'benchmark job failed ({done.returncode}):\n{code}')
-    return elapsed, int(done.stdout.split()[-1])
+    cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
+    return elapsed, int(done.stdout.split()[-1]), cpu
 
 
 def ensure_bag(kind: str, seconds: float) -> Path:
@@ -165,7 +195,7 @@ def measure(kind: str, seconds: float, repeat: int, include_baselines: bool = Tr
         jobs['hand-written'] = (HAND, {})
     for case in CASES[kind]:
         jobs[f'bagfault ({case})'] = (BAGFAULT, {'SCENARIO': scenario(kind, case), 'CHUNK_COPY': 'yes'})
-    samples: dict[str, list[tuple[float, int]]] = {name: [] for name in jobs}
+    samples: dict[str, list[tuple[float, int, float]]] = {name: [] for name in jobs}
     for _ in range(repeat):
         for name, (code, values) in jobs.items():
             samples[name].append(run_job(code, SRC=str(bag), DST=str(out), **values))
@@ -173,10 +203,11 @@ def measure(kind: str, seconds: float, repeat: int, include_baselines: bool = Tr
     size, messages = bag.stat().st_size, count_messages(bag)
     results = {}
     for name, runs in samples.items():
-        seconds_taken = statistics.median(t for t, _ in runs)
-        results[name] = {'seconds': seconds_taken, 'runs': [t for t, _ in runs],
+        seconds_taken = statistics.median(t for t, _, _ in runs)
+        results[name] = {'seconds': seconds_taken, 'runs': [t for t, _, _ in runs],
                          'mb_per_s': size / 1e6 / seconds_taken, 'messages_per_s': messages / seconds_taken,
-                         'peak_rss_mb': max(r for _, r in runs) / 1e6}
+                         'cpu_seconds': statistics.median(c for _, _, c in runs),
+                         'peak_rss_mb': max(r for _, r, _ in runs) / 1e6}
     for entry in results.values():
         if 'limit' in results:
             entry['vs_limit'] = results['limit']['seconds'] / entry['seconds']
@@ -185,33 +216,49 @@ def measure(kind: str, seconds: float, repeat: int, include_baselines: bool = Tr
     return {'bag': bag.name, 'bytes': size, 'messages': messages, 'results': results}
 
 
-def measure_copy(seconds: float, repeat: int) -> dict[str, dict]:
+def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[str, dict]:
     """Chunk copy against `cp` of the same file: no fault active, and an IMU bias active 10 s (from 100 s)."""
     bag = ensure_bag('sensor-heavy', seconds)
     out = DATA / 'out.mcap'
     jobs = {'cp': (CP, {}), 'start and import only': (IMPORT_ONLY, {})}
     for case, what in (('a', 'none active'), ('w', 'IMU bias 10 s')):
-        for copy in ('yes', 'no'):
+        for copy in ('yes', 'no') if reference else ('yes',):
             name = f'{what}{"" if copy == "yes" else ", --no-chunk-copy"}'
             jobs[name] = (BAGFAULT, {'SCENARIO': scenario('sensor-heavy', case), 'CHUNK_COPY': copy})
-    samples: dict[str, list[tuple[float, int]]] = {name: [] for name in jobs}
+    samples: dict[str, list[tuple[float, int, float]]] = {name: [] for name in jobs}
     for _ in range(repeat):
         for name, (code, values) in jobs.items():
             samples[name].append(run_job(code, SRC=str(bag), DST=str(out), **values))
             out.unlink(missing_ok=True)
-    cp = statistics.median(t for t, _ in samples['cp'])
-    results = {name: {'seconds': statistics.median(t for t, _ in runs), 'runs': [t for t, _ in runs],
-                      'vs_cp': statistics.median(t for t, _ in runs) / cp,
-                      'peak_rss_mb': max(r for _, r in runs) / 1e6} for name, runs in samples.items()}
-    return {'bag': bag.name, 'bytes': bag.stat().st_size, 'results': results}
+    cp = statistics.median(t for t, _, _ in samples['cp'])
+    cp_cpu = statistics.median(c for _, _, c in samples['cp'])
+    results = {name: {'seconds': statistics.median(t for t, _, _ in runs), 'runs': [t for t, _, _ in runs],
+                      'vs_cp': statistics.median(t for t, _, _ in runs) / cp,
+                      'cpu_seconds': statistics.median(c for _, _, c in runs),
+                      'cpu_vs_cp': statistics.median(c for _, _, c in runs) / cp_cpu,
+                      'peak_rss_mb': max(r for _, r, _ in runs) / 1e6} for name, runs in samples.items()}
+    return {'bag': bag.name, 'bytes': bag.stat().st_size, 'load_before': os.getloadavg()[0],
+            'cold': Conditions.cold, 'page_cache_gb': args_page_cache(), 'results': results}
+
+
+def args_page_cache() -> float | None:
+    """The page cache bound of the jobs, in GB (None: the machine's)."""
+    if Conditions.cgroup is None:
+        return None
+    for name in ('memory.max', 'memory.limit_in_bytes'):
+        if (Conditions.cgroup / name).exists():
+            return int((Conditions.cgroup / name).read_text()) / 2**30
+    return None
 
 
 def copy_table(block: dict) -> str:
     """Printable table of the chunk copy block."""
     lines = [f'chunk copy: {block["bag"]} ({block["bytes"] / 1e6:.0f} MB)',
-             f'  {"job":<32}{"median s":>10}{"x cp":>8}{"RSS MB":>8}']
+             f'  load {block["load_before"]:.1f}, cold cache {block["cold"]}, page cache {block["page_cache_gb"]} GB',
+             f'  {"job":<32}{"median s":>10}{"x cp":>8}{"CPU s":>8}{"CPU x cp":>9}{"RSS MB":>8}']
     for name, entry in block['results'].items():
-        lines.append(f'  {name:<32}{entry["seconds"]:>10.2f}{entry["vs_cp"]:>8.2f}{entry["peak_rss_mb"]:>8.0f}')
+        lines.append(f'  {name:<32}{entry["seconds"]:>10.2f}{entry["vs_cp"]:>8.2f}{entry["cpu_seconds"]:>8.2f}'
+                     f'{entry["cpu_vs_cp"]:>9.2f}{entry["peak_rss_mb"]:>8.0f}')
     return '\n'.join(lines)
 
 
@@ -236,15 +283,23 @@ def main() -> int:
     parser.add_argument('--copy', type=float, default=300.0,
                         help='sensor-heavy bag length for chunk copy against cp (0: skip)')
     parser.add_argument('--only-copy', action='store_true', help='run the chunk copy block only')
+    parser.add_argument('--no-reference', action='store_true',
+                        help='chunk copy block without the --no-chunk-copy jobs (minutes each on long bags)')
+    parser.add_argument('--cold', action='store_true', help='drop the page cache before every job (root)')
+    parser.add_argument('--page-cache-gb', type=float, default=None,
+                        help='run every job in a memory cgroup of this size, bounding its page cache (root)')
     parser.add_argument('--json', type=Path, default=None)
     args = parser.parse_args()
+    Conditions.cold = args.cold
+    if args.page_cache_gb:
+        Conditions.limit_page_cache(args.page_cache_gb)
     subprocess.run([sys.executable, '-m', 'compileall', '-q', str(Path(__file__).resolve().parents[1] / 'bagfault')],
                    check=True, env=JOB_ENV)
     report: dict = {'date': date.today().isoformat(), 'machine': platform.platform(), 'cpus': os.cpu_count(),
                     'python': platform.python_version(), 'seconds': args.seconds, 'repeat': args.repeat,
                     'speed': {}, 'memory': {}}
     if args.copy:
-        report['chunk_copy'] = measure_copy(args.copy, args.repeat)
+        report['chunk_copy'] = measure_copy(args.copy, args.repeat, not args.no_reference)
         print(copy_table(report['chunk_copy']), flush=True)
     if args.only_copy:
         save(report, args.json or RESULTS / f'bench-copy-{report["date"]}.json')

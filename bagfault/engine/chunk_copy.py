@@ -30,12 +30,13 @@ if TYPE_CHECKING:
     from bagfault.engine.scheduler import FaultScheduler
     from bagfault.io.mcap_sink import McapSink
     from bagfault.io.mcap_source import ChunkRef, McapSource
-    from bagfault.io.sources import InputSet
+    from bagfault.io.sources import InputSet, ReadMark
     from bagfault.spec.model import Scenario
 
-def chunk_copy_for(inputs: InputSet, *, verify: bool = False) -> ChunkCopy | None:
+def chunk_copy_for(inputs: InputSet, *, verify: bool = False, mark: ReadMark | None = None) -> ChunkCopy | None:
     """A chunk copy plan when the inputs are one indexed MCAP file whose chunks follow each other in time;
-    with `verify`, each copied chunk is also read again and checked on a second thread."""
+    with `verify`, each copied chunk is also read again and checked on a second thread; `mark` is told how far
+    the run has read."""
     from bagfault.io.mcap_source import McapSource  # noqa: PLC0415
 
     if len(inputs.parts) != 1 or not isinstance(inputs.parts[0], McapSource):
@@ -46,7 +47,7 @@ def chunk_copy_for(inputs: InputSet, *, verify: bool = False) -> ChunkCopy | Non
     refs = source.chunk_refs()
     if not refs or not any(ref.index_offsets for ref in refs):
         return None
-    return ChunkCopy(source, refs, ChunkVerifier(source) if verify else None)
+    return ChunkCopy(source, refs, ChunkVerifier(source) if verify else None, mark)
 
 
 class ChunkVerifier:
@@ -81,10 +82,12 @@ class ChunkVerifier:
 class ChunkCopy:
     """Which chunks of one MCAP input are copied as they are; built before routing, completed after it."""
 
-    def __init__(self, source: McapSource, refs: list[ChunkRef], verifier: ChunkVerifier | None = None) -> None:
+    def __init__(self, source: McapSource, refs: list[ChunkRef], verifier: ChunkVerifier | None = None,
+                 mark: ReadMark | None = None) -> None:
         self.source = source
         self.refs = refs
         self.verifier = verifier
+        self.mark = mark
         self._numbers = {cid: source.channel_number(cid) for cid in source.channel_records}
         self._ids = {number: cid for cid, number in self._numbers.items()}
         self.kept: set[int] = set()  # input channel numbers registered under their input id
@@ -96,8 +99,19 @@ class ChunkCopy:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        self.release()
         if self.verifier is not None:
             self.verifier.close()
+
+    def reading(self, ref: ChunkRef) -> None:
+        """The run reads this chunk and its message indexes now (copied or decoded)."""
+        if self.mark is not None:
+            self.mark.advance(ref.offset + ref.length + ref.index_length)
+
+    def release(self) -> None:
+        """The run reads no more chunks in file order."""
+        if self.mark is not None:
+            self.mark.release()
 
     def reserve(self, sink: McapSink) -> None:
         """New output channels and schemas are numbered above the input's."""

@@ -27,7 +27,7 @@ from bagfault.errors import InputError
 from bagfault.events import FaultEvent
 from bagfault.io.definitions import load_definitions
 from bagfault.io.mcap_sink import McapSink
-from bagfault.io.sources import InputSet
+from bagfault.io.sources import InputSet, ReadMark
 from bagfault.io.types import TypeCatalog
 
 if TYPE_CHECKING:
@@ -117,9 +117,11 @@ def replay(
     run.stats.replaced_topics = list(routing.replaced)
     if chunks is not None:
         chunks.wire(routing, run.observers, scenario)
+    if chunks is not None and not chunks.passthrough:
+        chunks.release()  # every message decoded in the usual order: nothing to keep pace with
+        chunks = None
     pipeline = Pipeline(inputs, run, routing.routes, routing.copies, state, seed=seed, activations=activations,
-                        start_offset=start_offset, batch=batch, progress=progress, control=control,
-                        chunks=chunks if chunks is not None and chunks.passthrough else None)
+                        start_offset=start_offset, batch=batch, progress=progress, control=control, chunks=chunks)
     if hooks is not None:
         hooks.begin(run)
         run.gate = hooks.gate
@@ -161,14 +163,18 @@ def run_to_file(
     read again, decompressed and checked on a second thread)."""
     definitions = load_definitions([*msg_paths, *scenario.msg_paths])
     stop = threading.Event()
+    copying = chunk_copy and batch and len(paths) == 1 and paths[0].is_file()
+    mark = ReadMark() if copying else None  # the hash follows the chunk copy's reading: the input is read once
     hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
     try:  # the inputs' digests on the second core from the start, beside the setup, the run and the copy
-        origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset, stop)
+        origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset, stop, mark)
         with InputSet(paths, salvage=salvage) as inputs:
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
             with McapSink(output, compression=compression, ros_distro=inputs.ros_distro or '') as sink:
-                chunks = chunk_copy_for(inputs, verify=verify) if chunk_copy and batch else None
+                chunks = chunk_copy_for(inputs, verify=verify, mark=mark) if copying else None
+                if chunks is None and mark is not None:
+                    mark.release()
                 with chunks if chunks is not None else contextlib.nullcontext():
                     if chunks is not None:
                         chunks.reserve(sink)
@@ -183,6 +189,8 @@ def run_to_file(
                     sink.add_metadata('bagfault', origin.result())
                     finish(sink, run)
     finally:
+        if mark is not None:
+            mark.release()
         stop.set()  # a failed run does not wait for the hash of a large input
         hashing.shutdown(wait=True, cancel_futures=True)
     if run.stats.input_messages == 0:

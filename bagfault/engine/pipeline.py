@@ -132,6 +132,7 @@ class Pipeline:
         self.run.stats.chunks = len(chunks.refs)
         batches = _Batches(self._process)
         for ref in chunks.refs:
+            chunks.reading(ref)
             if chunks.candidate(ref):
                 batches.flush()
                 if chunks.quiet(ref, self.scheduler) and not self._merge.holds(set(ref.channel_ids), ref.start,
@@ -147,6 +148,7 @@ class Pipeline:
                     continue
             for item in source.messages_of(ref, source.records_of(ref, source.read_record(ref))):
                 batches.add(item)
+        chunks.release()
         batches.flush()
         if chunks.verifier is not None:
             self.run.stats.chunks_verified = chunks.verifier.wait()

@@ -17,12 +17,15 @@ if TYPE_CHECKING:
 
     from bagfault.engine.scheduler import Activation
     from bagfault.io.mcap_sink import McapSink
+    from bagfault.io.sources import ReadMark
     from bagfault.spec.model import Scenario
 
 
 def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activations: Sequence[Activation],
-               start_offset: float, stop: threading.Event | None = None) -> dict[str, str]:
-    """Tool version, seed, scenario hash, inputs with sizes and BLAKE3 digests, `--activate` and `--start` options."""
+               start_offset: float, stop: threading.Event | None = None,
+               mark: ReadMark | None = None) -> dict[str, str]:
+    """Tool version, seed, scenario hash, inputs with sizes and BLAKE3 digests, `--activate` and `--start` options
+    (`mark`: the run reads its one input file in order, and the hash keeps pace with it)."""
     return {
         'tool': 'bagfault',
         'version': __version__,
@@ -30,7 +33,7 @@ def provenance(scenario: Scenario, inputs: Sequence[Path], seed: int, activation
         'scenario': scenario.name,
         'scenario_sha256': hashlib.sha256(scenario.text.encode()).hexdigest(),
         'inputs': json.dumps(
-            [{'name': p.name, 'files': [asdict(f) for f in fingerprint(p, stop)]} for p in inputs], sort_keys=True
+            [{'name': p.name, 'files': [asdict(f) for f in fingerprint(p, stop, mark)]} for p in inputs], sort_keys=True
         ),
         'activate': json.dumps([asdict(a) for a in activations], sort_keys=True),
         'start_offset': repr(float(start_offset)),

@@ -51,6 +51,8 @@ _CHUNK_INDEX_TAIL = struct.Struct('<QQ')
 _INDEX_ENTRY = struct.Struct('<HQ')
 PENDING_CHUNKS = 16
 SPAN_LIMIT = 64 << 20  # copied bytes handed to the copy thread at least this often
+COPIES_AHEAD = 2  # spans handed over and not yet copied: the writer reads the input at most ~128 MB ahead of the
+# copy, so what it (and the provenance hash that follows it) brought into the page cache is still there
 
 
 def chunk_index_record(start: int, end: int, offset: int, length: int, index_offsets: dict[int, int],
@@ -322,7 +324,7 @@ class McapWriter:
         self._stream.flush()
         self._stream.seek(at + end - begin)
         self._copies.append(self._copier.submit(self._copy_range, fd, begin, end - begin, at))
-        while self._copies and self._copies[0].done():
+        while self._copies and (self._copies[0].done() or len(self._copies) > COPIES_AHEAD):
             self._copies.popleft().result()  # a failed copy (a full disk) raises here, not at the end
 
     def _wait_copies(self) -> None:

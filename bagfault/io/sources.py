@@ -20,6 +20,40 @@ if TYPE_CHECKING:
     from collections.abc import Sequence
 
 
+class ReadMark:
+    """How far a run has read its one input file, so that its provenance hash follows the run through the file
+    instead of reading it a second time: each page the hash reads (up to `lead` bytes ahead of the run) is still
+    in the page cache when the run copies or decodes it, and the other way round (an input larger than the page
+    cache is read from the disk once, bench/run.py --page-cache-gb)."""
+
+    def __init__(self, lead: int = 128 << 20) -> None:
+        self.lead = lead
+        self._position = 0
+        self._released = False
+        self._moved = threading.Condition()
+
+    def advance(self, offset: int) -> None:
+        """The run has asked for the input's bytes up to `offset`."""
+        with self._moved:
+            if offset > self._position:
+                self._position = offset
+                self._moved.notify_all()
+
+    def release(self) -> None:
+        """The run reads no more of the input in order (it ended, failed, or reads it another way)."""
+        with self._moved:
+            self._released = True
+            self._moved.notify_all()
+
+    def wait_for(self, offset: int, stop: threading.Event | None) -> None:
+        """Block until the bytes before `offset` are within `lead` of the run (or the run released the file)."""
+        with self._moved:
+            while not self._released and offset > self._position + self.lead:
+                if stop is not None and stop.is_set():
+                    return
+                self._moved.wait(0.1)
+
+
 @dataclass(frozen=True)
 class InputFile:
     """One file that makes up an input, for the provenance record."""
@@ -89,15 +123,16 @@ def remember_digests(known: dict[StatKey, str]) -> None:
     _known.update(known)
 
 
-def fingerprint(path: Path, stop: threading.Event | None = None) -> list[InputFile]:
+def fingerprint(path: Path, stop: threading.Event | None = None, mark: ReadMark | None = None) -> list[InputFile]:
     """Name, size and BLAKE3 digest of each file of an input. BLAKE3 rather than sha256 because it hashes
     4 GB/s on one core here against sha256's 0.8 GB/s, so the hash of a bag stays below the time of copying
-    it (README, Chunk copy). `stop` set: give up at the next window (the run failed; nobody waits for it)."""
+    it (README, Chunk copy). `stop` set: give up at the next window (the run failed; nobody waits for it).
+    `mark`: the run reads this one-file input in order; the hash keeps pace with it."""
     out = []
     for file in input_files(path):
         try:
             key = stat_key(file)
-            digest = _known.get(key) or _blake3(file, stop)
+            digest = _known.get(key) or _blake3(file, stop, mark)
             out.append(InputFile(file.name, key[2], digest))
         except OSError as exc:
             raise InputError(f'{file}: cannot read: {exc.strerror or exc}') from None
@@ -113,14 +148,17 @@ class HashStopped(Exception):  # noqa: N818 - a signal to the hashing thread, ne
     """The run ended before the input was hashed."""
 
 
-def _blake3(file: Path, stop: threading.Event | None, window: int = 16 << 20) -> str:
+def _blake3(file: Path, stop: threading.Event | None, mark: ReadMark | None = None, window: int = 16 << 20) -> str:
     """Hex BLAKE3 of a file, hashed through mapped windows: no copy through a buffer (0.4 s per GB here
-    against 0.6 s reading it), memory bounded by the window, the GIL released while it hashes."""
+    against 0.6 s reading it), memory bounded by the window, the GIL released while it hashes; with `mark`,
+    each window only once the run is near it."""
     digest = blake3.blake3()
     with file.open('rb') as stream:
         size = os.fstat(stream.fileno()).st_size
         try:
             for offset in range(0, size, window):
+                if mark is not None:
+                    mark.wait_for(offset + window, stop)
                 if stop is not None and stop.is_set():
                     raise HashStopped
                 with mmap.mmap(stream.fileno(), min(window, size - offset), access=mmap.ACCESS_READ,

@@ -189,6 +189,40 @@ def test_input_digests_are_blake3_over_every_window_and_stop_when_asked(tmp_path
         sources.fingerprint(tmp_path / 'missing.bin')
 
 
+def test_the_hash_keeps_pace_with_the_run_that_reads_the_input(tmp_path: Path) -> None:
+    """A run that reads its one input in order (chunk copy) leads its hash: the hash reads a window only once
+    the run is within `lead` of it, so the page cache holds what one brought in when the other needs it."""
+    import threading
+
+    import blake3
+
+    from bagfault.io import sources
+
+    data = bytes(range(256)) * 41 + b'tail'  # 10500 bytes: windows of 4096 end at 4096, 8192 and 12288
+    path = tmp_path / 'input.bin'
+    path.write_bytes(data)
+    for finish in ('advance', 'release'):
+        mark = sources.ReadMark(lead=4096)
+        found: list[str] = []
+        worker = threading.Thread(target=lambda m=mark, f=found: f.append(sources._blake3(path, None, m, window=4096)))
+        worker.start()
+        worker.join(0.3)
+        assert worker.is_alive()  # the second window ends 8192 bytes in: beyond the run (0) plus the lead
+        if finish == 'advance':
+            mark.advance(8192)  # the run reached the third window's start: all of it is within the lead
+        else:
+            mark.release()  # the run ended, or reads the file another way: hash the rest freely
+        worker.join(5)
+        assert found == [blake3.blake3(data).hexdigest()]
+    stop = threading.Event()
+    waiting = sources.ReadMark(lead=0)
+    worker = threading.Thread(target=waiting.wait_for, args=(4096, stop))
+    worker.start()
+    stop.set()  # a failed run: the hash gives up instead of waiting for a run that will not come
+    worker.join(2)
+    assert not worker.is_alive()
+
+
 def test_a_fifo_is_refused_before_it_is_read(tmp_path):
     """A FIFO as the input, or listed in metadata.yaml, blocked the run for ever (SIGTERM did not end it)."""
     import os
