@@ -22,6 +22,7 @@ from bagfault.engine.result import RunResult
 from bagfault.engine.scheduler import Activation
 from bagfault.engine.stop import StopFlag
 from bagfault.errors import BagfaultError, Problem, ScenarioError, UsageError
+from bagfault.io.mcap_sink import check_level
 from bagfault.io.objects import is_remote, staged_folder
 from bagfault.io.outputs import Protected, check_derived, check_output
 from bagfault.io.recover import Recovered, partial_of, requested_name
@@ -107,6 +108,7 @@ def run(
     activate: Sequence[str | Activation] = (),
     start_offset: float = 0.0,
     compression: str = 'zstd',
+    compression_level: int | None = None,
     batch: bool = True,
     progress: Progress | None = None,
     observers: Sequence[Observer] = (),
@@ -124,13 +126,18 @@ def run(
     are copied as they are (checked against their indexes, not decompressed; `verify` also decompresses
     and counts them on a second thread); False takes the reference path that decompresses and rewrites every
     chunk. An existing output (or black box) that bagfault did not write is refused unless `force`.
+    `compression_level` applies to the chunks bagfault writes (copied chunks keep theirs); None: the MCAP C++
+    writer's default (zstd 1, lz4 0).
     """
     loaded = scenario_of(scenario)
     paths = _paths(inputs)
     out = Path(output)
+    if compression_level is not None:
+        check_level(out, compression, compression_level)
     _check_output(out, 'output', paths, loaded, force=force, msg_paths=msg_paths)
     return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
-                       start_offset=_seconds('--start', start_offset), compression=compression, batch=batch,
+                       start_offset=_seconds('--start', start_offset), compression=compression,
+                       compression_level=compression_level, batch=batch,
                        progress=progress, observers=observers, salvage=salvage,
                        msg_paths=[Path(p) for p in msg_paths], chunk_copy=chunk_copy, verify=verify)
 
@@ -276,13 +283,15 @@ def test(
     stop: StopFlag | None = None,
     foxglove: str | None = None,
     force: bool = False,
+    observers: Sequence[Observer] = (),
 ) -> RunResult:
     """Closed loop: start the scenario's system under test on a private ROS domain, play the inputs (default:
     the scenario's `bags`) into it through the faults on sim time, record it, judge it, stop it; needs rclpy.
 
     `system` holds `system_under_test` keys that replace the scenario's (`env` is added to). With `repeat`
     above 1 the loop runs that many times and the result holds each run in `repeats` and pass rates in its
-    assertions. Exit code semantics: `result.failed` is 1; a BagfaultError (could not run) is 2.
+    assertions; `observers` (report collectors) see the first run. Exit code semantics: `result.failed` is 1;
+    a BagfaultError (could not run) is 2.
     """
     from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
 
@@ -313,7 +322,7 @@ def test(
     for number, path in enumerate(outputs, 1):
         folder = logs if logs is None or repeat == 1 else logs / f'run{number}'
         results.append(run_test(loaded, paths, path, system=under_test, seed=seed_of(loaded, seed), rate=rate,
-                                logs=folder, stop=flag, foxglove=foxglove))
+                                logs=folder, stop=flag, foxglove=foxglove, observers=observers if number == 1 else ()))
     return results[0] if repeat == 1 else fold(results)
 
 

@@ -51,6 +51,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument('--start', type=float, default=0.0, metavar='SECONDS',
                      help='bag time zero is this many seconds after the first message')
     run.add_argument('--compression', choices=['none', 'lz4', 'zstd'], default='zstd')
+    run.add_argument('--compression-level', type=int, default=None, metavar='N',
+                     help="level of the chunks bagfault writes (zstd -7..22, lz4 0..16; default: the MCAP C++ "
+                          "writer's, zstd 1 and lz4 0; copied chunks keep theirs)")
     _salvage_option(run)
     run.add_argument('--no-chunk-copy', action='store_true',
                      help='decompress and rewrite every chunk (the reference path; default: chunks of a single '
@@ -279,7 +282,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     try:
         result = api.run(
             scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
-            start_offset=args.start, compression=args.compression, progress=bar, observers=collectors,
+            start_offset=args.start, compression=args.compression,
+            compression_level=args.compression_level, progress=bar, observers=collectors,
             salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy, force=args.force,
             verify=args.verify,
         )
@@ -388,10 +392,11 @@ def _cmd_test(args: argparse.Namespace) -> int:
     reports = _reports(args)
     reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
     scenario = api.load_scenario(args.scenario, strict=args.strict)
+    collectors = reports.collectors()
     result = api.test(scenario, args.inputs, args.output, system=_system_overrides(args), seed=args.seed,
                       rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs, foxglove=args.foxglove,
-                      force=args.force)
-    return _finish(reports, result)
+                      force=args.force, observers=collectors)
+    return _finish(reports, result, collectors)
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:

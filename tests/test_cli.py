@@ -94,6 +94,17 @@ def test_bad_input_or_output_exit_2_without_traces(capsys, tmp_path, scenarios, 
         assert tree_digest(bag) == before
 
 
+def test_a_compression_level_out_of_range_is_one_line_before_anything_is_read(capsys, tmp_path, scenarios, rover_bag):
+    out = tmp_path / 'out.mcap'
+    for args, problem in ((('--compression-level', '23'), 'zstd compression level 23 is outside -7..22'),
+                          (('--compression', 'none', '--compression-level', '1'), 'a compression level needs')):
+        code, _, err = run_cli(capsys, 'run', scenarios / 'rover_multi.yaml', rover_bag, '-o', out, *args)
+        assert code == 2
+        assert err.strip() == f'bagfault: error: {out}: {problem}' + (
+            " a compression (lz4 or zstd), not 'none'" if 'needs' in problem else '')
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_failure_during_the_run_leaves_nothing(capsys, tmp_path, scenarios, rover_bag):
     data = bytearray(rover_bag.read_bytes())
     data[len(data) // 2: len(data) // 2 + 4000] = bytes(4000)  # inside a compressed chunk

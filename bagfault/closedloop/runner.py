@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 
     from bagfault.closedloop.isolation import Stranger
     from bagfault.engine.result import RunResult
+    from bagfault.engine.run import Observer
     from bagfault.engine.stop import StopFlag
     from bagfault.spec.model import Scenario
     from bagfault.spec.system import SystemUnderTest
@@ -83,8 +84,10 @@ def quiet_domain(stop: StopFlag, attempts: int = 3, wait: float = PRESTART,
 
 
 def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *, system: SystemUnderTest,
-             seed: int, rate: float, logs: Path | None, stop: StopFlag, foxglove: str | None = None) -> RunResult:
-    """One closed-loop run; the recording (if `output`) is complete on return, the system stopped."""
+             seed: int, rate: float, logs: Path | None, stop: StopFlag, foxglove: str | None = None,
+             observers: Sequence[Observer] = ()) -> RunResult:
+    """One closed-loop run; the recording (if `output`) is complete on return, the system stopped; `observers`
+    see every record of the run, the system's messages among them (report collectors)."""
     from rclpy.node import Node  # noqa: PLC0415
 
     os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
@@ -123,7 +126,8 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
                           catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)
         closing.callback(link.close)
         link.view = view
-        run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output, hooks=link)
+        run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output, hooks=link,
+                              observers=observers)
         with run:  # its black boxes are dropped unless the recording is complete
             if stopped:
                 raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '

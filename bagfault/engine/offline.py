@@ -150,6 +150,7 @@ def run_to_file(
     activations: Sequence[Activation] = (),
     start_offset: float = 0.0,
     compression: str = 'zstd',
+    compression_level: int | None = None,
     batch: bool = True,
     progress: Progress | None = None,
     observers: Sequence[Observer] = (),
@@ -171,7 +172,8 @@ def run_to_file(
         with InputSet(paths, salvage=salvage) as inputs:
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
-            with McapSink(output, compression=compression, ros_distro=inputs.ros_distro or '') as sink:
+            with McapSink(output, compression=compression, level=compression_level,
+                          ros_distro=inputs.ros_distro or '') as sink:
                 chunks = chunk_copy_for(inputs, verify=verify, mark=mark) if copying else None
                 if chunks is None and mark is not None:
                     mark.release()

@@ -25,7 +25,7 @@ from mcap.records import Channel as McapChannel
 from mcap.records import Schema as McapSchema
 
 from bagfault.errors import OutputError
-from bagfault.io.mcap_writer import CopiedChunk, McapWriter
+from bagfault.io.mcap_writer import LEVELS, CopiedChunk, McapWriter
 from bagfault.io.outputs import PUBLISHED, current_umask
 from bagfault.io.qos import DEFAULT_QOS, normalized
 
@@ -37,6 +37,15 @@ LIVE_FLUSH = 1.0  # seconds: a live recording loses at most this much to a kill
 METADATA_VERSION = 8  # the last version whose QoS every distro reads (9 writes names Humble and Iron cannot)
 
 
+def check_level(path: Path, compression: str, level: int) -> None:
+    """OutputError unless `level` is one the compression accepts."""
+    if compression not in LEVELS:
+        raise OutputError(f'{path}: a compression level needs a compression (lz4 or zstd), not {compression!r}')
+    low, high = LEVELS[compression]
+    if not low <= level <= high:
+        raise OutputError(f'{path}: {compression} compression level {level} is outside {low}..{high}')
+
+
 class McapSink:
     """Writes schemas, channels, messages, metadata and attachments.
 
@@ -45,13 +54,15 @@ class McapSink:
     """
 
     def __init__(self, path: Path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 ros_distro: str = '', flush_every: float | None = None) -> None:
+                 ros_distro: str = '', flush_every: float | None = None, level: int | None = None) -> None:
         self.path = path
         self.ros_distro = ros_distro  # the input's or the recording rclpy's; '' when unknown, never guessed
         self.flush_every = flush_every  # live recordings: complete a chunk at least this often (seconds)
         self._flushed = time.monotonic()
         if compression not in COMPRESSIONS:
             raise OutputError(f'{path}: unknown compression {compression!r} (none, lz4, zstd)')
+        if level is not None:
+            check_level(path, compression, level)
         directory = path.parent if str(path.parent) else Path('.')
         if path.is_dir():
             raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
@@ -67,7 +78,7 @@ class McapSink:
         os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
         self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
-                                  library=f'bagfault {_version()}')
+                                  library=f'bagfault {_version()}', level=level)
         self._schemas: dict[tuple[str, str, str], int] = {}
         self._topics: dict[int, tuple[str, str, str, str, str]] = {}  # id -> topic, type, encoding, QoS, hash
         self._kept_schemas: set[int] = set()

@@ -68,12 +68,17 @@ def chunk_index_record(start: int, end: int, offset: int, length: int, index_off
                      _CHUNK_INDEX_TAIL.pack(compressed_size, uncompressed_size)))
 
 
-def _compress(compression: str, data: bytes) -> tuple[bytes, int]:
+DEFAULT_LEVELS = {'zstd': 1, 'lz4': 0}  # the MCAP C++ writer's default (rosbag2's mcap plugin); zstd 1 against 3:
+# half the CPU for 10 % more bytes (docs/notes/performance.md, Compression)
+LEVELS = {'zstd': (-7, 22), 'lz4': (0, 16)}  # the range each accepts here
+
+
+def _compress(compression: str, level: int, data: bytes) -> tuple[bytes, int]:
     crc = zlib.crc32(data)
     if compression == 'zstd':
-        return zstandard.ZstdCompressor(level=3).compress(data), crc
+        return zstandard.ZstdCompressor(level=level).compress(data), crc
     if compression == 'lz4':
-        return lz4.frame.compress(data), crc
+        return lz4.frame.compress(data, compression_level=level), crc
     return data, crc
 
 
@@ -127,9 +132,10 @@ class McapWriter:
     """Writes an MCAP stream; `finish` writes the summary and footer."""
 
     def __init__(self, stream: IO[bytes], *, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 profile: str = 'ros2', library: str = 'bagfault') -> None:
+                 profile: str = 'ros2', library: str = 'bagfault', level: int | None = None) -> None:
         self._stream = stream
         self._compression = '' if compression == 'none' else compression
+        self._level = DEFAULT_LEVELS.get(compression, 0) if level is None else level
         self._chunk_size = chunk_size
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
@@ -248,7 +254,7 @@ class McapWriter:
         self._chunk = _OpenChunk()
         data = b''.join(chunk.parts)
         chunk.parts = []
-        future = self._pool.submit(_compress, self._compression, data)
+        future = self._pool.submit(_compress, self._compression, self._level, data)
         self._pending.append((chunk, future, len(data), data))
         self._drain(wait=False)
 
@@ -280,7 +286,7 @@ class McapWriter:
             chunk, future, size, data = self._pending[position]
             if future is not None and future.cancel():
                 done: Future[tuple[bytes, int]] = Future()
-                done.set_result(_compress(self._compression, data))
+                done.set_result(_compress(self._compression, self._level, data))
                 self._pending[position] = (chunk, done, size, b'')
                 return True
         return False

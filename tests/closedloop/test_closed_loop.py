@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from support.html_check import figures
 from support.loop import EXAMPLE, SCENARIO, LoopRunner, running_with
 from support.toolchain import assert_toolchain_opens
 
@@ -38,8 +39,9 @@ def test_the_example_passes_and_its_recording_holds_the_whole_loop(tester: LoopR
                                                                    tmp_path: Path) -> None:
     token = tester.token()
     out = tmp_path / 'loop.mcap'
+    page = tmp_path / 'loop.html'
     result = tester.run(str(SCENARIO), str(example_bag), '-o', str(out), '--command', command(token),
-                        '--keep-logs', str(tmp_path / 'logs'))
+                        '--keep-logs', str(tmp_path / 'logs'), '--html', str(page))
     assert result.code == 0, result.stdout + result.stderr
     report = result.report
     assert report is not None
@@ -84,6 +86,17 @@ def test_the_example_passes_and_its_recording_holds_the_whole_loop(tester: LoopR
                  if e.fault.fault_code == 'IMU_DRIFT' and e.fault.status == 'CONFIRMED']
     assert activated == origin + 3 * NS
     assert 0 < confirmed[0] - activated < 2 * NS
+
+    # the HTML report plots the rates of what was played and of what the system said: the IMU at 100 Hz, the
+    # odometry at 50 Hz with its 1.5 s blackout as a gap, the system's diagnostics at 5 Hz of sim time
+    rates = {t['name']: t for t in figures(page)['rates']['data']}
+    assert {'/imu', '/odom', '/diagnostics'} <= set(rates)
+    def middle(topic: str) -> list[float]:
+        return [r for t, r in zip(rates[topic]['x'], rates[topic]['y'], strict=True) if r is not None and 1 < t < 3]
+    assert all(math.isclose(r, 100.0, rel_tol=0.05) for r in middle('/imu'))
+    assert all(math.isclose(r, 50.0, rel_tol=0.05) for r in middle('/odom'))
+    assert middle('/diagnostics') and all(3.5 < r < 6.5 for r in middle('/diagnostics'))
+    assert any(math.isclose(t, 8.48) for t in rates['/odom gaps']['x'])  # the last /odom before the blackout
 
     # `check` on the recording judges with the same time zero and reaches the same verdicts at the same times
     checked = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'check', str(SCENARIO), str(out), '--json',

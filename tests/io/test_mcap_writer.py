@@ -122,15 +122,52 @@ def test_a_waiting_writer_compresses_queued_chunks_itself(monkeypatch: pytest.Mo
     expected = write(chunk_size=60)  # about 25 chunks
     original, where = mcap_writer._compress, []
 
-    def slow(compression: str, data: bytes) -> tuple[bytes, int]:
+    def slow(compression: str, level: int, data: bytes) -> tuple[bytes, int]:
         worker = threading.current_thread().name.startswith('mcap-compress')
         where.append('worker' if worker else 'writer')
         if worker:
             time.sleep(0.02)
-        return original(compression, data)
+        return original(compression, level, data)
 
     monkeypatch.setattr(mcap_writer, '_compress', slow)
     monkeypatch.setattr(mcap_writer, 'PENDING_CHUNKS', 2)
     assert write(chunk_size=60) == expected
     assert 'worker' in where and 'writer' in where
     assert len(where) == make_reader(io.BytesIO(expected)).get_summary().statistics.chunk_count
+
+
+@pytest.mark.parametrize(('compression', 'level', 'expected'), [
+    ('zstd', None, lambda data: zstandard.ZstdCompressor(level=1).compress(data)),  # the MCAP C++ writer's default
+    ('zstd', 19, lambda data: zstandard.ZstdCompressor(level=19).compress(data)),
+    ('lz4', None, lambda data: __import__('lz4.frame').frame.compress(data, compression_level=0)),
+    ('lz4', 9, lambda data: __import__('lz4.frame').frame.compress(data, compression_level=9)),
+])
+def test_chunks_are_compressed_at_the_level_asked(compression: str, level: int | None, expected) -> None:
+    """Each chunk's bytes are what the compression library makes of its records at that level: the default is
+    the MCAP C++ writer's (CompressionLevel::Default: zstd 1; lz4 its fast mode)."""
+    stream = io.BytesIO()
+    writer = McapWriter(stream, compression=compression, chunk_size=200, library='test', level=level)
+    schema = writer.register_schema('std_msgs/msg/Float64', 'ros2msg', TEXT.encode())
+    channel = writer.register_channel('/a', 'cdr', schema, {})
+    for k in range(50):
+        writer.add_message(channel, 1_000 + k, b'\x00\x01\x00\x00' + struct.pack('<d', k % 7), 1_000 + k)
+    writer.finish()
+    chunks = [r for r in StreamReader(io.BytesIO(stream.getvalue()), skip_magic=False, emit_chunks=True).records
+              if isinstance(r, Chunk)]
+    assert len(chunks) > 3
+    for chunk in chunks:
+        plain = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size) \
+            if compression == 'zstd' else __import__('lz4.frame').frame.decompress(chunk.data)
+        assert chunk.compression == compression
+        assert chunk.data == expected(plain)
+
+
+def test_a_level_the_compression_does_not_take_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    from bagfault.errors import OutputError
+
+    for compression, level, problem in (('zstd', 23, r'zstd compression level 23 is outside -7\.\.22'),
+                                        ('lz4', -1, r'lz4 compression level -1 is outside 0\.\.16'),
+                                        ('none', 3, r'a compression level needs a compression')):
+        with pytest.raises(OutputError, match=problem):
+            McapSink(tmp_path / 'out.mcap', compression=compression, level=level)
+    assert list(tmp_path.iterdir()) == []
