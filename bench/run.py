@@ -26,6 +26,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -147,18 +148,23 @@ class Conditions:
             (cls.cgroup / 'cgroup.procs').write_text(str(os.getpid()))
 
 
+READS: list[int] = []  # bytes each job read from the storage device (not from the page cache), in order
+
+
 def run_job(code: str, **values: str) -> tuple[float, int, float]:
-    """Run one job in a fresh process; return (wall seconds, its peak RSS in bytes, its CPU seconds)."""
+    """Run one job in a fresh process; return (wall seconds, its peak RSS in bytes, its CPU seconds); the bytes
+    it read from the device go to READS."""
     prelude = ''.join(f'{k} = {v!r}\n' for k, v in values.items())
     os.sync()  # the previous job's output is written back before this one is timed, not during it
     if Conditions.cold:
         Path('/proc/sys/vm/drop_caches').write_text('3')
-    before = os.times()
+    before, blocks = os.times(), resource.getrusage(resource.RUSAGE_CHILDREN).ru_inblock
     started = time.perf_counter()
     done = subprocess.run([sys.executable, '-c', prelude + textwrap.dedent(code) + PEAK_RSS],
                           stdout=subprocess.PIPE, text=True, check=False, env=JOB_ENV, preexec_fn=Conditions.enter)
     elapsed = time.perf_counter() - started
     after = os.times()
+    READS.append((resource.getrusage(resource.RUSAGE_CHILDREN).ru_inblock - blocks) * 512)
     if done.returncode != 0:
         raise SystemExit(f'benchmark job failed ({done.returncode}):\n{code}')
     cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
@@ -226,9 +232,11 @@ def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[st
             name = f'{what}{"" if copy == "yes" else ", --no-chunk-copy"}'
             jobs[name] = (BAGFAULT, {'SCENARIO': scenario('sensor-heavy', case), 'CHUNK_COPY': copy})
     samples: dict[str, list[tuple[float, int, float]]] = {name: [] for name in jobs}
+    reads: dict[str, list[int]] = {name: [] for name in jobs}
     for _ in range(repeat):
         for name, (code, values) in jobs.items():
             samples[name].append(run_job(code, SRC=str(bag), DST=str(out), **values))
+            reads[name].append(READS[-1])
             out.unlink(missing_ok=True)
     cp = statistics.median(t for t, _, _ in samples['cp'])
     cp_cpu = statistics.median(c for _, _, c in samples['cp'])
@@ -236,6 +244,7 @@ def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[st
                       'vs_cp': statistics.median(t for t, _, _ in runs) / cp,
                       'cpu_seconds': statistics.median(c for _, _, c in runs),
                       'cpu_vs_cp': statistics.median(c for _, _, c in runs) / cp_cpu,
+                      'read_from_device_gb': statistics.median(reads[name]) / 1e9,
                       'peak_rss_mb': max(r for _, r, _ in runs) / 1e6} for name, runs in samples.items()}
     return {'bag': bag.name, 'bytes': bag.stat().st_size, 'load_before': os.getloadavg()[0],
             'cold': Conditions.cold, 'page_cache_gb': args_page_cache(), 'results': results}
@@ -255,10 +264,10 @@ def copy_table(block: dict) -> str:
     """Printable table of the chunk copy block."""
     lines = [f'chunk copy: {block["bag"]} ({block["bytes"] / 1e6:.0f} MB)',
              f'  load {block["load_before"]:.1f}, cold cache {block["cold"]}, page cache {block["page_cache_gb"]} GB',
-             f'  {"job":<32}{"median s":>10}{"x cp":>8}{"CPU s":>8}{"CPU x cp":>9}{"RSS MB":>8}']
+             f'  {"job":<32}{"median s":>10}{"x cp":>8}{"CPU s":>8}{"CPU x cp":>9}{"RSS MB":>8}{"read GB":>9}']
     for name, entry in block['results'].items():
         lines.append(f'  {name:<32}{entry["seconds"]:>10.2f}{entry["vs_cp"]:>8.2f}{entry["cpu_seconds"]:>8.2f}'
-                     f'{entry["cpu_vs_cp"]:>9.2f}{entry["peak_rss_mb"]:>8.0f}')
+                     f'{entry["cpu_vs_cp"]:>9.2f}{entry["peak_rss_mb"]:>8.0f}{entry["read_from_device_gb"]:>9.2f}')
     return '\n'.join(lines)
 
 

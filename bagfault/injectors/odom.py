@@ -25,7 +25,7 @@ class OdomInjector(Injector):
     type_name = 'odom'
     description = 'nav_msgs/msg/Odometry: position and yaw bias and noise, covariance inflation.'
     message_types = ('nav_msgs/msg/Odometry',)
-    plotted = (('x_', 'pose.pose.position.x'), ('y_', 'pose.pose.position.y'), ('yaw_', 'pose.pose.orientation.z'),
+    plotted = (('x_', 'pose.pose.position.x'), ('y_', 'pose.pose.position.y'), ('yaw_', 'pose.pose.orientation:yaw'),
                ('pose_covariance', 'pose.covariance[0]'), ('twist_covariance', 'twist.covariance[0]'))
     linear_ops = (
         ('pose.pose.position.x', 'x_bias', 'bias'),

@@ -1,7 +1,9 @@
 """Before/after values of mutated fields, read back from the input and the output after a run.
 
 Fields are shown as they are: a scalar field as its value per message (the
-report adds after - before); an array field (LaserScan ranges, joint
+report adds after - before); an orientation as the angle a fault changes
+(`pose.pose.orientation:yaw`, degrees, from the quaternion as tf2's getRPY
+takes it, so q and -q are the same angle); an array field (LaserScan ranges, joint
 velocities) as an element x time image, each time column the minimum of its
 messages with any `inf` / `nan` kept in masks of their own, so a blind sector
 shows as what it is. Faulted PointCloud2 topics get their point counts and a
@@ -34,6 +36,25 @@ if TYPE_CHECKING:
 COLUMNS, ROWS = 300, 360
 CLOUD_POINTS, THUMB_WIDTH = 4000, 160
 CLOUD, IMAGE = 'sensor_msgs/msg/PointCloud2', 'sensor_msgs/msg/Image'
+ANGLES = ('roll', 'pitch', 'yaw')
+
+
+def angle_of(field: str) -> tuple[str, str] | None:
+    """(quaternion path, angle) of a plotted angle such as `pose.pose.orientation:yaw`; None for a field."""
+    path, _, angle = field.rpartition(':')
+    return (path, angle) if path and angle in ANGLES else None
+
+
+def euler_deg(q: Any, angle: str) -> float:
+    """Roll, pitch or yaw in degrees of a geometry_msgs Quaternion (fixed axes x, y, z: tf2's getRPY)."""
+    x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+    if angle == 'roll':
+        value = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    elif angle == 'pitch':
+        value = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    else:
+        value = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return float(np.degrees(value))
 
 
 @dataclass
@@ -46,6 +67,7 @@ class ArrayImage:
     values: np.ndarray   # (ROWS, COLUMNS), nan where no finite value
     inf: np.ndarray      # bool, same shape
     nan: np.ndarray      # bool, same shape
+    span: float = 0.0    # seconds per column (the time columns are where messages fell, on this grid)
 
 
 @dataclass
@@ -140,7 +162,7 @@ class _ImageBuilder:
         times = (columns + 0.5) * self.duration / COLUMNS
         elements = first + np.arange(used) * step * max(self.size, 1) / max(used, 1)
         return ArrayImage(times, elements, values[:, columns], self.inf[:used, columns],
-                          self.nan[:used, columns])
+                          self.nan[:used, columns], self.duration / COLUMNS)
 
 
 def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duration: float,
@@ -156,12 +178,18 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duratio
         codec = catalog.codec(msgtype)
         if codec is None:
             return out
-        resolved = {}
+        resolved, angles = {}, {}
         for text in fields:
+            found = angle_of(text)
+            if found is not None:
+                angles[text] = found
+                continue
             try:
                 resolved[text] = FieldPath.parse(text).resolve(msgtype, codec.store)
             except FieldPathError:
                 continue
+        for text in angles:
+            out[text] = ([], [])
         arrays = {text for text in resolved if '[*]' in text}
         for text in resolved:
             out[text] = _ImageBuilder(duration) if text in arrays else ([], [])
@@ -170,6 +198,12 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duratio
                 continue
             message = codec.decode(data)
             seconds = (time - origin) / NS
+            for text, (path_text, angle) in angles.items():
+                quaternion = _attribute_path(message, path_text)
+                series = out[text]
+                assert not isinstance(series, _ImageBuilder)
+                series[0].append(seconds)
+                series[1].append(float('nan') if quaternion is None else euler_deg(quaternion, angle))
             for text, path in resolved.items():
                 target = out[text]
                 if isinstance(target, _ImageBuilder):
@@ -179,6 +213,15 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duratio
                     target[0].append(seconds)   # the value itself; nan and inf stay what they are
                     target[1].append(float(values.mean()) if values.size else float('nan'))
     return out
+
+
+def _attribute_path(message: Any, path: str) -> Any:
+    """The sub-message at a dotted path of plain fields (None where the type has no such field)."""
+    for name in path.split('.'):
+        message = getattr(message, name, None)
+        if message is None:
+            return None
+    return message
 
 
 def _scan_axis(paths: list[Path], topic: str) -> tuple[float, float] | None:

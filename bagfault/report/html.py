@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bagfault.report.page import LEGEND, Page, buckets_hit, envelope, shade, title
+from bagfault.report.fields import angle_of
+from bagfault.report.page import LEGEND, Page, buckets_hit, colorscale, envelope, paint, png, shade, title
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -139,20 +140,54 @@ def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) 
               f'{rows}</table>{snapshots}')
 
 
+INF_COLOR, NAN_COLOR = '#ff00ff', '#000000'
+
+
+def _held_columns(seen: np.ndarray, width: int) -> np.ndarray:
+    """For each column of the grid, the index in `seen` of the image column it shows: its own, or the nearest
+    one while the topic is not silent (a 10 Hz topic on a 15 Hz grid leaves every third column empty; a heatmap
+    would widen its cells to the midpoints the same way); -1 in a silence (longer than three of the topic's
+    usual steps)."""
+    held = np.full(width, -1)
+    if not seen.size:
+        return held
+    usual = float(np.median(np.diff(seen))) if seen.size > 1 else 1.0
+    held[seen] = np.arange(seen.size)
+    for number in range(seen.size - 1):
+        left, right = int(seen[number]), int(seen[number + 1])
+        if 1 < right - left <= 3 * usual:
+            middle = (left + right) // 2
+            held[left + 1:middle + 1] = number
+            held[middle + 1:right] = number + 1
+    return held
+
+
 def _heatmap(image: ArrayImage, text: str, axis: str, windows: list[tuple[float, float, str]],
              scale: tuple[float, float]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """An array field as element x time, inf cells magenta and nan cells black on top."""
+    """An array field as element x time: a PNG on the time grid (Viridis, inf cells magenta and nan cells
+    black, columns without messages transparent) and its colour bar; a page of several holds pictures, not
+    hundreds of thousands of numbers."""
+    span = image.span or 1.0
+    columns = np.rint(image.times / span - 0.5).astype(int)
+    first = int(columns.min()) if columns.size else 0
+    width = int(columns.max()) - first + 1 if columns.size else 1
+    grid = np.full((image.values.shape[0], width), np.nan)
+    inf, nan = (np.zeros(grid.shape, dtype=bool) for _ in range(2))
+    held = _held_columns(columns - first, width)
+    grid[:], inf[:], nan[:] = image.values[:, held], image.inf[:, held], image.nan[:, held]
+    grid[:, held < 0], inf[:, held < 0], nan[:, held < 0] = np.nan, False, False
+    step = float(image.elements[1] - image.elements[0]) if image.elements.size > 1 else 1.0
+    start = float(image.elements[0]) if image.elements.size else 0.0
     data: list[dict[str, Any]] = [
-        {'type': 'heatmap', 'x': image.times, 'y': image.elements, 'z': image.values, 'name': 'value',
-         'colorscale': 'Viridis', 'zmin': scale[0], 'zmax': scale[1], 'colorbar': {'len': 0.8},
-         'hovertemplate': 't %{x:.2f} s, %{y:.1f}: %{z:.3f}<extra></extra>'}]
-    for mask, label, color in ((image.inf, 'inf', '#ff00ff'), (image.nan, 'nan', '#000000')):
-        data.append({'type': 'heatmap', 'x': image.times, 'y': image.elements, 'name': label,
-                     'z': np.where(mask, 1.0, np.nan), 'zmin': 0, 'zmax': 1, 'showscale': False,
-                     'colorscale': [[0, color], [1, color]],
-                     'hovertemplate': f't %{{x:.2f}} s, %{{y:.1f}}: {label}<extra></extra>'})
+        {'type': 'image', 'source': png(paint(grid, scale, [(inf, INF_COLOR), (nan, NAN_COLOR)])),
+         'x0': (first + 0.5) * span, 'dx': span, 'y0': start, 'dy': step, 'name': 'value',
+         'hovertemplate': 't %{x:.2f} s, %{y:.1f}<extra></extra>'},
+        {'type': 'heatmap', 'x': [(first + 0.5) * span] * 2, 'y': [start] * 2, 'z': [[scale[0], scale[1]]],
+         'zmin': scale[0], 'zmax': scale[1], 'colorscale': colorscale(), 'opacity': 0, 'hoverinfo': 'skip',
+         'colorbar': {'len': 0.8}, 'name': 'scale'}]
     layout = {'title': title(text), 'height': 300,
-              'xaxis': {'title': {'text': 'bag time (s)'}}, 'yaxis': {'title': {'text': axis}},
+              'xaxis': {'title': {'text': 'bag time (s)'}},
+              'yaxis': {'title': {'text': axis}, 'autorange': True, 'scaleanchor': False},  # not square pixels
               'shapes': shade(windows, outline=True), 'margin': {'t': 48}}
     return data, layout
 
@@ -179,6 +214,9 @@ def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> N
         bx, by = (np.asarray(v, dtype=float) for v in plot.before)
         ax, ay = (np.asarray(v, dtype=float) for v in plot.after)
         difference = ay - _aligned(bx, by, ax) if bx.size and ax.size else np.zeros(0)
+        angle = angle_of(plot.field)
+        if angle is not None:  # degrees on a circle: 179 after -179 is 2 more, not 358 less
+            difference = (difference + 180.0) % 360.0 - 180.0
         data = [{'type': 'scatter', 'mode': 'lines', 'name': name, **xy, **extra}
                 for name, xy, extra in (
                     (f'before: {plot.input_topic}', _xy(bx, by), {}),
@@ -190,7 +228,8 @@ def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> N
         data += [*_non_finite(bx, by, 'before', bounds), *_non_finite(ax, ay, 'after', bounds)]
         page.figure(data, {'title': title(heading), 'height': 380, 'margin': {'t': 56},
                            'xaxis': {'title': {'text': 'bag time (s)'}, 'anchor': 'y2'},
-                           'yaxis': {'domain': [0.38, 1], 'title': {'text': plot.field}},
+                           'yaxis': {'domain': [0.38, 1], 'title': {'text': plot.field if angle is None else
+                                                                     f'{angle[1]} of {angle[0]} (deg)'}},
                            'yaxis2': {'domain': [0, 0.28], 'title': {'text': 'after - before'}},
                            'shapes': shade(windows), 'legend': LEGEND},
                     timed=True, name=f'field:{plot.output_topic}:{plot.field}')
@@ -251,7 +290,7 @@ def _media(page: Page, report: dict[str, Any], media: Sequence[MediaPlot]) -> No
             for number, (side, snap) in enumerate((('before', item.snapshot_before), ('after', item.snapshot_after))):
                 if snap is not None:
                     suffix = '' if number == 0 else '2'
-                    data.append({'type': 'scattergl', 'mode': 'markers', 'x': snap[0], 'y': snap[1], 'name': side,
+                    data.append({'type': 'scatter', 'mode': 'markers', 'x': snap[0], 'y': snap[1], 'name': side,
                                  'marker': {'size': 2}, 'xaxis': f'x{suffix}', 'yaxis': f'y{suffix}'})
             page.figure(data, {'title': title(f"bird's-eye view of {heading}"),
                                'height': 380, 'grid': {'rows': 1, 'columns': 2, 'pattern': 'independent'},

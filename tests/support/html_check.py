@@ -76,3 +76,66 @@ def click_first_assertion(page: Path, profile: Path) -> tuple[list[float], list[
     body = rendered(copy, profile)
     clicked = [float(v) for v in body['clicked'].split(',')]
     return clicked, json.loads(body['ranges'].replace('&quot;', '"')), body
+
+
+def png_pixels(source: str) -> Any:
+    """The pixels (height x width x channels, rows top to bottom) of a PNG data URI, decoded by the PNG
+    specification (8-bit RGB or RGBA, any of the five row filters), to read back what a report's image holds."""
+    import base64
+    import struct
+    import zlib
+
+    import numpy as np
+
+    data = base64.b64decode(source.split(',', 1)[1])
+    assert data[:8] == b'\x89PNG\r\n\x1a\n'
+    position, compressed, header = 8, b'', None
+    while position < len(data):
+        (length,), kind = struct.unpack_from('>I', data, position), data[position + 4:position + 8]
+        body = data[position + 8:position + 8 + length]
+        assert zlib.crc32(kind + body) == struct.unpack_from('>I', data, position + 8 + length)[0]
+        if kind == b'IHDR':
+            header = struct.unpack('>IIBBBBB', body)
+        elif kind == b'IDAT':
+            compressed += body
+        position += 12 + length
+    assert header is not None
+    width, height, depth, color, _, _, interlace = header
+    assert depth == 8 and color in (2, 6) and interlace == 0
+    channels = 4 if color == 6 else 3
+    raw = zlib.decompress(compressed)
+    stride = width * channels
+    out = np.zeros((height, stride), dtype=np.int32)
+    for row in range(height):
+        kind = raw[row * (stride + 1)]
+        line = np.frombuffer(raw, np.uint8, stride, row * (stride + 1) + 1).astype(np.int32)
+        above = out[row - 1] if row else np.zeros(stride, dtype=np.int32)
+        for i in range(stride):
+            left = out[row, i - channels] if i >= channels else 0
+            corner = above[i - channels] if i >= channels else 0
+            if kind == 0:
+                predicted = 0
+            elif kind == 1:
+                predicted = left
+            elif kind == 2:
+                predicted = above[i]
+            elif kind == 3:
+                predicted = (left + above[i]) // 2
+            else:
+                p = left + above[i] - corner
+                pa, pb, pc = abs(p - left), abs(p - above[i]), abs(p - corner)
+                predicted = left if pa <= pb and pa <= pc else above[i] if pb <= pc else corner
+            out[row, i] = (line[i] + predicted) & 0xFF
+    return out.reshape(height, width, channels).astype(np.uint8)
+
+
+def image_cells(figure: dict[str, Any]) -> tuple[Any, Any, Any]:
+    """(times, elements, pixels) of a report's array image: the centre of each pixel column and row on the
+    figure's axes (x0/dx, y0/dy), and the RGBA pixels with rows in element order."""
+    import numpy as np
+
+    image = next(t for t in figure['data'] if t['type'] == 'image')
+    pixels = png_pixels(image['source'])
+    times = image['x0'] + image['dx'] * np.arange(pixels.shape[1])
+    elements = image['y0'] + image['dy'] * np.arange(pixels.shape[0])
+    return times, elements, pixels
