@@ -43,18 +43,19 @@ def sqlite_copy(bag: Path) -> Path:
     """The MCAP bag as a rosbag2 sqlite3 folder (once)."""
     from mcap.reader import make_reader
     from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
 
     folder = bag.with_suffix('.sqlite3')
     if folder.exists():
         return folder
     started = time.perf_counter()
+    store = get_typestore(Stores.ROS2_JAZZY)  # the bench bag's types are all standard ones
     with bag.open('rb') as stream, Writer(folder, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
         reader = make_reader(stream)
         connections = {}
         for schema, channel, message in reader.iter_messages(log_time_order=True):
             if channel.id not in connections:
-                connections[channel.id] = writer.add_connection(channel.topic, schema.name,
-                                                                msgdef=schema.data.decode(), rihs01='')
+                connections[channel.id] = writer.add_connection(channel.topic, schema.name, typestore=store)
             writer.write(connections[channel.id], message.log_time, message.data)
     print(f'wrote {folder.name} in {time.perf_counter() - started:.0f} s', flush=True)
     return folder
