@@ -248,6 +248,8 @@ class RayEngine:
             where = f'the Ray cluster at {address}' if address else 'a local Ray instance'
             raise CampaignError(f'--ray: cannot start or reach {where}: {" ".join(str(exc).split())}') from None
         cpus = int(self.ray.cluster_resources().get('CPU', 1))
+        if address == 'auto':  # the running cluster Ray found (RAY_ADDRESS, else the last `ray start` here)
+            address = f'{self.ray.get_runtime_context().gcs_address} (auto)'
         self.description = f'Ray at {address} ({cpus} CPUs)' if address else f'a local Ray instance ({cpus} CPUs)'
         # a task whose worker or node dies (not one whose job failed: that is a result) runs again elsewhere
         self.task = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(execute)

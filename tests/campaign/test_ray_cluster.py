@@ -171,8 +171,12 @@ def test_jobs_spread_over_nodes_and_survive_a_node_and_a_driver_lost(cluster: An
     run.communicate(timeout=60)
     stored = len(list(jobs.glob('*.json')))
     assert stored < 18  # killed mid-campaign
-    resumed = driver(remote, tmp_path / 'killed', cluster.port, '--resume')
+    # (through `--ray auto`: the running cluster that RAY_ADDRESS names, as after `ray start`, is reused)
+    resumed = subprocess.Popen([sys.executable, '-m', 'bagfault.cli', 'campaign', str(remote), '-o',
+                                str(tmp_path / 'killed'), '--ray', 'auto', '--resume'], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env={**os.environ, 'RAY_ADDRESS': cluster.address})
     out, err = resumed.communicate(timeout=300)
     assert resumed.returncode == 1, err[-3000:]
     assert f'({18 - stored} run now' in out  # only the jobs without a stored result
+    assert f'on Ray at {cluster.address} (auto) (' in out  # the cluster's GCS, found by Ray itself
     assert rows(tmp_path / 'killed') == expected
