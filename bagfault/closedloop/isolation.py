@@ -84,20 +84,41 @@ def invalid(domain: int, intruders: Iterable[Stranger], system_pid: int | None) 
                            f'{system}; the run is invalid, nothing judged')
 
 
+class CrowdedDomainError(ClosedLoopError):
+    """Other processes have nodes on the leased domain, seen in its first moments: the run moves on to another."""
+
+    def __init__(self, domain: int, found: list[Stranger]) -> None:
+        super().__init__(f'ROS domain {domain} has nodes of other processes')
+        self.domain = domain
+        self.found = found
+
+
 class DomainWatch:
     """Looks at the graph now and then for strangers: those publishing make the run invalid, listeners are noted."""
 
     def __init__(self, node: Any, domain: int, own_pid: int, system: Callable[[], set[int]],
-                 system_pid: int | None = None, period: float = 0.5) -> None:
+                 system_pid: int | None = None, period: float = 0.5, quiet_until: float | None = None) -> None:
         self.node = node
         self.domain = domain
+        self.own_pid = own_pid
         self.own = pid16(own_pid)
         self.system = system
         self.system_pid = system_pid
         self.period = period
+        self.quiet_until = quiet_until  # the first look lasts until then (None: no first look)
         self.listeners: dict[str, str] = {}  # node -> description, of strangers that published nothing
         self._last = 0.0
         self._cleared: set[int] = set()
+
+    def first_look(self) -> None:
+        """CrowdedDomainError when other processes show nodes before `quiet_until` (PRESTART after this participant
+        started: discovery takes ~0.2 s); the system under test starts meanwhile and is not a stranger."""
+        if self.quiet_until is None:
+            return
+        found = first_strangers(self.node, self.own_pid, self.quiet_until, self.system)
+        self.quiet_until = None
+        if found:
+            raise CrowdedDomainError(self.domain, found)
 
     def _ours(self, low: int) -> bool:
         return low == self.own or low in self._cleared
@@ -122,14 +143,15 @@ class DomainWatch:
             raise invalid(self.domain, intruders, self.system_pid)
 
 
-def first_strangers(node: Any, own_pid: int, wait: float = PRESTART) -> list[Stranger]:
-    """Nodes of other processes the graph shows within `wait` seconds of `node`'s start (empty: the domain is
-    bagfault's alone)."""
-    deadline = time.monotonic() + wait
+def first_strangers(node: Any, own_pid: int, until: float, system: Callable[[], set[int]] = set) -> list[Stranger]:
+    """Nodes of other processes than bagfault's and the system's (`system()`: its process ids, looked at each
+    time: it starts meanwhile) that the graph shows before the monotonic time `until` (empty: the domain is
+    theirs alone)."""
     own = pid16(own_pid)
     while True:
-        found = strangers(node, lambda low: low == own)
+        ours = {own, *(pid16(pid) for pid in system())}
+        found = strangers(node, ours.__contains__)
         named = all(UNKNOWN not in s.node for s in found)  # the endpoints come before the node names
-        if (found and named) or time.monotonic() >= deadline + (1.0 if found else 0.0):
+        if (found and named) or time.monotonic() >= until + (1.0 if found else 0.0):
             return found
         time.sleep(0.05)

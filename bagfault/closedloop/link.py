@@ -100,6 +100,8 @@ class SystemLink(LiveSink):
         self._graph = {p.topic_name: p for p in self._publishers.values()}  # as the graph names them
         self.played = sorted(self._graph)  # (a bag's `odom` is played as /odom, a remapped topic by its new name)
         started = time.monotonic()
+        if self.watch is not None:
+            self.watch.first_look()  # while the system starts: a domain other processes use is left for another
         for condition in self.system.conditions():
             self._await(condition)
         time.sleep(MATCH_SETTLE)  # a publisher sees its subscriber first; the system's side matches a moment later

@@ -11,11 +11,12 @@ import contextlib
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bagfault.closedloop.domain import DomainLease
-from bagfault.closedloop.isolation import PRESTART, DomainWatch, first_strangers
+from bagfault.closedloop.isolation import PRESTART, CrowdedDomainError, DomainWatch
 from bagfault.closedloop.link import SystemLink
 from bagfault.closedloop.process import SystemProcess
 from bagfault.engine.offline import finish, replay
@@ -33,8 +34,7 @@ from bagfault.log import log
 from bagfault.spec.system import command_line
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator, Sequence
-    from typing import Any
+    from collections.abc import Sequence
 
     from bagfault.closedloop.isolation import Stranger
     from bagfault.engine.result import RunResult
@@ -52,48 +52,50 @@ def system_env(system: SystemUnderTest, domain: int) -> dict[str, str]:
             'ROS_DOMAIN_ID': str(domain), PROFILE_VARIABLE: str(LOOPBACK_PROFILE)}
 
 
-@contextlib.contextmanager
-def quiet_domain(stop: StopFlag, attempts: int = 3, wait: float = PRESTART,
-                 **lease: int) -> Iterator[tuple[DomainLease, Any]]:
-    """A leased domain with an rclpy context on it, on which no other process shows a node (looked at for
-    `wait` seconds: discovery takes ~0.2 s in a fresh process; the run's DomainWatch catches later ones);
-    another lease when one does, ClosedLoopError naming them after `attempts`."""
-    from rclpy.node import Node  # noqa: PLC0415
-
-    crowded: dict[int, list[Stranger]] = {}
-    for _ in range(attempts):
-        with contextlib.ExitStack() as stack:
-            try:
-                held = stack.enter_context(DomainLease(avoid=crowded, **lease))
-            except ClosedLoopError:
-                if not crowded:
-                    raise
-                break
-            context = stack.enter_context(ros_context(stop, domain_id=held.domain))
-            probe = Node('bagfault_domain_probe', context=context)
-            try:
-                found = first_strangers(probe, os.getpid(), wait)
-            finally:
-                probe.destroy_node()
-            if not found:
-                yield held, context
-                return
-            crowded[held.domain] = found
-    said = '; '.join(f'{domain}: {", ".join(s.describe() for s in found)}' for domain, found in crowded.items())
-    raise ClosedLoopError(f'no quiet ROS domain: other processes have nodes on each leased one ({said})')
+ATTEMPTS = 3  # leased domains tried before giving up on finding one without other processes' nodes
 
 
 def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *, system: SystemUnderTest,
              seed: int, rate: float, logs: Path | None, stop: StopFlag, foxglove: str | None = None,
-             observers: Sequence[Observer] = ()) -> RunResult:
+             observers: Sequence[Observer] = (), **lease: int) -> RunResult:
     """One closed-loop run; the recording (if `output`) is complete on return, the system stopped; `observers`
-    see every record of the run, the system's messages among them (report collectors)."""
+    see every record of the run, the system's messages among them (report collectors). The system starts at
+    once on a leased domain while bagfault looks for other processes' nodes there (PRESTART: discovery takes
+    ~0.2 s); should some show, the system is stopped and the run moves to another domain, ClosedLoopError
+    naming them after ATTEMPTS (later ones void the run: DomainWatch). `lease`: the ids to lease from."""
+    crowded: dict[int, list[Stranger]] = {}
+    for _ in range(ATTEMPTS):
+        try:
+            held = DomainLease(avoid=crowded, **lease)
+        except ClosedLoopError:
+            if not crowded:
+                raise
+            break
+        with held:
+            try:
+                return _run_on(held, scenario, inputs, output, system=system, seed=seed, rate=rate, logs=logs,
+                               stop=stop, foxglove=foxglove, observers=observers)
+            except CrowdedDomainError as exc:
+                crowded[exc.domain] = exc.found
+                log.info(f'ROS domain {exc.domain} has nodes of other processes '
+                         f'({", ".join(s.describe() for s in exc.found)}): the system is stopped and starts again '
+                         'on another')
+    said = '; '.join(f'{domain}: {", ".join(s.describe() for s in found)}' for domain, found in crowded.items())
+    raise ClosedLoopError(f'no quiet ROS domain: other processes have nodes on each leased one ({said})')
+
+
+def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
+            system: SystemUnderTest, seed: int, rate: float, logs: Path | None, stop: StopFlag,
+            foxglove: str | None, observers: Sequence[Observer]) -> RunResult:
+    """`run_test` on one leased domain (CrowdedDomainError when other processes show nodes there at first)."""
     from rclpy.node import Node  # noqa: PLC0415
 
     os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
     view_notes: list[str] = []
-    with quiet_domain(stop) as (lease, context), tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch, \
-            InputSet(inputs) as input_set, contextlib.ExitStack() as closing:  # closed in the reverse order
+    with ros_context(stop, domain_id=lease.domain) as context, \
+            tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch, InputSet(inputs) as input_set, \
+            contextlib.ExitStack() as closing:  # closed in the reverse order
+        quiet_until = time.monotonic() + PRESTART  # this process's participant looks from now on
         folder = logs if logs is not None else Path(scratch)
         command = command_line(system, sys.executable)
         report = SystemReport(command=command, domain_id=lease.domain, logs=logs)
@@ -121,7 +123,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
         closing.callback(_stopped, process, system, report)
         log.info(f'system under test started on ROS domain {lease.domain}; to watch it: '
                  f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}')
-        watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid)
+        watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid, quiet_until=quiet_until)
         link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
                           catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)
         closing.callback(link.close)

@@ -85,25 +85,44 @@ def test_a_listener_attached_to_watch_is_named_but_does_not_void_the_run(tester:
                for n in outcome.report['notes']), outcome.report['notes']
 
 
-def test_a_crowded_domain_is_passed_over_before_the_system_starts(tmp_path: Path,
-                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_crowded_domain_is_passed_over_and_the_system_started_there_stopped(
+        tmp_path: Path, example_bag: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """The system starts while bagfault looks at the leased domain; nodes of another process there (one that
+    only listens too) stop it, and it starts again on the next domain; with none left, one line names them."""
     pytest.importorskip('rclpy')
-    from bagfault.closedloop.runner import quiet_domain
+    from bagfault import api
+    from bagfault.closedloop import runner
     from bagfault.engine.stop import StopFlag
     from bagfault.errors import ClosedLoopError
 
     monkeypatch.setenv('BAGFAULT_DOMAIN_LOCKS', str(tmp_path / 'locks'))
     monkeypatch.setenv('FASTRTPS_DEFAULT_PROFILES_FILE', str(LOOPBACK_PROFILE))
+    # (a participant made again in one process can take a second to be seen: a long look here; a fresh
+    # `bagfault test` sees a node in ~0.2 s, and its DomainWatch catches any the first look missed)
+    monkeypatch.setattr(runner, 'PRESTART', 3.0)
+    caplog.set_level('INFO', logger='bagfault')
     crowded, free, other = 110, 111, 112  # outside the leases' range, so no other run is there
+    token = f'crowd{os.getpid()}'
+    scenario = api.load_scenario(SCENARIO)
+    system = api.system_of(scenario, {'command': f'{{python}} monitor.py --hardware-id {token}'})
     sitters = [stranger(crowded, 'sitter', '/imu', 'x'), stranger(other, 'listener', '-', 'x')]
     try:
-        # (a participant made again in one process can take a second to be seen: a long look here; a fresh
-        # `bagfault test` sees a node in ~0.2 s, and its DomainWatch catches any the first look missed)
-        with quiet_domain(StopFlag(), first=crowded, last=other, wait=3.0) as (lease, _context):
-            assert lease.domain == free  # one who only listens crowds a domain too, before the start
-        with pytest.raises(ClosedLoopError) as caught, quiet_domain(StopFlag(), first=crowded, last=crowded,
-                                                                    wait=3.0):
-            pass
+        result = runner.run_test(scenario, [example_bag], None, system=system, seed=7, rate=1.0, logs=None,
+                                 stop=StopFlag(), first=crowded, last=other)
+        assert result.system is not None and result.system.domain_id == free
+        def started() -> list[int]:
+            return [int(re.search(r'domain (\d+)', r.getMessage()).group(1))  # type: ignore[union-attr]
+                    for r in caplog.records if 'system under test started' in r.getMessage()]
+
+        *passed_over, last = started()  # leases start where the process id says: crowded ones first or not
+        assert last == free and set(passed_over) <= {crowded, other}
+        assert not result.failed, [a.message for a in result.assertions if a.state != 'passed']
+        assert running_with(token) == []
+        with pytest.raises(ClosedLoopError) as caught:
+            runner.run_test(scenario, [example_bag], None, system=system, seed=7, rate=1.0, logs=None,
+                            stop=StopFlag(), first=crowded, last=crowded)
+        assert started()[-1] == crowded
+        assert running_with(token) == []  # the system started on the crowded domain was stopped
     finally:
         for process in sitters:
             ended(process)
