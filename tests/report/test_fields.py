@@ -3,13 +3,10 @@
 from __future__ import annotations
 
 import math
-import textwrap
 
 import numpy as np
-from support.helpers import make_bag
-from support.html_check import figures, rendered
+from support.html_check import figures, rendered, report_of
 
-from bagfault.cli import main
 from bagfault.demo import synthetic
 
 
@@ -17,16 +14,12 @@ def test_a_yaw_bias_is_plotted_as_yaw_in_degrees_across_the_half_turn(tmp_path):
     """The synthetic robot turns at 0.1 rad/s, so its yaw passes +-180 deg at 31.4 s, where a quaternion with
     w >= 0 flips the sign of z: a 5 deg bias from 25 s to 38 s must show as 5 deg all along (after - before),
     and the series as the robot's yaw (synthetic.odom_pose, wrapped to +-180)."""
-    bag = make_bag(tmp_path / 'in.mcap', [('/odom_raw', 'nav_msgs/msg/Odometry', 20.0)], 40.0)
-    scenario = tmp_path / 's.yaml'
-    scenario.write_text(textwrap.dedent("""
+    page = report_of(tmp_path, [('/odom_raw', 'nav_msgs/msg/Odometry', 20.0)], 40.0, """
         injectors:
           - {id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}
         faults:
           - {id: turned, injector_id: odom, start: 25.0, duration: 13.0, config: {yaw_bias_deg: 5.0}}
-    """))
-    page = tmp_path / 'r.html'
-    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--html', str(page)]) == 0
+    """)
     drawn = figures(page)
     assert not [name for name in drawn if 'orientation.' in name]
     figure = drawn['field:/odom:pose.pose.orientation:yaw']

@@ -3,31 +3,23 @@ the fault start, compared with the synthetic generator's own points and pixels."
 
 from __future__ import annotations
 
-import textwrap
-
 import numpy as np
 import pytest
-from support.helpers import make_bag
-from support.html_check import figures
+from support.html_check import figures, report_of
 
-from bagfault.cli import main
 from bagfault.demo import synthetic
 
 
 def test_cloud_and_image_at_the_fault_start(tmp_path):
-    bag = make_bag(tmp_path / 'in.mcap', [('/cloud', 'sensor_msgs/msg/PointCloud2', 5.0),
-                                          ('/camera', 'sensor_msgs/msg/Image', 5.0)], 6.0)
-    scenario = tmp_path / 's.yaml'
-    scenario.write_text(textwrap.dedent("""
+    page = report_of(tmp_path, [('/cloud', 'sensor_msgs/msg/PointCloud2', 5.0),
+                                ('/camera', 'sensor_msgs/msg/Image', 5.0)], 6.0, """
         injectors:
           - {id: lidar, type: pointcloud2, input_topic: /cloud, output_topic: /cloud_out}
           - {id: camera, type: image, input_topic: /camera, output_topic: /camera_out}
         faults:
           - {id: thin, injector_id: lidar, start: 2.0, duration: 2.0, config: {dropout_probability: 0.5}}
           - {id: dark, injector_id: camera, start: 2.0, duration: 2.0, config: {black_frame: true}}
-    """))
-    page = tmp_path / 'r.html'
-    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--html', str(page)]) == 0
+    """)
     drawn = figures(page)
     counts = {t['name']: t for t in drawn['cloud_counts:/cloud_out']['data']}
     before, after = counts['before: /cloud'], counts['after: /cloud_out']
@@ -67,9 +59,7 @@ def test_array_images_keep_short_arrays_element_by_element_and_bin_long_ones():
 def test_non_finite_scalars_are_marked_where_they_are(tmp_path):
     """A `nan` operation on odometry x from 1 s to 3 s and +inf on y from 4 s: the line would only show gaps, so
     the field figures mark every such message, on the after side only (times from the 10 Hz generator)."""
-    bag = make_bag(tmp_path / 'in.mcap', [('/odom', 'nav_msgs/msg/Odometry', 10.0)], 6.0)
-    scenario = tmp_path / 's.yaml'
-    scenario.write_text(textwrap.dedent("""
+    page = report_of(tmp_path, [('/odom', 'nav_msgs/msg/Odometry', 10.0)], 6.0, """
         injectors:
           - {id: f, type: field, input_topic: /odom, output_topic: /odom_out}
         faults:
@@ -77,9 +67,7 @@ def test_non_finite_scalars_are_marked_where_they_are(tmp_path):
              config: {operations: [{op: nan, path: pose.pose.position.x}]}}
           - {id: huge, injector_id: f, start: 4.0,
              config: {operations: [{op: set, path: pose.pose.position.y, value: .inf}]}}
-    """))
-    page = tmp_path / 'r.html'
-    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--html', str(page)]) == 0
+    """)
     drawn = figures(page)
     x = {t['name']: t for t in drawn['field:/odom_out:pose.pose.position.x']['data']}
     y = {t['name']: t for t in drawn['field:/odom_out:pose.pose.position.y']['data']}

@@ -139,3 +139,19 @@ def image_cells(figure: dict[str, Any]) -> tuple[Any, Any, Any]:
     times = image['x0'] + image['dx'] * np.arange(pixels.shape[1])
     elements = image['y0'] + image['dy'] * np.arange(pixels.shape[0])
     return times, elements, pixels
+
+
+def report_of(folder: Path, streams: list[tuple[str, str, float]], seconds: float, scenario: str) -> Path:
+    """`bagfault run --html` of a scenario (YAML text) on a synthetic bag of these (topic, type, rate) streams:
+    the report page."""
+    import textwrap
+
+    from bagfault.cli import main
+    from support.helpers import make_bag
+
+    bag = make_bag(folder / 'in.mcap', streams, seconds)
+    path = folder / 's.yaml'
+    path.write_text(textwrap.dedent(scenario))
+    page = folder / 'r.html'
+    assert main(['run', str(path), str(bag), '-o', str(folder / 'out.mcap'), '--html', str(page)]) == 0
+    return page
