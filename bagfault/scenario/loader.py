@@ -105,6 +105,7 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
                                 for w in warnings] if strict else [])
     if problems:
         raise ScenarioError(sorted(problems, key=_position))
+    scenario.seal()
     return scenario
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import FrozenInstanceError, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -10,8 +10,24 @@ from bagfault.spec.system import SystemUnderTest
 from bagfault.spec.yamlnodes import LocatedYaml, PathKey
 
 
+class Sealed:
+    """A record the loader fills in field by field and then seals: assigning to a field of a sealed record
+    raises, so a loaded scenario is never edited (what changes while running lives in the engine's FaultState,
+    which makes new records)."""
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if self.__dict__.get('_sealed') and not name.startswith('_'):
+            raise FrozenInstanceError(f'cannot assign to {type(self).__name__}.{name}: a loaded scenario is '
+                                      'never edited (run-time changes go through engine.FaultState)')
+        object.__setattr__(self, name, value)
+
+    def seal(self) -> None:
+        """From now on, read only."""
+        object.__setattr__(self, '_sealed', True)
+
+
 @dataclass
-class InjectorSpec:
+class InjectorSpec(Sealed):
     """One injector: where it reads, where it writes, which type mutates.
 
     Topic injectors have input_topic/output_topic; service injectors have
@@ -37,7 +53,7 @@ class InjectorSpec:
 
 
 @dataclass
-class Repeat:
+class Repeat(Sealed):
     """Intermittent schedule: on for `on` seconds at the start of every `period`."""
 
     period: float
@@ -45,7 +61,7 @@ class Repeat:
 
 
 @dataclass
-class After:
+class After(Sealed):
     """Chained schedule: activate `delay` seconds after fault `fault` activates."""
 
     fault: str
@@ -53,7 +69,7 @@ class After:
 
 
 @dataclass
-class FaultSpec:
+class FaultSpec(Sealed):
     """A named fault owned by one injector, with its config and schedule.
 
     Times are seconds from bag time zero. A fault with neither
@@ -106,7 +122,7 @@ def describe_config_update(key: str, value: str) -> str:
 
 
 @dataclass
-class AssertionSpec:
+class AssertionSpec(Sealed):
     """An expected outcome; `params` holds the type-specific keys."""
 
     id: str
@@ -136,7 +152,7 @@ class _Index:
 
 
 @dataclass
-class Scenario:
+class Scenario(Sealed):
     """A loaded scenario file."""
 
     injectors: list[InjectorSpec]
@@ -154,6 +170,14 @@ class Scenario:
     text: str = ''
     located: LocatedYaml = field(default_factory=lambda: LocatedYaml(None))
     _index: _Index | None = field(default=None, repr=False, compare=False)
+
+    def seal(self) -> None:
+        """The scenario and every record in it, read only from now on."""
+        records: list[Sealed] = [*self.injectors, *self.faults, *self.assertions]
+        records += [x for f in self.faults for x in (f.repeat, f.after) if x is not None]
+        for record in records:
+            record.seal()
+        super().seal()
 
     def _ids(self) -> _Index:
         """Injectors and faults by id (the first of a repeated id), made again when the lists change."""

@@ -289,3 +289,24 @@ def test_live_injector_keys_are_checked_like_the_rest():
                         'faults: []\n')
     assert ok.injectors[0].options == {'reliability': 'best_effort', 'durability': 'transient_local',
                                        'message_type': 'std_msgs/msg/String'}
+
+
+def test_a_loaded_scenario_is_read_only_and_a_run_time_change_makes_a_new_record(scenarios):
+    """Nothing edits a loaded scenario: its records refuse assignment, and a fault changed while running (the
+    engine's FaultState) is a new FaultSpec beside the loaded one, which keeps its value."""
+    import dataclasses
+
+    from bagfault.engine.fault_state import FaultState
+
+    scenario = load_scenario(scenarios / 'rover_multi.yaml')
+    fault = scenario.faults[0]
+    records = [scenario, fault, scenario.injectors[0], *scenario.assertions[:1]]
+    for record in records:
+        name = next(f.name for f in dataclasses.fields(record) if not f.name.startswith('_'))
+        with pytest.raises(dataclasses.FrozenInstanceError, match='never edited'):
+            setattr(record, name, getattr(record, name))
+    key = next(iter(fault.config))
+    state = FaultState(scenario)
+    changed = state.configure(fault.id, key, state.check(fault.id, key, 12.5))
+    assert state.fault(fault.id) is changed and changed.config[key] == 12.5
+    assert scenario.fault(fault.id).config[key] != 12.5
