@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -11,6 +12,7 @@ from pathlib import Path
 import pytest
 from support.loop import SCENARIO, LoopRunner, running_with
 
+from bagfault.closedloop.domain import COORDINATOR_PORT_BASE
 from bagfault.live import LOOPBACK_PROFILE
 
 pytestmark = pytest.mark.live  # needs rclpy
@@ -85,6 +87,21 @@ def test_a_listener_attached_to_watch_is_named_but_does_not_void_the_run(tester:
                for n in outcome.report['notes']), outcome.report['notes']
 
 
+def three_domains() -> list[tuple[int, socket.socket]]:
+    """Three consecutive domain ids above the leases' range, claimed the way domain_coordinator claims them (so a
+    second test suite running this test beside this one takes three others), with their claims."""
+    from bagfault.closedloop.domain import LAST, claim_port
+
+    for first in range(LAST + 1, 230, 3):
+        claims = [(domain, claim_port(domain)) for domain in range(first, first + 3)]
+        held = [(domain, claim) for domain, claim in claims if claim is not None]
+        if len(held) == 3:
+            return held
+        for _, claim in held:
+            claim.close()
+    pytest.fail('no three consecutive free domain ids above the leases')
+
+
 def test_a_crowded_domain_is_passed_over_and_the_system_started_there_stopped(
         tmp_path: Path, example_bag: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     """The system starts while bagfault looks at the leased domain; nodes of another process there (one that
@@ -101,7 +118,10 @@ def test_a_crowded_domain_is_passed_over_and_the_system_started_there_stopped(
     # `bagfault test` sees a node in ~0.2 s, and its DomainWatch catches any the first look missed)
     monkeypatch.setattr(runner, 'PRESTART', 3.0)
     caplog.set_level('INFO', logger='bagfault')
-    crowded, free, other = 110, 111, 112  # outside the leases' range, so no other run is there
+    claims = three_domains()  # outside the leases' range, and no other test suite's: no other run is there
+    crowded, free, other = (domain for domain, _ in claims)
+    # this test's own leases claim their ports at another base, so the claims above keep only others away
+    monkeypatch.setenv('BAGFAULT_DOMAIN_PORT_BASE', str(COORDINATOR_PORT_BASE + 1000))
     token = f'crowd{os.getpid()}'
     scenario = api.load_scenario(SCENARIO)
     system = api.system_of(scenario, {'command': f'{{python}} monitor.py --hardware-id {token}'})
@@ -126,6 +146,8 @@ def test_a_crowded_domain_is_passed_over_and_the_system_started_there_stopped(
     finally:
         for process in sitters:
             ended(process)
+        for _, claim in claims:
+            claim.close()
     sitter = sitters[0]
     assert 'no quiet ROS domain' in str(caught.value)
     assert f'{crowded}: /sitter (pid {sitter.pid}) publishing /imu' in str(caught.value)
