@@ -97,7 +97,8 @@ class DomainWatch:
     """Looks at the graph now and then for strangers: those publishing make the run invalid, listeners are noted."""
 
     def __init__(self, node: Any, domain: int, own_pid: int, system: Callable[[], set[int]],
-                 system_pid: int | None = None, period: float = 0.5, quiet_until: float | None = None) -> None:
+                 system_pid: int | None = None, period: float = 0.5, quiet_until: float | None = None,
+                 on_quiet: Callable[[], None] | None = None) -> None:
         self.node = node
         self.domain = domain
         self.own_pid = own_pid
@@ -106,6 +107,7 @@ class DomainWatch:
         self.system_pid = system_pid
         self.period = period
         self.quiet_until = quiet_until  # the first look lasts until then (None: no first look)
+        self.on_quiet = on_quiet  # called when the first look found the domain quiet
         self.listeners: dict[str, str] = {}  # node -> description, of strangers that published nothing
         self._last = 0.0
         self._cleared: set[int] = set()
@@ -119,6 +121,8 @@ class DomainWatch:
         self.quiet_until = None
         if found:
             raise CrowdedDomainError(self.domain, found)
+        if self.on_quiet is not None:
+            self.on_quiet()
 
     def _ours(self, low: int) -> bool:
         return low == self.own or low in self._cleared

@@ -121,9 +121,14 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
                                 shell=system.shell, logs=folder)
         closing.callback(_stopped, process, system, report)
-        log.info(f'system under test started on ROS domain {lease.domain}; to watch it: '
-                 f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}')
-        watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid, quiet_until=quiet_until)
+        log.debug(f'system under test starting on ROS domain {lease.domain}')
+
+        def announce() -> None:  # once the domain is the run's alone: a watcher who attaches now is not a stranger
+            log.info(f'system under test started on ROS domain {lease.domain}; to watch it: '
+                     f'ROS_DOMAIN_ID={lease.domain} FASTRTPS_DEFAULT_PROFILES_FILE={LOOPBACK_PROFILE}')
+
+        watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid, quiet_until=quiet_until,
+                            on_quiet=announce)
         link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
                           catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)
         closing.callback(link.close)
