@@ -171,10 +171,11 @@ def _heatmap(image: ArrayImage, text: str, axis: str, windows: list[tuple[float,
     columns = np.rint(image.times / span - 0.5).astype(int)
     first = int(columns.min()) if columns.size else 0
     width = int(columns.max()) - first + 1 if columns.size else 1
-    grid = np.full((image.values.shape[0], width), np.nan)
+    grid = np.full((max(1, image.values.shape[0]), width), np.nan)  # an array that was always empty: one row
     inf, nan = (np.zeros(grid.shape, dtype=bool) for _ in range(2))
     held = _held_columns(columns - first, width)
-    grid[:], inf[:], nan[:] = image.values[:, held], image.inf[:, held], image.nan[:, held]
+    if image.values.size:
+        grid[:], inf[:], nan[:] = image.values[:, held], image.inf[:, held], image.nan[:, held]
     grid[:, held < 0], inf[:, held < 0], nan[:, held < 0] = np.nan, False, False
     step = float(image.elements[1] - image.elements[0]) if image.elements.size > 1 else 1.0
     start = float(image.elements[0]) if image.elements.size else 0.0

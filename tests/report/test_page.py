@@ -29,3 +29,17 @@ def test_figures_use_only_traces_the_inlined_bundle_draws() -> None:
         page.figure([{'type': 'scattergl', 'x': [0], 'y': [0]}], {})
     html = page.render()
     assert 'plotly.js (cartesian - minified)' in html and len(html) < 1_600_000
+
+
+def test_an_array_field_that_was_always_empty_is_a_blank_picture_not_a_broken_one() -> None:
+    """A PNG must be at least one pixel high (the PNG specification): an array image without elements (every
+    message held an empty array) is one transparent row over its time columns."""
+    from bagfault.report.fields import ArrayImage
+    from bagfault.report.html import _heatmap
+
+    times = (np.arange(4) + 0.5) * 0.5
+    empty = ArrayImage(times, np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4), dtype=bool),
+                       np.zeros((0, 4), dtype=bool), 0.5)
+    data, _ = _heatmap(empty, 'empty', 'element', [], (0.0, 1.0))
+    pixels = png_pixels(data[0]['source'])
+    assert pixels.shape == (1, 4, 4) and not pixels[..., 3].any()
