@@ -129,6 +129,7 @@ class Conditions:
 
     cold = False
     cgroup: Path | None = None
+    page_cache_gb: float | None = None
 
     @classmethod
     def limit_page_cache(cls, gigabytes: float) -> None:
@@ -139,7 +140,7 @@ class Conditions:
         group = root / 'bagfault-bench'
         group.mkdir(exist_ok=True)
         (group / limit).write_text(str(int(gigabytes * 2**30)))
-        cls.cgroup = group
+        cls.cgroup, cls.page_cache_gb = group, gigabytes
 
     @classmethod
     def enter(cls) -> None:
@@ -247,17 +248,7 @@ def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[st
                       'read_from_device_gb': statistics.median(reads[name]) / 1e9,
                       'peak_rss_mb': max(r for _, r, _ in runs) / 1e6} for name, runs in samples.items()}
     return {'bag': bag.name, 'bytes': bag.stat().st_size, 'load_before': os.getloadavg()[0],
-            'cold': Conditions.cold, 'page_cache_gb': args_page_cache(), 'results': results}
-
-
-def args_page_cache() -> float | None:
-    """The page cache bound of the jobs, in GB (None: the machine's)."""
-    if Conditions.cgroup is None:
-        return None
-    for name in ('memory.max', 'memory.limit_in_bytes'):
-        if (Conditions.cgroup / name).exists():
-            return int((Conditions.cgroup / name).read_text()) / 2**30
-    return None
+            'cold': Conditions.cold, 'page_cache_gb': Conditions.page_cache_gb, 'results': results}
 
 
 def copy_table(block: dict) -> str:
