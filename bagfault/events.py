@@ -166,5 +166,5 @@ def event_json(event: Event, origin: int | None) -> str:
     fields: dict[str, Any] = dataclasses.asdict(event) if dataclasses.is_dataclass(event) else {}
     stamp = fields.pop('time', None)
     body = {'topic': event.topic, 'type': event.msgtype, 'stamp_ns': stamp,
-            't_s': None if stamp is None or origin is None else round((stamp - origin) / 1e9, 9), **fields}
+            't_s': None if stamp is None or origin is None else round((stamp - origin) / NS, 9), **fields}
     return json.dumps(body, sort_keys=True, default=str)

@@ -10,6 +10,8 @@ import sys
 import time
 from typing import TextIO
 
+from bagfault.units import NS
+
 
 def _clock(seconds: float) -> str:
     seconds = max(0, int(seconds))
@@ -46,8 +48,8 @@ class ProgressBar:
 
     def line(self, messages: int, bag_time: int, elapsed: float) -> str:
         """The text of one update."""
-        done_s = (bag_time - self.start_time) / 1e9 if self.start_time is not None else 0.0
-        total_s = (self.end_time - self.start_time) / 1e9 if self.end_time and self.start_time is not None else None
+        done_s = (bag_time - self.start_time) / NS if self.start_time is not None else 0.0
+        total_s = (self.end_time - self.start_time) / NS if self.end_time and self.start_time is not None else None
         fraction = self.fraction(messages, bag_time)
         width = 24
         if fraction is None:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 from bagfault.schema import ConfigField
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
@@ -86,7 +87,7 @@ class AssertionType:
         """Bag time (ns) after which a pending assertion fails."""
         if self.spec.within is None or not self.takes_within:
             return None
-        return self.runner.origin + round(self.spec.within * 1e9)
+        return self.runner.origin + round(self.spec.within * NS)
 
     def on_event(self, event: FaultEvent) -> None:
         """A fault event (the runner already updated the active fault set)."""

@@ -45,7 +45,7 @@ class FaultEventAssertion(AssertionType):
         """Pass when the watched fault reaches the expected state."""
         if event.fault_id == self.params['fault_id'] and event.state == self.params['state']:
             self.passed(event.time, f'fault {event.fault_id} reached {event.state} at {self.runner.t(event.time)} '
-                                    f'({event.source})', (event.time - self.runner.origin) / 1e9, 's')
+                                    f'({event.source})', (event.time - self.runner.origin) / NS, 's')
 
     def waiting_for(self) -> str:
         """Failure text."""

@@ -14,6 +14,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from bagfault.units import NS
+
 
 @contextlib.contextmanager
 def _local(spec: dict[str, Any]) -> Iterator[str]:
@@ -53,7 +55,7 @@ def run_job(spec: dict[str, Any]) -> dict[str, Any]:
                 'seconds': round(time.monotonic() - started, 3), 'output': None}
     origin = result.stats.origin
     assertions = {a.id: {'state': a.state, 'message': a.message, 'value': a.value, 'unit': a.unit,
-                         't_s': None if a.time is None or origin is None else round((a.time - origin) / 1e9, 9)}
+                         't_s': None if a.time is None or origin is None else round((a.time - origin) / NS, 9)}
                   for a in result.assertions}
     detections: dict[str, float] = {}
     for event in (result.fault_manager or {}).get('events', []):

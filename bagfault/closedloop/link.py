@@ -35,6 +35,7 @@ from bagfault.live.echoes import OwnEchoes
 from bagfault.live.graph import OWN_PREFIXES, oracle_topics, watched_topics
 from bagfault.live.recorder import Recorder
 from bagfault.live.sink import MATCH_SETTLE, LiveSink
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -270,12 +271,12 @@ class SystemLink(LiveSink):
         origin = self._origin
         wall, now = time.time_ns(), time.monotonic()
         for topic, arrived, data in items:
-            stamp = upto if origin is None else origin[0] + round((arrived - origin[1]) * self.rate * 1e9)
+            stamp = upto if origin is None else origin[0] + round((arrived - origin[1]) * self.rate * NS)
             stamp = min(max(stamp, self._floor), upto)
             self._floor = stamp
             self.heard[topic] = self.heard.get(topic, 0) + 1
             if topic in self._stamped and origin is not None:
-                self.clocks.stamp(topic, data, stamp, wall - round((now - arrived) * 1e9))
+                self.clocks.stamp(topic, data, stamp, wall - round((now - arrived) * NS))
             run.message(self._outputs[topic], stamp, stamp, data)
 
     def _check_alive(self, bag_time: int) -> None:
@@ -289,7 +290,7 @@ class SystemLink(LiveSink):
 
     def _verdict(self, state: AssertionState, time_ns: int, message: str) -> None:
         origin = self._run.stats.origin if self._run is not None else None
-        seconds = (time_ns - (origin if origin is not None else time_ns)) / 1e9
+        seconds = (time_ns - (origin if origin is not None else time_ns)) / NS
         text = f'{message} (found at {seconds:.3f} s)' if state == 'failed' else message
         self.alive_result = AssertionResult(SYSTEM_ALIVE, SYSTEM_ALIVE, state, time_ns, text)
         if self._run is not None:
@@ -301,7 +302,7 @@ class SystemLink(LiveSink):
         if self._origin is None:
             self._hand_over(run.stats.origin or 0)
             return
-        end = max(self.clock_value, 0) + round(self.system.tail * 1e9)
+        end = max(self.clock_value, 0) + round(self.system.tail * NS)
         while True:
             if self.stop.is_set():
                 raise Stopped(self.stop.reason)
@@ -310,7 +311,7 @@ class SystemLink(LiveSink):
             if now >= end:
                 break
             self._tick(now)
-            time.sleep(min(0.01, (end - now) / 1e9 / self.rate))
+            time.sleep(min(0.01, (end - now) / NS / self.rate))
         self._reached(end)
         if self.watch is not None:
             self.watch.look(now=True)  # before any verdict: a stranger that joined late spoils them too

@@ -13,6 +13,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from bagfault.assertions.base import AssertionResult
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -26,7 +27,7 @@ def decided_seconds(result: RunResult, assertion: AssertionResult) -> float | No
     origin = result.stats.origin
     if assertion.time is None or origin is None:
         return None
-    return (assertion.time - origin) / 1e9
+    return (assertion.time - origin) / NS
 
 
 def fold(results: Sequence[RunResult]) -> RunResult:

@@ -362,9 +362,9 @@ def caret_target_messages(
             truth.append((t4, t1))
         _ = number
     if timer_hz is not None:
-        period = round(1e9 / timer_hz)
+        period = round(NS / timer_hz)
         tick = start + round(delays_ms[2] * ms)
-        end = start + round(duration * 1e9) + round(sum(delays_ms) * ms)
+        end = start + round(duration * NS) + round(sum(delays_ms) * ms)
         while tick < end:
             latest = [c for c in chain if c[0] <= tick]
             if latest:

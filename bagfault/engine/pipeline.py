@@ -28,6 +28,7 @@ from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.injectors.base import Injector, RawMessage
 from bagfault.spec.model import describe_config_update
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
@@ -268,7 +269,7 @@ class Pipeline:
         stats = self.run.stats
         stats.malformed[topic] = stats.malformed.get(topic, 0) + 1
         stats.malformed_first.setdefault(topic, (message.log_time, reason))
-        return f'{topic}: message at {(message.log_time - (stats.origin or 0)) / 1e9:.3f} s'
+        return f'{topic}: message at {(message.log_time - (stats.origin or 0)) / NS:.3f} s'
 
     def _roundtrip(self, index: int) -> Callable[[Data], Data]:
         """Reference path: decode and re-encode a channel's messages (unchanged when undecodable)."""

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Protocol
 from bagfault.engine.merge import EVENT_RANK
 from bagfault.engine.oracles import Oracles
 from bagfault.engine.result import RunResult, RunStats
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -263,7 +264,7 @@ class Run:
         notes = list(self.notes)
         for topic, count in sorted(stats.malformed.items()):
             time, reason = stats.malformed_first[topic]
-            seconds = (time - (stats.origin or time)) / 1e9
+            seconds = (time - (stats.origin or time)) / NS
             notes.append(f'{count} message{"s" if count != 1 else ""} on {topic} could not take a fault and followed '
                          f'on_malformed (first at {seconds:.3f} s: {reason})')
         result = RunResult(self.scenario, list(inputs), output, seed, stats, notes,

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.faults.rng import FaultRandom
-from bagfault.units import NS
+from bagfault.units import MAX_SECONDS, MS, NS
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator, Sequence
@@ -32,8 +32,6 @@ if TYPE_CHECKING:
     from bagfault.events import FaultSource
     from bagfault.spec.model import FaultSpec, Scenario
 
-NS_PER_MS = 1_000_000
-MAX_SECONDS = 1e7  # as bagfault.scenario.loader.MAX_SECONDS
 
 
 def seconds_to_ns(seconds: float) -> int:
@@ -76,11 +74,11 @@ def _anchor_window(fault: FaultSpec) -> tuple[int, int | None]:
     """`active_on_startup` / `start` + `duration` as ros2_fault_injection schedules them: whole milliseconds,
     and timers of at least 1 ms (a `start: 0` fault activates 1 ms after time zero)."""
     if fault.active_on_startup:
-        end = None if fault.duration is None else max(_ms(fault.duration), 1) * NS_PER_MS
+        end = None if fault.duration is None else max(_ms(fault.duration), 1) * MS
         return 0, end
     start = _ms(fault.start or 0.0)
-    end = None if fault.duration is None else max(start + _ms(fault.duration), 1) * NS_PER_MS
-    return max(start, 1) * NS_PER_MS, end
+    end = None if fault.duration is None else max(start + _ms(fault.duration), 1) * MS
+    return max(start, 1) * MS, end
 
 
 def _window(fault: FaultSpec) -> tuple[int, int | None]:

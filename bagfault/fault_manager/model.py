@@ -76,8 +76,8 @@ class Fault:
             'reporting_sources': list(self.reporting_sources),
         }
         if origin is not None:
-            out['first_occurred_s'] = round((self.first_occurred - origin) / 1e9, 9)
-            out['last_occurred_s'] = round((self.last_occurred - origin) / 1e9, 9)
+            out['first_occurred_s'] = round((self.first_occurred - origin) / NS, 9)
+            out['last_occurred_s'] = round((self.last_occurred - origin) / NS, 9)
         return out
 
 

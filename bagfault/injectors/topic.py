@@ -21,13 +21,13 @@ from bagfault.faults.drop import should_drop
 from bagfault.faults.header import has_header, shift_stamp
 from bagfault.injectors.base import Injector, RawMessage
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, MAX_DELAY_MS, ConfigField, boolean, integer, probability
+from bagfault.units import MS, NS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from bagfault.faults.active import ActiveFault
 
-NS_PER_MS = 1_000_000
 MAX_STAMP_OFFSET_MS = 86_400_000 * 366  # a year either way
 MIN_THROTTLE_HZ = 0.001
 SIMPLE = frozenset({'drop_probability', 'delay_ms'})
@@ -138,7 +138,7 @@ class TopicInjector(Injector):
             self.last_good = message
         offset = int(total(active, 'stamp_offset_ms'))
         if offset:
-            message = replace(message, data=shift_stamp(message.data, offset * NS_PER_MS))
+            message = replace(message, data=shift_stamp(message.data, offset * MS))
         message = self._corrupt(message, active)
         copies = [message]
         chance, owner = strongest(active, 'duplicate_probability')
@@ -169,7 +169,7 @@ class TopicInjector(Injector):
             return False
         rates = [f.config['throttle_hz'] for f in active if f.config.get('throttle_hz', 0) > 0]
         if rates:
-            period = round(1e9 / min(rates))
+            period = round(NS / min(rates))
             throttling = (f for f in active if f.config.get('throttle_hz', 0) > 0)
             owner = min(throttling, key=lambda f: f.config['throttle_hz'])
             if self._throttle_since != (owner.id, owner.since) or self._next_due is None:
@@ -198,12 +198,12 @@ class TopicInjector(Injector):
     def _delay(self, messages: list[RawMessage], active: Sequence[ActiveFault]) -> list[RawMessage]:
         delay_ms, _ = strongest(active, 'delay_ms')
         jitter_ms, owner = strongest(active, 'jitter_ms')
-        base = int(delay_ms) * NS_PER_MS
+        base = int(delay_ms) * MS
         out = []
         for message in messages:
             shift = base
             if owner is not None and jitter_ms > 0:
-                shift += round(owner.random.stream('jitter_ms').random() * jitter_ms * NS_PER_MS)
+                shift += round(owner.random.stream('jitter_ms').random() * jitter_ms * MS)
             out.append(message if shift == 0 else self.delayed(message, shift))
         return out
 

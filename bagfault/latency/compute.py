@@ -24,12 +24,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bagfault.errors import LatencyError
+from bagfault.units import MS
 
 if TYPE_CHECKING:
     from bagfault.latency.architecture import Architecture, MessageContext, NamedPath
 
 STAMP_CONTEXTS = {'inherit_unique_stamp'}
-NS_PER_MS = 1_000_000
 
 
 @dataclass
@@ -126,7 +126,7 @@ def response_cases(starts: np.ndarray, matched: np.ndarray, ends: np.ndarray) ->
              'best': sorted((s, e - s) for e, s in best.items()),
              'worst': sorted((s, e - s) for e, s in worst.items()),
              'worst-with-external-latency': sorted((p, e - p) for e, (_, p) in external.items())}
-    return {name: (np.array([s for s, _ in rows], dtype=np.int64), np.array([r for _, r in rows]) / NS_PER_MS)
+    return {name: (np.array([s for s, _ in rows], dtype=np.int64), np.array([r for _, r in rows]) / MS)
             for name, rows in cases.items()}
 
 
@@ -184,7 +184,7 @@ def path_latency(
         if first.stamps is None:
             raise LatencyError(f'stamp origin needs header stamps on {topics[0]}')
         starts = first.stamps
-    latency = (sample_times - starts[matched]) / NS_PER_MS
+    latency = (sample_times - starts[matched]) / MS
     dropped = int(first.times.size - np.unique(matched).size)
     return PathResult(path.name, topics, sample_times, first.times[matched], latency, dropped,
                       int(first.times.size), response_cases(starts, matched, sample_times), notes)

@@ -8,6 +8,8 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
+from bagfault.units import NS
+
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -44,7 +46,7 @@ class DelayLine:
                     self._condition.wait()
                 if self._stopped:
                     return
-                wait = (self._heap[0][0] - self.clock()) / 1e9
+                wait = (self._heap[0][0] - self.clock()) / NS
                 if wait > 0:
                     self._condition.wait(min(wait, 0.05))  # re-read the clock: sim time may jump
                     continue

@@ -17,6 +17,7 @@ import time
 from typing import TYPE_CHECKING, Any, Protocol
 
 from bagfault.engine.stop import Stopped
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
@@ -67,7 +68,7 @@ class Pacer:
         self.view = view
         self.settle = settle  # seconds before the first record (discovery)
         self.topics = set(topics)  # only these are played and recorded (all when empty; events always)
-        self.skip = round(skip * 1e9)  # bag ns from the first record that are not played (--start-offset, seek)
+        self.skip = round(skip * NS)  # bag ns from the first record that are not played (--start-offset, seek)
         self.clock_period = 1.0 / clock_hz
         self.offset = 0  # added to bag times: loops continue the timeline
         self.clock_value = -1  # the bag time the timeline last reached (what /clock said), ns
@@ -175,12 +176,12 @@ class Pacer:
             now = time.monotonic()
             with self._lock:
                 first, started = self._origin
-                due = started + (stamp - first) / 1e9 / self.rate
+                due = started + (stamp - first) / NS / self.rate
                 paused = self.paused
             if not paused and now >= due:
                 break
             if not paused:
-                self._tick(first + round((now - started) * self.rate * 1e9))
+                self._tick(first + round((now - started) * self.rate * NS))
             elif now - self._last_tick >= self.clock_period:
                 self._last_tick = now
                 if self.recording is not None:
@@ -223,7 +224,7 @@ class Pacer:
             first, started = self._origin
             if self.paused:
                 return self.clock_value
-            return first + round((time.monotonic() - started) * self.rate * 1e9)
+            return first + round((time.monotonic() - started) * self.rate * NS)
 
     # -- playback controls (any thread) ---------------------------------------------------------------
     def pause(self) -> None:

@@ -47,7 +47,7 @@ def unacknowledged(publishers: Iterable[Any], timeout: float) -> list[str]:
     late = []
     for publisher in publishers:
         left = max(deadline - time.monotonic(), 0.0)
-        if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+        if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * NS))):
             late.append(publisher.topic_name)
     return sorted(late)
 
@@ -109,7 +109,7 @@ def offered_yaml(profiles: list[QoSProfile]) -> str:
 
 def sleep_duration(seconds: float) -> Duration:
     """An rclpy Duration."""
-    return Duration(nanoseconds=round(seconds * 1e9))
+    return Duration(nanoseconds=round(seconds * NS))
 
 
 def make_node(name: str, context: Any, ros_args: list[str] | None = None, **options: Any) -> Any:

@@ -27,7 +27,7 @@ def render_info(paths: Sequence[Path]) -> str:
                  f'distro:    {inputs.ros_distro or "unknown (standard types of " + catalog.distro + ")"}',
                  f'messages:  {sum(counts)}']
         if first is not None and last is not None:
-            lines.append(f'duration:  {(last - first) / 1e9:.3f} s  (start {stamp(first)}, end {stamp(last)})')
+            lines.append(f'duration:  {(last - first) / NS:.3f} s  (start {stamp(first)}, end {stamp(last)})')
         lines.append('topics:')
         width = max((len(c.topic) for c in inputs.channels), default=10)
         for channel, count in zip(inputs.channels, counts, strict=True):

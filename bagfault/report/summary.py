@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING, TextIO
 
+from bagfault.units import NS
+
 if TYPE_CHECKING:
     from bagfault.engine.result import RunResult
 
@@ -12,7 +14,7 @@ if TYPE_CHECKING:
 def _seconds(time: int | None, origin: int | None) -> str:
     if time is None:
         return '       -  '
-    return f'{(time - (origin or 0)) / 1e9:8.3f} s'
+    return f'{(time - (origin or 0)) / NS:8.3f} s'
 
 
 def _short(text: str, width: int) -> str:
