@@ -459,7 +459,7 @@ def test_a_malformed_message_follows_on_malformed(tmp_path, case, policy):
     ('start: 1e300', 'is not a time bagfault can schedule'),
     ('start: .inf', 'is not a time bagfault can schedule'),
     ('repeat: {period: 1e-9, on: 1e-9}', 'is below the minimum 0.01 s'),
-    ('probability_per_second: 1e9, hold: 1e-9', 'at most 100 activations per second'),
+    ('probability_per_second: 1e9, hold: 1e-9', 'is above the maximum 100'),
     ('after: {fault: other, delay: 1e300}', 'is not a time bagfault can schedule'),
     ('config: {delay_ms: 1000000000000}', 'is above the maximum'),
     ('config: {throttle_hz: 1e-300}', 'throttle_hz 1e-300 is below 0.001 Hz'),

@@ -9,15 +9,14 @@ from typing import TYPE_CHECKING, Any
 from bagfault.campaign.edit import PathError, expanded, scenario_data
 from bagfault.campaign.model import Campaign, Search, Until
 from bagfault.errors import CampaignError, ScenarioError, one_line
+from bagfault.spec import sections
+from bagfault.spec.reader import Reader
 from bagfault.spec.yamlnodes import YamlSyntaxError, format_path, load_located
 
 if TYPE_CHECKING:
     from bagfault.spec.yamlnodes import LocatedYaml, PathKey
 
-KEYS = {'campaign', 'scenario', 'mode', 'bags', 'sweep', 'seeds', 'design', 'search', 'keep', 'timeout'}
 MAX_RANGE = 100_000
-MAX_REPEAT = 100
-SEARCH_KEYS = {'parameter', 'low', 'high', 'tolerance', 'until', 'repeat'}
 
 
 class _Problems:
@@ -25,10 +24,17 @@ class _Problems:
         self.name = name
         self.located = located
         self.lines: list[str] = []
+        self._places: list[tuple[int, int]] = []
 
     def add(self, path: PathKey, message: str) -> None:
         where = self.located.where(path)
         self.lines.append(f'{self.name}:{where}: {format_path(path) or "<top>"}: {message}')
+        line, _, column = where.partition(':')
+        self._places.append((int(line), int(column or 0)))
+
+    def in_file_order(self) -> list[str]:
+        """The problems by line and column (as a scenario's are listed)."""
+        return [text for _, text in sorted(zip(self._places, self.lines, strict=True), key=lambda x: x[0])]
 
 
 def load_campaign(path: str | Path) -> Campaign:
@@ -46,49 +52,35 @@ def load_campaign(path: str | Path) -> Campaign:
     data = located.data
     if not isinstance(data, dict):
         raise CampaignError(f'{file}: a campaign file is a mapping (campaign, scenario, bags, sweep, ...)')
-    for key in data:
-        if key not in KEYS:
-            problems.add((key,), f'unknown key {key!r} (known: {", ".join(sorted(KEYS))})')
-    campaign = Campaign(name=str(data.get('campaign') or file.stem), scenario=file.parent / 'missing',
+    read = Reader(problems.add).read(sections.CAMPAIGN, data, ())
+    assert read is not None
+    campaign = Campaign(name=str(read.get('campaign') or file.stem), scenario=file.parent / 'missing',
                         source=file, text=text)
-    scenario_file = data.get('scenario')
-    if not isinstance(scenario_file, str) or not scenario_file:
-        problems.add(('scenario',), 'must name a scenario file (relative to this file)')
-    else:
-        campaign.scenario = file.parent / scenario_file
-    mode = data.get('mode', 'run')
-    if mode not in ('run', 'test'):
-        problems.add(('mode',), f'{mode!r} is not run or test')
-    else:
-        campaign.mode = mode
-    bags = data.get('bags')
-    if not isinstance(bags, list) or not bags or not all(isinstance(b, str) and b for b in bags):
-        problems.add(('bags',), 'must be a list of bag files, rosbag2 folders or globs (relative to this file)')
-    else:
-        campaign.bags = list(bags)
-    campaign.sweep = _sweep(data.get('sweep', {}), problems)
+    if 'scenario' in read:
+        campaign.scenario = file.parent / read.get('scenario')
+    campaign.mode = read.get('mode', campaign.mode)
+    bags = read.get('bags')
+    if bags is not None:
+        if not bags or not all(isinstance(b, str) and b for b in bags):
+            problems.add(('bags',), f'must be {sections.CAMPAIGN.key("bags").what}')  # type: ignore[union-attr]
+        else:
+            campaign.bags = list(bags)
+    campaign.sweep = {str(key): values for key, raw in read.get('sweep', {}).items()
+                      if (values := _values(raw, ('sweep', key), problems))}
     seeds = _values(data['seeds'], ('seeds',), problems, integers=True) if 'seeds' in data else []
     if seeds and not all(isinstance(s, int) and 0 <= s < 2**64 for s in seeds):
         problems.add(('seeds',), 'seeds are integers from 0 to 2^64 - 1')
     elif seeds:
         campaign.seeds = [int(s) for s in seeds]
-    _design(data.get('design', 'grid'), campaign, problems)
-    if 'search' in data:
-        campaign.search = _search(data['search'], problems)
-    keep = data.get('keep', 'failed')
-    if keep not in ('all', 'failed', 'none'):
-        problems.add(('keep',), f'{keep!r} is not all, failed or none')
-    else:
-        campaign.keep = keep
-    timeout = data.get('timeout', 3600)
-    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout <= 86400:
-        problems.add(('timeout',), f'{timeout!r} must be seconds a job may take, above 0 and at most a day')
-    else:
-        campaign.timeout = float(timeout)
+    _design(read.get('design'), campaign, problems)
+    if 'search' in read:
+        campaign.search = _search(read.get('search'), problems)
+    campaign.keep = read.get('keep', campaign.keep)
+    campaign.timeout = read.get('timeout', campaign.timeout)
     if not problems.lines:
         _check_scenario(campaign, problems, seeded='seeds' in data)
     if problems.lines:
-        raise CampaignError('\n'.join(problems.lines))
+        raise CampaignError('\n'.join(problems.in_file_order()))
     return campaign
 
 
@@ -116,14 +108,6 @@ def _values(node: object, path: PathKey, problems: _Problems, *, integers: bool 
     return []
 
 
-def _sweep(node: object, problems: _Problems) -> dict[str, list[Any]]:
-    if not isinstance(node, dict):
-        problems.add(('sweep',), 'must map dotted scenario paths to values')
-        return {}
-    return {str(key): values for key, raw in node.items()
-            if (values := _values(raw, ('sweep', key), problems))}
-
-
 def _design(node: object, campaign: Campaign, problems: _Problems) -> None:
     if node == 'grid':
         return
@@ -139,35 +123,20 @@ def _design(node: object, campaign: Campaign, problems: _Problems) -> None:
 
 
 def _search(node: object, problems: _Problems) -> Search | None:
-    if not isinstance(node, dict):
-        problems.add(('search',), 'must be a mapping: parameter, low, high, tolerance, until, repeat')
+    reader = Reader(problems.add)
+    read = reader.read(sections.SEARCH, node, ('search',))
+    if read is None:
         return None
-    for key in sorted(set(node) - SEARCH_KEYS, key=str):
-        problems.add(('search', key), f'unknown key {key!r} (known: {", ".join(sorted(SEARCH_KEYS))})')
-    numbers = {k: node.get(k) for k in ('low', 'high', 'tolerance')}
-    bad = [k for k, v in numbers.items()
-           if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)]
-    for key in bad:
-        problems.add(('search', key), 'must be a finite number')
-    until = node.get('until')
-    parameter = node.get('parameter')
-    if not isinstance(parameter, str) or not parameter:
-        problems.add(('search', 'parameter'), 'must be a dotted scenario path')
-    repeat = node.get('repeat')
-    if repeat is not None and (isinstance(repeat, bool) or not isinstance(repeat, int)
-                               or not 1 <= repeat <= MAX_REPEAT):
-        problems.add(('search', 'repeat'), f'must be a whole number of samples per value, 1 to {MAX_REPEAT}')
-        repeat = None
-    if not (isinstance(until, dict) and isinstance(until.get('assertion'), str)
-            and until.get('state', 'passed') in ('passed', 'failed')):
-        problems.add(('search', 'until'), 'must be {assertion: ID, state: passed|failed}')
-    if bad or not isinstance(parameter, str) or not isinstance(until, dict):
+    until = reader.read(sections.UNTIL, read.get('until'), ('search', 'until')) if 'until' in read else None
+    if read.refused or any(k.required and k.name not in read for k in sections.SEARCH.keys) or until is None \
+            or 'assertion' not in until or 'state' not in until:
         return None
-    low, high, tolerance = (float(numbers[k]) for k in ('low', 'high', 'tolerance'))  # type: ignore[arg-type]
-    if not (low < high and tolerance > 0):
-        problems.add(('search',), 'needs low < high and a tolerance above 0')
+    low, high, tolerance = (float(read.get(k)) for k in ('low', 'high', 'tolerance'))
+    if not low < high:
+        problems.add(('search',), 'needs low < high')
         return None
-    return Search(parameter, low, high, tolerance, Until(str(until['assertion']), until.get('state', 'passed')), repeat)
+    return Search(read.get('parameter'), low, high, tolerance, Until(until.get('assertion'), until.get('state')),
+                  read.get('repeat'))
 
 
 def _check_scenario(campaign: Campaign, problems: _Problems, *, seeded: bool) -> None:

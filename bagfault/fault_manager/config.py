@@ -19,7 +19,6 @@ Every problem is reported through `problem(path, message)` with its place.
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -28,6 +27,8 @@ import re2  # type: ignore[import-untyped]
 
 from bagfault.fault_manager.correlation import CorrelationConfig, no_warning, parse_correlation
 from bagfault.fault_manager.model import severity_value, valid_code
+from bagfault.spec import sections
+from bagfault.spec.reader import Read, Reader
 
 Problem = Callable[[tuple[Any, ...], str], None]
 PREFIX = ('fault_manager',)
@@ -144,52 +145,34 @@ class FaultManagerConfig:
         return best
 
 
-THRESHOLD_KEYS = {'confirmation_threshold', 'healing_enabled', 'healing_threshold', 'auto_confirm_after_sec'}
-TOP_KEYS = THRESHOLD_KEYS | {'overrides', 'diagnostics', 'conditions', 'correlation', 'snapshots', 'clear'}
-
-
-def _thresholds(node: dict[str, Any], base: Thresholds, path: tuple[Any, ...], problem: Problem) -> Thresholds:
-    values: dict[str, Any] = {}
-    for key in ('confirmation_threshold', 'healing_threshold'):
-        if key in node:
-            value = node[key]
-            if isinstance(value, bool) or not isinstance(value, int):
-                problem((*path, key), f'{value!r} is not an integer')
-                continue
-            if key == 'confirmation_threshold':
-                values[key] = -1 if value == 0 else -abs(value)
-            else:
-                values[key] = abs(value)
-    if 'healing_enabled' in node:
-        if not isinstance(node['healing_enabled'], bool):
-            problem((*path, 'healing_enabled'), f"{node['healing_enabled']!r} is not true or false")
-        else:
-            values['healing_enabled'] = node['healing_enabled']
-    if 'auto_confirm_after_sec' in node:
-        value = node['auto_confirm_after_sec']
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
-            problem((*path, 'auto_confirm_after_sec'), f'{value!r} is not a number of seconds >= 0')
-        else:
-            values['auto_confirm_after_sec'] = float(value)
+def _thresholds(read: Read, base: Thresholds) -> Thresholds:
+    """The thresholds given in a section read by its declaration, over `base`; medkit's signs."""
+    values: dict[str, Any] = {k: read.get(k) for k in ('healing_enabled', 'auto_confirm_after_sec') if k in read.given
+                              and k in read}
+    if 'confirmation_threshold' in read.given and 'confirmation_threshold' in read:
+        value = read.get('confirmation_threshold')
+        values['confirmation_threshold'] = -1 if value == 0 else -abs(value)
+    if 'healing_threshold' in read.given and 'healing_threshold' in read:
+        values['healing_threshold'] = abs(read.get('healing_threshold'))
     return replace(base, **values)
 
 
-def _severity(node: dict[str, Any], path: tuple[Any, ...], problem: Problem, default: int = 2) -> int:
-    if 'severity' not in node:
-        return default
-    value = severity_value(node['severity'])
+def _severity(read: Read, path: tuple[Any, ...], problem: Problem) -> int:
+    value = severity_value(read.get('severity'))
     if value is None:
-        problem((*path, 'severity'), f"{node['severity']!r} is not INFO, WARN, ERROR, CRITICAL or 0-3")
-        return default
+        problem((*path, 'severity'), f"{read.get('severity')!r} is not INFO, WARN, ERROR, CRITICAL or 0-3")
+        return 2
     return value
 
 
-def _code(node: dict[str, Any], path: tuple[Any, ...], problem: Problem) -> str:
-    code = node.get('code')
-    if not isinstance(code, str) or not valid_code(code):
+def _code(read: Read, path: tuple[Any, ...], problem: Problem) -> str:
+    code = read.get('code')
+    if code is None:
+        return ''
+    if not valid_code(code):
         problem((*path, 'code'), f'{code!r} is not a fault code (1-128 of A-Z a-z 0-9 _ . -, no "..")')
         return ''
-    return code
+    return str(code)
 
 
 def _topics(value: object, path: tuple[Any, ...], problem: Problem) -> tuple[str, ...]:
@@ -202,23 +185,13 @@ def _topics(value: object, path: tuple[Any, ...], problem: Problem) -> tuple[str
 def parse_report(fault_id: str, injector_id: str, node: object, path: tuple[Any, ...],
                  problem: Problem) -> InjectedReport | None:
     """The `report:` block of a fault."""
-    if not isinstance(node, dict):
-        problem(path, 'must be a mapping {code, severity[, report_period, source]}')
+    read = Reader(problem).read(sections.REPORT, node, path)
+    if read is None:
         return None
-    for key in node:
-        if key not in {'code', 'severity', 'report_period', 'source'}:
-            problem((*path, key), f'unknown report key {key!r} (code, severity, report_period, source)')
-    code = _code(node, path, problem)
-    severity = _severity(node, path, problem)
-    period = node.get('report_period')
-    if period is not None and (isinstance(period, bool) or not isinstance(period, (int, float)) or period <= 0):
-        problem((*path, 'report_period'), f'{period!r} is not a number of seconds > 0')
-        period = None
-    source = node.get('source', f'/bagfault/{injector_id}')
-    if not isinstance(source, str) or not source:
-        problem((*path, 'source'), 'must be a non-empty source id')
-        source = f'/bagfault/{injector_id}'
-    return InjectedReport(fault_id, code, severity, source, float(period) if period else None)
+    code = _code(read, path, problem)
+    severity = _severity(read, path, problem)
+    return InjectedReport(fault_id, code, severity, read.get('source', f'/bagfault/{injector_id}'),
+                          read.get('report_period'))
 
 
 def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
@@ -227,126 +200,92 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
     config = FaultManagerConfig()
     if not section:
         return config
-    for key in section:
-        if key not in TOP_KEYS:
-            problem((*PREFIX, key), f'unknown fault_manager key {key!r} (known: {", ".join(sorted(TOP_KEYS))})')
-    config.thresholds = _thresholds(section, Thresholds(), PREFIX, problem)
-    for number, node in enumerate(section.get('overrides') or []):
-        where: tuple[Any, ...] = (*PREFIX, 'overrides', number)
-        if not isinstance(node, dict) or not isinstance(node.get('source'), str):
-            problem(where, 'must be a mapping with source and thresholds')
-            continue
-        for key in node:
-            if key not in THRESHOLD_KEYS | {'source'}:
-                problem((*where, key), f'unknown override key {key!r}')
-        config.overrides.append((node['source'], _thresholds(node, config.thresholds, where, problem)))
-    diagnostics = section.get('diagnostics')
-    if diagnostics is not None:
+    reader = Reader(problem, warn)
+    read = reader.read(sections.FAULT_MANAGER, section, PREFIX)
+    assert read is not None
+    config.thresholds = _thresholds(read, Thresholds())
+    for number, node in enumerate(read.get('overrides', [])):
+        override = reader.read(sections.OVERRIDE, node, (*PREFIX, 'overrides', number))
+        if override is not None and 'source' in override:
+            config.overrides.append((override.get('source'), _thresholds(override, config.thresholds)))
+    diagnostics = read.get('diagnostics')
+    if diagnostics is True:
+        config.diagnostics_topic = '/diagnostics'
+    elif isinstance(diagnostics, dict):
         path: tuple[Any, ...] = (*PREFIX, 'diagnostics')
-        if diagnostics is True:
-            config.diagnostics_topic = '/diagnostics'
-        elif isinstance(diagnostics, dict):
-            config.diagnostics_topic = str(diagnostics.get('topic', '/diagnostics'))
-            codes = diagnostics.get('codes', {}) or {}
-            if not isinstance(codes, dict):
-                problem((*path, 'codes'), 'must map status names to fault codes')
+        block = reader.read(sections.DIAGNOSTICS, diagnostics, path)
+        assert block is not None
+        config.diagnostics_topic = block.get('topic', '/diagnostics')
+        for name, code in block.get('codes', {}).items():
+            if not isinstance(code, str) or not valid_code(code):
+                problem((*path, 'codes', name), f'{code!r} is not a fault code')
             else:
-                for name, code in codes.items():
-                    if not isinstance(code, str) or not valid_code(code):
-                        problem((*path, 'codes', name), f'{code!r} is not a fault code')
-                    else:
-                        config.diagnostics_codes[str(name)] = code
-        elif diagnostics is not False:
-            problem(path, 'must be true or a mapping {topic, codes}')
-    for number, node in enumerate(section.get('conditions') or []):
-        condition = _condition(node, (*PREFIX, 'conditions', number), problem)
+                config.diagnostics_codes[str(name)] = code
+    elif diagnostics not in (None, False):
+        problem((*PREFIX, 'diagnostics'), 'must be true or a mapping {topic, codes}')
+    for number, node in enumerate(read.get('conditions', [])):
+        condition = _condition(node, (*PREFIX, 'conditions', number), reader)
         if condition:
             config.conditions.append(condition)
-    if 'correlation' in section:
-        node = section['correlation']
-        config.correlation = parse_correlation(node, (*PREFIX, 'correlation'), problem, warn or no_warning)
-    if 'snapshots' in section:
-        config.snapshots = _snapshots(section['snapshots'], (*PREFIX, 'snapshots'), problem, warn)
-    for number, node in enumerate(section.get('clear') or []):
+    if 'correlation' in read.given:
+        config.correlation = parse_correlation(section['correlation'], (*PREFIX, 'correlation'), problem,
+                                               warn or no_warning)
+    if 'snapshots' in read:
+        config.snapshots = _snapshots(read.get('snapshots'), (*PREFIX, 'snapshots'), reader)
+    for number, node in enumerate(read.get('clear', [])):
         path = (*PREFIX, 'clear', number)
-        if not isinstance(node, dict):
-            problem(path, 'must be a mapping {code, at}')
+        clear = reader.read(sections.CLEAR, node, path)
+        if clear is None:
             continue
-        code = _code(node, path, problem)
-        at = node.get('at')
-        if isinstance(at, bool) or not isinstance(at, (int, float)) or at < 0:
-            problem((*path, 'at'), f'{at!r} is not a number of seconds >= 0')
-            continue
-        config.clears.append(Clear(code, float(at), bool(node.get('skip_correlation_auto_clear', False))))
+        code = _code(clear, path, problem)
+        if 'at' in clear and code:
+            config.clears.append(Clear(code, clear.get('at'), clear.get('skip_correlation_auto_clear')))
     return config
 
 
-def _condition(node: object, path: tuple[Any, ...], problem: Problem) -> Condition | None:
-    if not isinstance(node, dict):
-        problem(path, 'must be a mapping {topic, when, code, severity}')
+def _condition(node: object, path: tuple[Any, ...], reader: Reader) -> Condition | None:
+    read = reader.read(sections.CONDITION, node, path)
+    if read is None or 'when' not in read or 'topic' not in read:
         return None
-    topic, when = node.get('topic'), node.get('when')
-    if not isinstance(topic, str) or not isinstance(when, dict) or not isinstance(when.get('field'), str):
-        problem(path, 'needs topic and when: {field, above|below|outside|not_finite}')
+    when = reader.read(sections.WHEN, read.get('when'), (*path, 'when'))
+    if when is None or 'field' not in when:
         return None
-    tests = [k for k in ('above', 'below', 'outside', 'not_finite') if k in when]
+    tests = [k for k in ('above', 'below', 'outside', 'not_finite') if k in when.given]
     if len(tests) != 1:
-        problem((*path, 'when'), 'give exactly one of above, below, outside, not_finite')
+        reader.problem((*path, 'when'), 'give exactly one of above, below, outside, not_finite')
         return None
-    code = _code(node, path, problem)
-    severity = _severity(node, path, problem)
+    if tests[0] not in when:
+        return None
+    code = _code(read, path, reader.problem)
+    severity = _severity(read, path, reader.problem)
     kwargs: dict[str, Any] = {}
-    value = when[tests[0]]
+    value = when.get(tests[0])
     if tests[0] == 'outside':
-        if not (isinstance(value, list) and len(value) == 2 and all(isinstance(v, (int, float)) for v in value)):
-            problem((*path, 'when', 'outside'), 'must be [low, high]')
+        if not (len(value) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            reader.problem((*path, 'when', 'outside'), 'must be [low, high]')
             return None
         kwargs['outside'] = (float(value[0]), float(value[1]))
-    elif tests[0] == 'not_finite':
-        kwargs['not_finite'] = bool(value)
     else:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            problem((*path, 'when', tests[0]), f'{value!r} is not a number')
-            return None
-        kwargs[tests[0]] = float(value)
-    source = str(node.get('source', f'/bagfault/conditions{topic}'))
-    return Condition(topic, when['field'], code, severity, source, **kwargs) if code else None
+        kwargs[tests[0]] = value
+    topic = read.get('topic')
+    source = read.get('source', f'/bagfault/conditions{topic}')
+    return Condition(topic, when.get('field'), code, severity, source, **kwargs) if code else None
 
 
-def _snapshots(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem | None = None) -> Snapshots:
-    if not isinstance(node, dict):
-        problem(path, 'must be a mapping')
+def _snapshots(node: object, path: tuple[Any, ...], reader: Reader) -> Snapshots:
+    read = reader.read(sections.SNAPSHOTS, node, path)
+    if read is None:
         return Snapshots()
-    values: dict[str, Any] = {}
-    known = {'enabled', 'default_topics', 'fault_specific', 'patterns', 'duration_sec', 'duration_after_sec',
-             'recapture_cooldown_sec'}
-    for key in node:
-        if key not in known:
-            problem((*path, key), f'unknown snapshots key {key!r}')
-    if 'enabled' in node:  # a ROS parameter in medkit (declare_parameter<bool>): rcl's YAML keeps 'false' a string
-        if isinstance(node['enabled'], bool):
-            values['enabled'] = node['enabled']
-        else:
-            problem((*path, 'enabled'), f"{node['enabled']!r} must be true or false (medkit declares "
-                                        'snapshots.enabled as a bool parameter; a quoted value is a string there)')
-    if 'default_topics' in node:
-        values['default_topics'] = _topics(node['default_topics'], (*path, 'default_topics'), problem)
-    if 'fault_specific' in node:
-        specific = node['fault_specific']
-        if isinstance(specific, dict):
-            values['fault_specific'] = {str(code): _topics(topics, (*path, 'fault_specific', code), problem)
-                                        for code, topics in specific.items()}
-        else:
-            problem((*path, 'fault_specific'), 'must map fault codes to topic lists')
-    if 'patterns' in node:
-        values['patterns'] = _snapshot_patterns(node['patterns'] or [], (*path, 'patterns'), problem, warn)
-    for key in ('duration_sec', 'duration_after_sec', 'recapture_cooldown_sec'):
-        if key in node:
-            value = node[key]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
-                problem((*path, key), f'{value!r} is not a number of seconds >= 0')
-            else:
-                values[key] = float(value)
+    values: dict[str, Any] = {k: read.get(k) for k in ('enabled', 'duration_sec', 'duration_after_sec',
+                                                        'recapture_cooldown_sec') if k in read}
+    if 'default_topics' in read:
+        values['default_topics'] = _topics(read.get('default_topics'), (*path, 'default_topics'), reader.problem)
+    if 'fault_specific' in read:
+        values['fault_specific'] = {str(code): _topics(topics, (*path, 'fault_specific', code), reader.problem)
+                                    for code, topics in read.get('fault_specific').items()}
+    if 'patterns' in read.given:
+        values['patterns'] = _snapshot_patterns(read.get('patterns') or [], (*path, 'patterns'), reader.problem,
+                                                reader.warn)
     return Snapshots(**values)
 
 

@@ -30,14 +30,22 @@ def schema_dict(type_name: str | None = None) -> dict[str, Any]:
     }
 
 
+def _bound(value: float) -> str:
+    """A bound as written: 2**64 - 1 whole, 1e7 short."""
+    return str(value) if isinstance(value, int) else f'{value:g}'
+
+
 def _limits(minimum: float | None, maximum: float | None, choices: Sequence[str], *, required: bool = False,
-            markdown: bool = False) -> list[str]:
-    """A key's range, choices and whether it is required, as the text tables or the markdown tables say it."""
+            markdown: bool = False, exclusive: bool = False) -> list[str]:
+    """A key's range, choices and whether it is required, as the text tables or the markdown tables say it
+    (`exclusive`: the minimum itself is refused)."""
     out = []
-    if minimum is not None:
-        out.append(f'{"≥" if markdown else "min"} {minimum:g}')
+    if minimum is not None and exclusive:
+        out.append(f'> {_bound(minimum)}' if markdown else f'above {_bound(minimum)}')
+    elif minimum is not None:
+        out.append(f'{"≥" if markdown else "min"} {_bound(minimum)}')
     if maximum is not None:
-        out.append(f'{"≤" if markdown else "max"} {maximum:g}')
+        out.append(f'{"≤" if markdown else "max"} {_bound(maximum)}')
     if choices:
         out.append(' \\| '.join(f'`{c}`' for c in choices) if markdown else 'one of ' + ' | '.join(choices))
     if required:
@@ -91,7 +99,7 @@ def render_markdown() -> str:
     for section in (*SCENARIO_SECTIONS, *CAMPAIGN_SECTIONS):
         lines += [f'### `{section.where}`', '', section.description, '', HEADER]
         for key in section.keys:
-            limits = _limits(key.minimum, key.maximum, key.choices, markdown=True)
+            limits = _limits(key.minimum, key.maximum, key.choices, markdown=True, exclusive=key.exclusive)
             unit = f' ({key.unit})' if key.unit else ''
             default = '' if key.default is None else f'`{key.default}`'
             lines.append(f'| `{key.name}` | {key.type} | {"yes" if key.required else ""} | {default} | '
@@ -127,7 +135,7 @@ KEY_JSON: dict[str, dict[str, Any]] = {
     'mapping': {'type': 'object'}, 'any': {},
     'string_or_list': {'anyOf': [{'type': 'string'}, {'type': 'array', 'items': {'type': 'string'}}]},
 }
-OPEN_SECTIONS = ('injector', 'assertion', 'fault_manager')  # their keys depend on a type, or are medkit's own
+OPEN_SECTIONS = ('injector', 'assertion')  # their keys depend on a type
 
 
 def _field_json(field: dict[str, Any]) -> dict[str, Any]:
@@ -151,7 +159,7 @@ def _key_json(key: Any, ref: Callable[[str], dict[str, Any]]) -> dict[str, Any]:
     text = key.description + (f' ({key.unit})' if key.unit else '')
     out['description'] = text
     if key.minimum is not None:
-        out['minimum'] = key.minimum
+        out['exclusiveMinimum' if key.exclusive else 'minimum'] = key.minimum
     if key.maximum is not None:
         out['maximum'] = key.maximum
     if key.choices:
@@ -229,7 +237,7 @@ def render_sections() -> str:
     for section in (*SCENARIO_SECTIONS, *CAMPAIGN_SECTIONS):
         lines.append(f'{section.where}: {section.description}')
         for key in section.keys:
-            limits = _limits(key.minimum, key.maximum, key.choices, required=key.required)
+            limits = _limits(key.minimum, key.maximum, key.choices, required=key.required, exclusive=key.exclusive)
             extra = f' [{", ".join(limits)}]' if limits else ''
             unit = f' ({key.unit})' if key.unit else ''
             default = '' if key.default is None else f' (default {key.default})'

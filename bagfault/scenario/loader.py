@@ -10,26 +10,18 @@ then checks values against the injector and assertion schemas.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
 from bagfault.errors import Problem, ScenarioError, one_line
+from bagfault.spec import sections
 from bagfault.spec.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
+from bagfault.spec.reader import Reader
 from bagfault.spec.system import parse_system
 from bagfault.spec.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
-from bagfault.yamlcpp import as_bool, as_double, as_int
 
-TOP_KEYS = {'injector', 'injectors', 'faults', 'assertions', 'seed', 'name', 'description', 'fault_manager',
-            'msg_paths', 'system_under_test', 'bags'}
-INJECTOR_KEYS = {'id', 'type', 'topic', 'input_topic', 'output_topic', 'qos_depth', 'trigger_service',
-                 'proxy_service', 'target_service', 'seed'}
-ENDPOINT_KEYS = {'input_topic', 'output_topic', 'qos_depth'}
-SERVICE_KEYS = {'proxy_service', 'target_service'}
-FAULT_KEYS = {'id', 'injector_id', 'active_on_startup', 'active', 'start', 'duration', 'config',
-              'repeat', 'probability_per_second', 'hold', 'after', 'report'}
-SEED_MAX = 2**64 - 1
-MAX_SECONDS = 1e7  # any time in a scenario (about 115 days): far beyond a bag, far below int64 nanoseconds
+ENDPOINT_KEYS = {k.name for k in sections.TOPIC.keys}
+SERVICE_KEYS = {k.name for k in sections.TRIGGER_SERVICE.keys}
 
 
 class _Collector:
@@ -49,6 +41,10 @@ class _Collector:
     def warn(self, path: PathKey, message: str) -> None:
         """Something ros2_fault_injection accepts (and ignores or reads its own way); an error with --strict."""
         self.warnings.append(Problem(self.file, self.located.where(path), format_path(path), message))
+
+    def reader(self) -> Reader:
+        """The section reader reporting here, with the scalars as the file writes them."""
+        return Reader(self.add, self.warn, self.located.raw_text)
 
 
 def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = False) -> Scenario:
@@ -84,12 +80,12 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
     scenario = _build(located, out)
     base = source.parent if source is not None else None
     root = located.data if isinstance(located.data, dict) else {}
-    if 'system_under_test' in root:
+    if isinstance(root.get('system_under_test'), dict):  # (not a mapping: told by the top-level read)
         scenario.system = parse_system(root['system_under_test'], ('system_under_test',), out.add, base)
-    if 'bags' in root:
-        bags = root['bags']
-        if not isinstance(bags, list) or not all(isinstance(b, str) and b for b in bags):
-            out.add(('bags',), 'must be a list of bags (files or rosbag2 folders, relative to this file)')
+    bags = root.get('bags')
+    if isinstance(bags, list):
+        if not all(isinstance(b, str) and b for b in bags):
+            out.add(('bags',), f'must be {sections.SCENARIO.key("bags").what}')  # type: ignore[union-attr]
         else:
             scenario.bags = [base / b if base is not None else Path(b) for b in bags]
     scenario.source = source
@@ -115,121 +111,38 @@ def _position(problem: Any) -> tuple[int, int]:
 
 
 def _build(located: LocatedYaml, out: _Collector) -> Scenario:
-    root = located.data
     scenario = Scenario([], [], [])
-    if not isinstance(root, dict):
+    if not isinstance(located.data, dict):
         out.add((), 'a scenario must be a YAML mapping with injectors and faults')
         return scenario
-    for key in root:
-        if key not in TOP_KEYS:
-            out.warn((key,), f'unknown top-level key {key!r} is ignored (known: {", ".join(sorted(TOP_KEYS))})')
-
-    if 'injectors' in root and 'injector' in root:
+    reader = out.reader()
+    top = reader.read(sections.SCENARIO, located.data, ())
+    assert top is not None
+    if 'injectors' in top.given and 'injector' in top.given:
         out.warn(('injector',), "both 'injector' and 'injectors' are given; 'injectors' is used, as "
                                 'ros2_fault_injection does')
-    if 'injectors' in root:
-        items = root['injectors']
-        if not isinstance(items, list):
-            out.add(('injectors',), 'must be a list of injectors')
-        else:
-            scenario.injectors = [x for i, n in enumerate(items) if (x := _injector(n, ('injectors', i), out))]
-    elif 'injector' in root:
-        if not isinstance(root['injector'], dict):
-            out.add(('injector',), 'must be a mapping')
-        elif injector := _injector(root['injector'], ('injector',), out):
+    if 'injectors' in top.given:
+        scenario.injectors = [x for i, n in enumerate(top.get('injectors', []))
+                              if (x := _injector(n, ('injectors', i), out))]
+    elif 'injector' in top.given:
+        if 'injector' in top and (injector := _injector(top.get('injector'), ('injector',), out)):
             scenario.injectors = [injector]
     else:
         out.add((), "scenario has no 'injector' or 'injectors' block")
-
-    faults = root.get('faults', [])
-    if faults is None:
-        faults = []
-    if not isinstance(faults, list):
-        out.add(('faults',), 'must be a list of faults')
-    else:
-        scenario.faults = [f for i, n in enumerate(faults) if (f := _fault(n, ('faults', i), out, located))]
-
-    assertions = root.get('assertions', [])
-    if assertions is None:
-        assertions = []
-    if not isinstance(assertions, list):
-        out.add(('assertions',), 'must be a list of assertions')
-    else:
-        scenario.assertions = [
-            a for i, n in enumerate(assertions) if (a := _assertion(n, ('assertions', i), out))
-        ]
-
-    if 'seed' in root:
-        scenario.seed = _seed(root['seed'], ('seed',), out)
-    if 'msg_paths' in root:
-        paths = root['msg_paths']
-        if not isinstance(paths, list) or not all(isinstance(p, str) and p for p in paths):
-            out.add(('msg_paths',), 'must be a list of folders holding <package>/msg/<Name>.msg or .idl files')
+    scenario.faults = [f for i, n in enumerate(top.get('faults', [])) if (f := _fault(n, ('faults', i), out))]
+    scenario.assertions = [a for i, n in enumerate(top.get('assertions', []))
+                           if (a := _assertion(n, ('assertions', i), out))]
+    if 'seed' in top:
+        scenario.seed = top.get('seed')
+    if 'msg_paths' in top:
+        paths = top.get('msg_paths')
+        if not all(isinstance(p, str) and p for p in paths):
+            out.add(('msg_paths',), f'must be {sections.SCENARIO.key("msg_paths").what}')  # type: ignore[union-attr]
         else:
             scenario.msg_paths = [Path(p) for p in paths]
-    if 'fault_manager' in root:
-        section = root['fault_manager']
-        if section is not None and not isinstance(section, dict):
-            out.add(('fault_manager',), 'must be a mapping')
-        else:
-            scenario.fault_manager = section or {}
+    if 'fault_manager' in top.given:
+        scenario.fault_manager = top.get('fault_manager', {})
     return scenario
-
-
-def _text(node: dict[str, Any], key: str, path: PathKey, out: _Collector, *, required: bool = True) -> str | None:
-    if key not in node or node[key] is None:
-        if required:
-            out.add(path, f'missing required key {key!r}')
-        return None
-    value = node[key]
-    if isinstance(value, (dict, list)):
-        out.add((*path, key), f'{value!r} is not a string')
-        return None
-    text = value if isinstance(value, str) else out.located.raw_text((*path, key), value)  # as written: `id: on`
-    if not text:
-        out.add((*path, key), 'must not be empty')
-        return None
-    return text
-
-
-def seconds(value: object, path: PathKey, out: _Collector, *, positive: bool = False,
-            minimum: float = 0.0) -> float | None:
-    """A time in seconds as the anchor reads it (`node.as<double>()`, yamlcpp.as_double of the scalar as written:
-    a quoted number counts, `1_000` and `0x10` do not), finite, 0..MAX_SECONDS."""
-    number: float | None = None
-    if isinstance(value, (int, float, str)) and not isinstance(value, bool):
-        number = as_double(out.located.raw_text(path, value))
-    if number is None:
-        out.add(path, f'{value!r} is not a number of seconds')
-        return None
-    if not math.isfinite(number) or number > MAX_SECONDS:
-        out.add(path, f'{value} is not a time bagfault can schedule (0 to {MAX_SECONDS:g} s)')
-        return None
-    if number < minimum or (positive and number <= 0):
-        if positive:
-            out.add(path, f'{value} must be greater than 0' if minimum == 0 else f'{value} is below the minimum '
-                                                                                f'{minimum:g} s')
-        else:
-            out.add(path, f'{value} is negative')
-        return None
-    return number
-
-
-def _bool(value: object, path: PathKey, out: _Collector) -> bool:
-    """A boolean as the anchor reads it, with yaml-cpp's `as<bool>()` (y/n, yes/no, true/false, on/off, quoted
-    or not)."""
-    read = as_bool(value)
-    if read is None:
-        out.add(path, f'{value!r} is not true or false (nor yes/no, y/n, on/off, as yaml-cpp reads booleans)')
-        return False
-    return read
-
-
-def _seed(value: object, path: PathKey, out: _Collector) -> int | None:
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= SEED_MAX:
-        out.add(path, f'{value!r} is not an integer seed from 0 to {SEED_MAX}')
-        return None
-    return value
 
 
 def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | None:
@@ -238,96 +151,69 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
     if not isinstance(node, dict):
         out.add(path, 'an injector must be a mapping')
         return None
-    injector_id = _text(node, 'id', path, out)
-    injector_type = _text(node, 'type', path, out)
-    spec = InjectorSpec(id=injector_id or '', type=injector_type or '', path=path)
-    cls = get_injector_type(spec.type) if injector_type else None
+    type_name = node.get('type')
+    cls = get_injector_type(type_name) if isinstance(type_name, str) and type_name else None
     option_keys = {f.key for f in cls.options} if cls else set()
+    read = out.reader().read(sections.INJECTOR, node, path, extra=option_keys,
+                             judge_unknown=cls is not None or not type_name)
+    assert read is not None
+    spec = InjectorSpec(id=read.get('id', ''), type=read.get('type', ''), path=path)
+    spec.options = {key: node[key] for key in node if key in option_keys}
+    if 'seed' in read:
+        spec.seed = read.get('seed')
 
-    for key in node:
-        if key not in INJECTOR_KEYS and key not in option_keys:
-            if cls is None and injector_type:
-                continue  # unknown type: its keys cannot be judged; the type itself is reported
-            known = sorted(INJECTOR_KEYS | option_keys)
-            out.warn((*path, key), f'unknown injector key {key!r} is ignored (known: {", ".join(known)})')
-        elif key in option_keys:
-            spec.options[key] = node[key]
-
-    if 'seed' in node:
-        spec.seed = _seed(node['seed'], (*path, 'seed'), out)
-
-    service_node, service_path = node, path
-    if 'trigger_service' in node:
-        service_node, service_path = node['trigger_service'], (*path, 'trigger_service')
-        if not isinstance(service_node, dict):
-            out.add(service_path, 'must be a mapping with proxy_service and target_service')
-            return spec
-    is_service = 'trigger_service' in node or any(k in node for k in SERVICE_KEYS) or spec.type == 'trigger_service'
-    if is_service:
-        spec.proxy_service = _text(service_node, 'proxy_service', service_path, out) or ''
-        spec.target_service = _text(service_node, 'target_service', service_path, out) or ''
+    if 'trigger_service' in read.given:
+        service = out.reader().read(sections.TRIGGER_SERVICE, read.get('trigger_service'),
+                                    (*path, 'trigger_service'))
+        if service is not None:
+            spec.proxy_service = service.get('proxy_service', '')
+            spec.target_service = service.get('target_service', '')
+        return spec
+    if any(k in node for k in SERVICE_KEYS) or spec.type == 'trigger_service':
+        for key in sorted(SERVICE_KEYS):
+            if key not in read.given:
+                out.add(path, f'missing required key {key!r}')
+        spec.proxy_service = read.get('proxy_service', '')
+        spec.target_service = read.get('target_service', '')
         return spec
 
-    endpoint, endpoint_path = node, path
-    if 'topic' in node:
-        endpoint, endpoint_path = node['topic'], (*path, 'topic')
-        if not isinstance(endpoint, dict):
-            out.add(endpoint_path, 'must be a mapping with input_topic and output_topic')
+    endpoint, endpoint_path = read, path
+    if 'topic' in read.given:
+        nested = out.reader().read(sections.TOPIC, read.get('topic'), (*path, 'topic'))
+        if nested is None:
             return spec
-        for key in endpoint:
-            if key not in ENDPOINT_KEYS:
-                out.warn((*endpoint_path, key),
-                         f'unknown topic key {key!r} is ignored (known: {", ".join(sorted(ENDPOINT_KEYS))})')
-        for key in sorted(ENDPOINT_KEYS & set(node)):
+        endpoint, endpoint_path = nested, (*path, 'topic')
+        for key in sorted(ENDPOINT_KEYS & read.given):
             out.warn((*path, key), f"{key!r} is given here and in 'topic'; the one in 'topic' is used, "
                                    'as ros2_fault_injection does')
-    spec.input_topic = _topic(endpoint, 'input_topic', endpoint_path, out)
-    spec.output_topic = _topic(endpoint, 'output_topic', endpoint_path, out)
-    if 'qos_depth' in endpoint:  # the anchor: as<std::size_t>() (a quoted number counts, the base follows 0x/0)
-        depth = endpoint['qos_depth']
-        read = None if isinstance(depth, (bool, dict, list)) else \
-            as_int(out.located.raw_text((*endpoint_path, 'qos_depth'), depth), unsigned=True)
-        if read is None or read <= 0:
-            out.add((*endpoint_path, 'qos_depth'), f'{depth!r} is not a positive integer')
-        else:
-            spec.qos_depth = read
+    for key in ('input_topic', 'output_topic'):  # a name as written: ROS 1 and test bags have names without '/'
+        if key not in endpoint.given:
+            out.add(endpoint_path, f'missing required key {key!r}')
+    spec.input_topic = endpoint.get('input_topic')
+    spec.output_topic = endpoint.get('output_topic')
+    spec.qos_depth = endpoint.get('qos_depth', spec.qos_depth)
     return spec
 
 
-def _topic(node: dict[str, Any], key: str, path: PathKey, out: _Collector) -> str | None:
-    """A topic name as written: a bag may hold names without the leading slash (ROS 1 bags, test bags)."""
-    return _text(node, key, path, out)
-
-
-def _fault(node: object, path: PathKey, out: _Collector, located: LocatedYaml) -> FaultSpec | None:
+def _fault(node: object, path: PathKey, out: _Collector) -> FaultSpec | None:
     if not isinstance(node, dict):
         out.add(path, 'a fault must be a mapping')
         return None
-    fault = FaultSpec(id=_text(node, 'id', path, out) or '', injector_id=_text(node, 'injector_id', path, out) or '',
-                      path=path)
-    for key in node:
-        if key not in FAULT_KEYS:
-            out.warn((*path, key), f'unknown fault key {key!r} is ignored (known: {", ".join(sorted(FAULT_KEYS))})')
-    if 'active_on_startup' in node:
-        fault.active_on_startup = _bool(node['active_on_startup'], (*path, 'active_on_startup'), out)
-    if 'active' in node:  # deprecated alias kept by the anchor
-        fault.active_on_startup = fault.active_on_startup or _bool(node['active'], (*path, 'active'), out)
-    for key in ('start', 'duration'):
-        if key in node and node[key] is not None:
-            setattr(fault, key, seconds(node[key], (*path, key), out))
-    config = node.get('config', {})
-    if config is None:
-        config = {}
-    if not isinstance(config, dict):
-        out.add((*path, 'config'), 'must be a mapping of config keys')
-    else:
+    read = out.reader().read(sections.FAULT, node, path)
+    assert read is not None
+    fault = FaultSpec(id=read.get('id', ''), injector_id=read.get('injector_id', ''), path=path)
+    fault.active_on_startup = read.get('active_on_startup', False) or read.get('active', False)
+    fault.start = read.get('start')
+    fault.duration = read.get('duration')
+    if 'config' in read:
+        config = read.get('config')
         fault.config = dict(config)
-        fault.config_text = {str(k): located.raw_text((*path, 'config', k), v) for k, v in config.items()}
+        fault.config_text = {str(k): out.located.raw_text((*path, 'config', k), v) for k, v in config.items()}
     from bagfault.scenario.schedules import parse_extended_schedule  # noqa: PLC0415
 
-    parse_extended_schedule(fault, node, path, out)
-    if 'report' in node:
-        fault.report = node['report']
+    parse_extended_schedule(fault, node, read, path, out)
+    if 'report' in read:
+        fault.report = read.get('report')
     return fault
 
 
@@ -335,10 +221,10 @@ def _assertion(node: object, path: PathKey, out: _Collector) -> AssertionSpec | 
     if not isinstance(node, dict):
         out.add(path, 'an assertion must be a mapping')
         return None
-    spec = AssertionSpec(id=_text(node, 'id', path, out) or '', type=_text(node, 'type', path, out) or '', path=path)
-    if 'within' in node and node['within'] is not None:
-        spec.within = seconds(node['within'], (*path, 'within'), out)
-    if 'duration' in node and node['duration'] is not None:  # parsed and checked by the anchor, used by nothing
-        spec.duration = seconds(node['duration'], (*path, 'duration'), out)
+    read = out.reader().read(sections.ASSERTION, node, path)
+    assert read is not None
+    spec = AssertionSpec(id=read.get('id', ''), type=read.get('type', ''), path=path)
+    spec.within = read.get('within')
+    spec.duration = read.get('duration')  # parsed and checked by the anchor, used by nothing
     spec.params = {k: v for k, v in node.items() if k not in {'id', 'type', 'within', 'duration'}}
     return spec

@@ -1,7 +1,7 @@
 """Every key of every section of a scenario and a campaign file, declared once.
 
 A `Key` says a key's type, unit, range, default, whether it is required
-and what it means. `bagfault schema` prints these tables, and
+and what it means; spec/reader.py reads every section by these declarations. `bagfault schema` prints these tables, and
 `bagfault schema --json-schema` turns them (with the injector and assertion
 types' own `ConfigField`s) into a JSON Schema an editor's YAML language
 server checks and completes files with. The parsers' own key sets are
@@ -14,6 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from bagfault.units import MAX_SECONDS
+
+Reads = Literal['anchor', 'yaml']
+Unknown = Literal['warn', 'error', 'ignore']
 KeyType = Literal['string', 'number', 'integer', 'boolean', 'list', 'mapping', 'string_or_list', 'seconds', 'any']
 
 
@@ -31,6 +35,8 @@ class Key:
     maximum: float | None = None
     choices: tuple[str, ...] = ()
     section: str = ''  # the section its value is (a mapping, or a list of mappings)
+    what: str = ''  # what a valid value is, for messages ('a list of topics')
+    exclusive: bool = False  # the minimum itself is refused (a period must be above 0)
 
 
 @dataclass(frozen=True)
@@ -41,6 +47,9 @@ class Section:
     where: str
     description: str
     keys: tuple[Key, ...] = field(default_factory=tuple)
+    reads: Reads = 'yaml'  # how scalars are read (spec/reader.py)
+    unknown: Unknown = 'error'  # what an undeclared key is
+    noun: str = ''  # 'unknown fault key ...'
 
     def key(self, name: str) -> Key | None:
         """The declaration of one key."""
@@ -53,17 +62,21 @@ SCENARIO = Section('scenario', '(top level)', 'A scenario file: injectors, fault
     Key('description', 'string', 'Free text.'),
     Key('seed', 'integer', 'Seed of every random draw; `--seed` overrides.', default=0, minimum=0,
         maximum=2**64 - 1),
-    Key('bags', 'list', 'Bags the scenario is meant for, relative to the file (pytest and `test` play them).'),
-    Key('msg_paths', 'list', 'Folders of .msg definitions for types the bags do not define, relative to the file.'),
-    Key('injectors', 'list', "The injectors (the anchor's list layouts).", section='injector'),
+    Key('bags', 'list', 'Bags the scenario is meant for, relative to the file (pytest and `test` play them).',
+        what='a list of bags (files or rosbag2 folders, relative to this file)'),
+    Key('msg_paths', 'list', 'Folders of .msg definitions for types the bags do not define, relative to the file.',
+        what='a list of folders holding <package>/msg/<Name>.msg or .idl files'),
+    Key('injectors', 'list', "The injectors (the anchor's list layouts).", section='injector',
+        what='a list of injectors'),
     Key('injector', 'mapping', "One injector (the anchor's single layout); `injectors` wins when both are given.",
         section='injector'),
-    Key('faults', 'list', 'The faults.', section='fault'),
+    Key('faults', 'list', 'The faults.', section='fault', what='a list of faults'),
     Key('assertions', 'list', "The verdicts; the keys of each type are in the assertion types' tables.",
-        section='assertion'),
+        section='assertion', what='a list of assertions'),
     Key('fault_manager', 'mapping', "ros2_medkit's fault manager on bag time.", section='fault_manager'),
-    Key('system_under_test', 'mapping', 'What `bagfault test` starts and judges.', section='system_under_test'),
-))
+    Key('system_under_test', 'mapping', 'What `bagfault test` starts and judges.', section='system_under_test',
+        what='a mapping with at least a command'),
+), reads='anchor', unknown='warn', noun='top-level')
 INJECTOR = Section('injector', 'injectors[]', "Which topic (or service), which type; plus its type's options.", (
     Key('id', 'string', 'Unique name; faults refer to it.', required=True),
     Key('type', 'string', 'An injector type (`bagfault schema` lists them) or one a plugin adds.', required=True),
@@ -73,104 +86,180 @@ INJECTOR = Section('injector', 'injectors[]', "Which topic (or service), which t
         minimum=1),
     Key('topic', 'mapping', "The anchor's nested layout of input_topic, output_topic and qos_depth.",
         section='topic'),
-    Key('trigger_service', 'mapping', "The anchor's nested layout of a service injector."),
+    Key('trigger_service', 'mapping', "The anchor's nested layout of a service injector.",
+        section='trigger_service'),
     Key('proxy_service', 'string', 'A service injector: the service bagfault offers.'),
     Key('target_service', 'string', 'A service injector: the service it forwards to.'),
-    Key('seed', 'integer', 'Accepted and ignored, as the anchor does (the scenario seed is used).'),
-))
+    Key('seed', 'integer', 'Accepted and ignored, as the anchor does (the scenario seed is used).', minimum=0,
+        maximum=2**64 - 1),
+), reads='anchor', unknown='warn', noun='injector')
+TRIGGER_SERVICE = Section('trigger_service', 'injectors[].trigger_service', "The anchor's nested service block.", (
+    Key('proxy_service', 'string', 'The service bagfault offers.', required=True),
+    Key('target_service', 'string', 'The service it forwards to.', required=True),
+), reads='anchor', unknown='warn', noun='trigger_service')
 TOPIC = Section('topic', 'injectors[].topic', "The anchor's nested topic block.", (
     Key('input_topic', 'string', 'The topic read.'),
     Key('output_topic', 'string', 'Where the faulty stream goes.'),
     Key('qos_depth', 'integer', 'History depth in live mode.', default=10, minimum=1),
-))
+), reads='anchor', unknown='warn', noun='topic')
 FAULT = Section('fault', 'faults[]', "What happens to an injector's stream, and when.", (
     Key('id', 'string', 'Unique name.', required=True),
     Key('injector_id', 'string', 'The injector it acts on.', required=True),
     Key('active_on_startup', 'boolean', 'Active from time zero (until `duration`).', default=False),
     Key('active', 'boolean', "The anchor's older spelling of active_on_startup."),
-    Key('start', 'seconds', 'Active from this time.', unit=SECONDS, minimum=0, maximum=1e7),
+    Key('start', 'seconds', 'Active from this time.', unit=SECONDS, minimum=0, maximum=MAX_SECONDS),
     Key('duration', 'seconds', 'Active this long (from `start`, or from zero when active on startup).',
-        unit='seconds', minimum=0, maximum=1e7),
-    Key('config', 'mapping', "The fault config keys of its injector's type."),
+        unit='seconds', minimum=0, maximum=MAX_SECONDS),
+    Key('config', 'mapping', "The fault config keys of its injector's type.", what='a mapping of config keys'),
     Key('repeat', 'mapping', 'On for `on` seconds every `period` seconds.', section='repeat'),
     Key('probability_per_second', 'number', 'Random activations per second (each `hold` long).', unit='1/s',
-        minimum=0, maximum=100),
-    Key('hold', 'seconds', 'How long a random activation lasts.', unit='seconds', minimum=0.001),
+        minimum=0, exclusive=True, maximum=100),
+    Key('hold', 'seconds', 'How long a random activation lasts.', unit='seconds', minimum=0.001, maximum=MAX_SECONDS),
     Key('after', 'mapping', 'Starts `delay` seconds after another fault does.', section='after'),
-    Key('report', 'any', 'Accepted and ignored, as the anchor does.'),
-))
+    Key('report', 'mapping', 'A fault manager report while it is active (the anchor ignores it).', section='report'),
+), reads='anchor', unknown='warn', noun='fault')
 REPEAT = Section('repeat', 'faults[].repeat', 'An intermittent fault.', (
-    Key('period', 'seconds', 'Time from one activation to the next.', unit='seconds', required=True, minimum=0.01),
-    Key('on', 'seconds', 'How long each activation lasts.', unit='seconds', required=True, minimum=0.001),
-))
+    Key('period', 'seconds', 'Time from one activation to the next.', unit='seconds', required=True, minimum=0.01,
+        maximum=MAX_SECONDS),
+    Key('on', 'seconds', 'How long each activation lasts.', unit='seconds', required=True, minimum=0.001,
+        maximum=MAX_SECONDS),
+), reads='anchor')
 AFTER = Section('after', 'faults[].after', 'A fault that follows another.', (
     Key('fault', 'string', 'The fault whose activation starts this one.', required=True),
-    Key('delay', 'seconds', 'Time after that activation.', unit='seconds', default=0.0, minimum=0, maximum=1e7),
-))
+    Key('delay', 'seconds', 'Time after that activation.', unit='seconds', default=0.0, minimum=0, maximum=MAX_SECONDS),
+), reads='anchor')
 ASSERTION = Section('assertion', 'assertions[]', 'A verdict; each type adds its own keys.', (
     Key('id', 'string', 'Unique name.', required=True),
     Key('type', 'string', "An assertion type (see the assertion types' tables).", required=True),
-))
+    Key('within', 'seconds', 'Deadline, seconds from time zero (the types that take one).', unit=SECONDS, minimum=0,
+        maximum=MAX_SECONDS),
+    Key('duration', 'seconds', 'Accepted and ignored, as the anchor does.', unit='seconds', minimum=0,
+        maximum=MAX_SECONDS),
+), reads='anchor', unknown='ignore')
 SYSTEM = Section('system_under_test', 'system_under_test', 'The system `bagfault test` starts, feeds and judges.', (
     Key('command', 'string_or_list', "Its command line (`{python}` is bagfault's interpreter); use_sim_time is "
         'added.', required=True),
     Key('shell', 'boolean', 'Run the command string in /bin/sh.', default=False),
-    Key('env', 'mapping', "Environment variables added to bagfault's."),
-    Key('cwd', 'string', 'Working folder, relative to the scenario file.'),
-    Key('ready', 'list', 'Conditions met, in turn, before the first message is played.', section='ready'),
+    Key('env', 'mapping', "Environment variables added to bagfault's.", what='a mapping of variable names to values'),
+    Key('cwd', 'string', 'Working folder, relative to the scenario file.', what='a folder'),
+    Key('ready', 'list', 'Conditions met, in turn, before the first message is played.', section='ready',
+        what='a list of conditions'),
     Key('record', 'string_or_list', '`all`, or the topics of the system to record.', default='all'),
     Key('stop_timeout', 'seconds', 'SIGINT, then SIGTERM, then SIGKILL, this far apart.', unit='seconds',
-        default=5.0, minimum=0, maximum=3600),
+        default=5.0, minimum=0, exclusive=True, maximum=3600),
     Key('use_sim_time', 'boolean', 'Add `--ros-args -p use_sim_time:=true`.', default=True),
     Key('tail', 'seconds', 'Bag time recorded after the last message, while the system answers.', unit=SECONDS,
         default=1.0, minimum=0, maximum=3600),
 ))
 READY = Section('ready', 'system_under_test.ready[]', 'One ready condition (one of topic, subscribes, service, '
                 'delay).', (
-    Key('topic', 'string', 'A topic the system publishes (with `publisher: true` or `message: true`).'),
+    Key('topic', 'string', 'A topic the system publishes (with `publisher: true` or `message: true`).',
+        what='a topic name'),
     Key('publisher', 'boolean', 'Ready once the topic has a publisher.'),
     Key('message', 'boolean', 'Ready once a first message arrived on the topic.'),
     Key('subscribes', 'string_or_list', '`played` (every played topic), or the topics it must subscribe to.'),
-    Key('service', 'string', 'A service the system must offer.'),
+    Key('service', 'string', 'A service the system must offer.', what='a service name'),
     Key('delay', 'seconds', 'Wait this long.', unit='seconds', minimum=0, maximum=3600),
     Key('timeout', 'seconds', 'Give up (exit 2) after this long.', unit='seconds', default=30.0, minimum=0,
-        maximum=3600),
+        exclusive=True, maximum=3600),
 ))
-FAULT_MANAGER = Section('fault_manager', 'fault_manager', "ros2_medkit's fault manager semantics on bag time.", (
+THRESHOLDS = (
     Key('confirmation_threshold', 'integer', 'Debounce counter value at which a fault is CONFIRMED (negative, '
-        "medkit's sign).", default=-1),
+        "medkit's sign; 0 reads as -1, a positive value as its negative).", default=-1),
     Key('healing_enabled', 'boolean', 'Faults heal after enough PASSED reports.', default=False),
-    Key('healing_threshold', 'integer', 'Counter value at which a fault HEALS.', default=3),
-    Key('auto_confirm_after_sec', 'number', 'Confirm a PREFAILED fault after this long.', unit='seconds',
-        default=0.0, minimum=0),
-    Key('overrides', 'mapping', 'Per-source thresholds, by reporting-source prefix.'),
-    Key('diagnostics', 'mapping', 'Fault codes from /diagnostics statuses (`codes: {NAME: CODE}`).'),
-    Key('conditions', 'list', 'Fault codes from conditions on message fields.'),
+    Key('healing_threshold', 'integer', 'Counter value at which a fault HEALS (its absolute value).', default=3),
+    Key('auto_confirm_after_sec', 'seconds', 'Confirm a PREFAILED fault after this long.', unit='seconds',
+        default=0.0, minimum=0, maximum=MAX_SECONDS),
+)
+FAULT_MANAGER = Section('fault_manager', 'fault_manager', "ros2_medkit's fault manager semantics on bag time.", (
+    *THRESHOLDS,
+    Key('overrides', 'list', 'Per-source thresholds, by reporting-source prefix.', section='override',
+        default=[]),
+    Key('diagnostics', 'any', 'Fault codes from /diagnostics statuses: true, or {topic, codes: {NAME: CODE}}.'),
+    Key('conditions', 'list', 'Fault codes from conditions on message fields.', section='condition', default=[]),
     Key('correlation', 'mapping', "Hierarchical and auto-cluster correlation (medkit's correlation block)."),
-    Key('snapshots', 'mapping', 'Freeze frames and black boxes of confirmed faults.'),
-    Key('clear', 'list', 'ClearFault calls at given times.'),
-))
+    Key('snapshots', 'mapping', 'Freeze frames and black boxes of confirmed faults.', section='snapshots'),
+    Key('clear', 'list', 'ClearFault calls at given times.', section='clear', default=[]),
+), noun='fault_manager')
+OVERRIDE = Section('override', 'fault_manager.overrides[]', 'Thresholds of the sources under one prefix.', (
+    Key('source', 'string', 'A reporting-source prefix (`/powertrain` matches `/powertrain/motor`).', required=True),
+    *(Key(k.name, k.type, k.description, unit=k.unit, minimum=k.minimum, maximum=k.maximum) for k in THRESHOLDS),
+), noun='override')
+DIAGNOSTICS = Section('diagnostics', 'fault_manager.diagnostics', 'Fault codes from diagnostic statuses.', (
+    Key('topic', 'string', 'The DiagnosticArray topic.', default='/diagnostics'),
+    Key('codes', 'mapping', 'Status names to fault codes.', default={},
+        what='a mapping of status names to fault codes'),
+), noun='diagnostics')
+CONDITION = Section('condition', 'fault_manager.conditions[]', 'FAILED while a condition on a field holds.', (
+    Key('topic', 'string', 'The topic.', required=True),
+    Key('when', 'mapping', 'The condition.', required=True, section='when'),
+    Key('code', 'string', 'The fault code reported.', required=True),
+    Key('severity', 'any', 'INFO, WARN, ERROR, CRITICAL or 0-3.', default='ERROR'),
+    Key('source', 'string', 'The reporting source (default: /bagfault/conditions<topic>).'),
+), noun='condition')
+WHEN = Section('when', 'fault_manager.conditions[].when', 'One of above, below, outside, not_finite on a field.', (
+    Key('field', 'string', 'A field path of the message (`linear_acceleration.z`).', required=True),
+    Key('above', 'number', 'Holds while the field is above this.'),
+    Key('below', 'number', 'Holds while the field is below this.'),
+    Key('outside', 'list', 'Holds while the field is outside [low, high].', what='[low, high]'),
+    Key('not_finite', 'boolean', 'Holds while the field is NaN or infinite.'),
+), noun='when')
+SNAPSHOTS = Section('snapshots', 'fault_manager.snapshots', 'Freeze frames and black boxes of confirmed faults.', (
+    Key('enabled', 'boolean', 'Capture snapshots.', default=True,
+        what='medkit declares snapshots.enabled as a bool parameter; a quoted value is a string there'),
+    Key('default_topics', 'list', 'Topics captured for any code.', what='a list of topic names'),
+    Key('fault_specific', 'mapping', 'Fault codes to topic lists.', what='a mapping of fault codes to topic lists'),
+    Key('patterns', 'any', 'Regular expressions of codes to topic lists ({REGEX: [topics]} or [{match, topics}]).'),
+    Key('duration_sec', 'seconds', 'Black box length before confirmation.', unit='seconds', default=5.0, minimum=0,
+        maximum=MAX_SECONDS),
+    Key('duration_after_sec', 'seconds', 'Black box length after confirmation.', unit='seconds', default=1.0,
+        minimum=0, maximum=MAX_SECONDS),
+    Key('recapture_cooldown_sec', 'seconds', 'Time before one code is captured again.', unit='seconds',
+        default=60.0, minimum=0, maximum=MAX_SECONDS),
+), noun='snapshots')
+CLEAR = Section('clear', 'fault_manager.clear[]', 'A ClearFault call.', (
+    Key('code', 'string', 'The fault code cleared.', required=True),
+    Key('at', 'seconds', 'When.', unit=SECONDS, required=True, minimum=0, maximum=MAX_SECONDS),
+    Key('skip_correlation_auto_clear', 'boolean', "medkit's flag of the same name.", default=False),
+), noun='clear')
+REPORT = Section('report', 'faults[].report', 'A fault manager report made while the fault is active.', (
+    Key('code', 'string', 'The fault code.', required=True),
+    Key('severity', 'any', 'INFO, WARN, ERROR, CRITICAL or 0-3.', default='ERROR'),
+    Key('report_period', 'seconds', 'Report again this often while active.', unit='seconds', minimum=0,
+        exclusive=True, maximum=MAX_SECONDS),
+    Key('source', 'string', 'The reporting source (default: /bagfault/<injector id>).', what='a non-empty source id'),
+), noun='report')
 CAMPAIGN = Section('campaign', '(top level of a campaign file)', 'Bags x fault parameters x seeds.', (
     Key('campaign', 'string', "The campaign's name.", required=True),
-    Key('scenario', 'string', 'The scenario file, relative to this file.', required=True),
+    Key('scenario', 'string', 'The scenario file, relative to this file.', required=True,
+        what='a scenario file (relative to this file)'),
     Key('mode', 'string', '`run` (offline) or `test` (closed loop).', default='run', choices=('run', 'test')),
-    Key('bags', 'list', 'Bags: files, rosbag2 folders or globs, relative to this file.', required=True),
-    Key('sweep', 'mapping', 'Dotted scenario paths and their values (a list or {range: [start, stop, step]}).'),
+    Key('bags', 'list', 'Bags: files, rosbag2 folders or globs, relative to this file.', required=True,
+        what='a list of bag files, rosbag2 folders or globs (relative to this file)'),
+    Key('sweep', 'mapping', 'Dotted scenario paths and their values (a list or {range: [start, stop, step]}).',
+        default={}, what='a mapping of dotted scenario paths to values'),
     Key('seeds', 'any', "Seeds of each point: a list or {range: [start, stop]} (default: the scenario's)."),
     Key('design', 'any', '`grid`, or {random: {samples: N, seed: S}}.', default='grid'),
     Key('search', 'mapping', 'The breaking point of one parameter per bag, by bisection.', section='search'),
     Key('keep', 'string', 'Outputs kept.', default='failed', choices=('all', 'failed', 'none')),
-    Key('timeout', 'seconds', 'Time a job may take.', unit='seconds', default=3600, minimum=0, maximum=86400),
+    Key('timeout', 'seconds', 'Time a job may take.', unit='seconds', default=3600.0, minimum=0, exclusive=True,
+        maximum=86400),
 ))
 SEARCH = Section('search', 'search', 'Bisection of one parameter.', (
-    Key('parameter', 'string', 'A dotted scenario path.', required=True),
+    Key('parameter', 'string', 'A dotted scenario path.', required=True, what='a dotted scenario path'),
     Key('low', 'number', 'Lower end of the bracket.', required=True),
     Key('high', 'number', 'Upper end of the bracket.', required=True),
-    Key('tolerance', 'number', 'Stop when the bracket is this narrow.', required=True),
-    Key('until', 'mapping', '{assertion: ID, state: passed|failed}: what counts as holding.', required=True),
+    Key('tolerance', 'number', 'Stop when the bracket is this narrow.', required=True, minimum=0, exclusive=True),
+    Key('until', 'mapping', '{assertion: ID, state: passed|failed}: what counts as holding.', required=True,
+        section='until'),
     Key('repeat', 'integer', 'Runs per value and seed (default 1 offline, 3 in closed loop).', minimum=1,
         maximum=100),
 ))
 
-SCENARIO_SECTIONS = (SCENARIO, INJECTOR, TOPIC, FAULT, REPEAT, AFTER, ASSERTION, SYSTEM, READY, FAULT_MANAGER)
-CAMPAIGN_SECTIONS = (CAMPAIGN, SEARCH)
+SCENARIO_SECTIONS = (SCENARIO, INJECTOR, TOPIC, TRIGGER_SERVICE, FAULT, REPEAT, AFTER, REPORT, ASSERTION, SYSTEM,
+                     READY, FAULT_MANAGER, OVERRIDE, DIAGNOSTICS, CONDITION, WHEN, SNAPSHOTS, CLEAR)
+UNTIL = Section('until', 'search.until', 'What counts as holding.', (
+    Key('assertion', 'string', 'An assertion id of the scenario.', required=True),
+    Key('state', 'string', 'The verdict that counts as holding.', default='passed', choices=('passed', 'failed')),
+))
+CAMPAIGN_SECTIONS = (CAMPAIGN, SEARCH, UNTIL)

@@ -23,11 +23,13 @@ and every such subscription is matched (at most 30 s).
 
 from __future__ import annotations
 
-import math
 import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
+
+from bagfault.spec import sections
+from bagfault.spec.reader import Reader
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -35,10 +37,7 @@ if TYPE_CHECKING:
     from bagfault.spec.yamlnodes import PathKey
 
 ReadyKind = Literal['publisher', 'message', 'subscribes', 'service', 'delay', 'default']
-KEYS = {'command', 'shell', 'env', 'cwd', 'ready', 'record', 'stop_timeout', 'use_sim_time', 'tail'}
-READY_KEYS = {'topic', 'publisher', 'message', 'subscribes', 'service', 'delay', 'timeout'}
 DEFAULT_TIMEOUT = 30.0
-MAX_SECONDS = 3600.0
 
 
 @dataclass(frozen=True)
@@ -90,27 +89,23 @@ class SystemUnderTest:
 def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], None],
                  base: Path | None) -> SystemUnderTest | None:
     """Check and read the section; every problem reported at its place."""
-    if not isinstance(node, dict):
-        problem(path, 'must be a mapping with at least a command')
+    read = Reader(problem).read(sections.SYSTEM, node, path)
+    if read is None:
         return None
-    system = SystemUnderTest()
-    for key in node:
-        if key not in KEYS:
-            problem((*path, key), f'unknown key {key!r} (known: {", ".join(sorted(KEYS))})')
-    system.shell = _flag(node, 'shell', False, path, problem)
-    command = node.get('command')
+    system = SystemUnderTest(shell=read.get('shell'), stop_timeout=read.get('stop_timeout'),
+                             tail=read.get('tail'), use_sim_time=read.get('use_sim_time'))
+    command = read.get('command')
     if isinstance(command, str) and command.strip():
         system.command = [command] if system.shell else shlex.split(command)
     elif isinstance(command, list) and command and all(isinstance(c, (str, int, float)) for c in command):
         system.command = [str(c) for c in command]
-    else:
+    elif 'command' in read.given:
         problem((*path, 'command'), 'must be a command line: a string or a list of arguments')
     if any('\0' in part for part in system.command):
         problem((*path, 'command'), 'holds a NUL character, which no command line can carry')
-    env = node.get('env', {})
-    if not isinstance(env, dict) or not all(isinstance(k, str) and isinstance(v, (str, int, float, bool))
-                                            for k, v in env.items()):
-        problem((*path, 'env'), 'must map variable names to values')
+    env = read.get('env', {})
+    if not all(isinstance(k, str) and isinstance(v, (str, int, float, bool)) for k, v in env.items()):
+        problem((*path, 'env'), f'must be {sections.SYSTEM.key("env").what}')  # type: ignore[union-attr]
     else:
         system.env = {k: _text(v) for k, v in env.items()}
         for name, value in system.env.items():
@@ -118,27 +113,17 @@ def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], 
                 problem((*path, 'env', name), 'not a variable name (empty, or holds = or NUL)')
             elif '\0' in value:
                 problem((*path, 'env', name), 'the value holds a NUL character, which no environment can carry')
-    if 'cwd' in node:
-        cwd = node['cwd']
-        if not isinstance(cwd, str) or not cwd:
-            problem((*path, 'cwd'), 'must be a folder')
-        else:
-            system.cwd = (base / cwd) if base is not None else Path(cwd)
-    ready = node.get('ready', [])
-    if not isinstance(ready, list):
-        problem((*path, 'ready'), 'must be a list of conditions')
-    else:
-        system.ready = [c for i, item in enumerate(ready) if (c := _condition(item, (*path, 'ready', i), problem))]
-    record = node.get('record', 'all')
+    if 'cwd' in read:
+        system.cwd = (base / read.get('cwd')) if base is not None else Path(read.get('cwd'))
+    system.ready = [c for i, item in enumerate(read.get('ready', []))
+                    if (c := _condition(item, (*path, 'ready', i), problem))]
+    record = read.get('record')
     if record == 'all':
         system.record = 'all'
     elif isinstance(record, list) and all(isinstance(t, str) and t for t in record):
         system.record = list(record)
     else:
         problem((*path, 'record'), "must be 'all' or a list of topics")
-    system.stop_timeout = _seconds(node, 'stop_timeout', 5.0, path, problem)
-    system.tail = _seconds(node, 'tail', 1.0, path, problem, zero=True)
-    system.use_sim_time = _flag(node, 'use_sim_time', True, path, problem)
     return system
 
 
@@ -147,54 +132,28 @@ def _condition(item: object, path: PathKey, problem: Callable[[PathKey, str], No
         problem(path, 'must be a mapping such as {topic: /x, publisher: true}, {subscribes: played}, '
                       '{service: /s} or {delay: 1.0}')
         return None
-    timeout = _seconds(item, 'timeout', DEFAULT_TIMEOUT, path, problem)
-    known = READY_KEYS
-    for key in item:
-        if key not in known:
-            problem((*path, key), f'unknown key {key!r} (known: {", ".join(sorted(known))})')
-    if 'topic' in item:
-        topic = item['topic']
-        if not isinstance(topic, str) or not topic:
-            problem((*path, 'topic'), 'must be a topic name')
+    read = Reader(problem).read(sections.READY, item, path)
+    assert read is not None
+    timeout = read.get('timeout')
+    if 'topic' in read.given:
+        if 'topic' not in read:
             return None
-        kind: ReadyKind = 'message' if item.get('message') else 'publisher'
-        return ReadyCondition(kind, name=topic, timeout=timeout)
-    if 'subscribes' in item:
-        value = item['subscribes']
+        kind: ReadyKind = 'message' if read.get('message') else 'publisher'
+        return ReadyCondition(kind, name=read.get('topic'), timeout=timeout)
+    if 'subscribes' in read.given:
+        value = read.get('subscribes')
         if value == 'played':
             return ReadyCondition('subscribes', timeout=timeout)
         if isinstance(value, list) and value and all(isinstance(t, str) for t in value):
             return ReadyCondition('subscribes', topics=tuple(value), timeout=timeout)
         problem((*path, 'subscribes'), "must be 'played' or a list of topics")
         return None
-    if 'service' in item:
-        if not isinstance(item['service'], str) or not item['service']:
-            problem((*path, 'service'), 'must be a service name')
-            return None
-        return ReadyCondition('service', name=item['service'], timeout=timeout)
-    if 'delay' in item:
-        return ReadyCondition('delay', seconds=_seconds(item, 'delay', 0.0, path, problem, zero=True))
+    if 'service' in read.given:
+        return ReadyCondition('service', name=read.get('service'), timeout=timeout) if 'service' in read else None
+    if 'delay' in read.given:
+        return ReadyCondition('delay', seconds=read.get('delay', 0.0))
     problem(path, 'needs one of topic, subscribes, service or delay')
     return None
-
-
-def _seconds(node: Mapping[str, Any], key: str, default: float, path: PathKey,
-             problem: Callable[[PathKey, str], None], *, zero: bool = False) -> float:
-    value = node.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or value > MAX_SECONDS or value < 0 or (value == 0 and not zero):
-        problem((*path, key), f'{value!r} must be {"0 or more" if zero else "more than 0"} seconds, at most an hour')
-        return default
-    return float(value)
-
-
-def _flag(node: Mapping[str, Any], key: str, default: bool, path: PathKey,
-          problem: Callable[[PathKey, str], None]) -> bool:
-    value = node.get(key, default)
-    if not isinstance(value, bool):
-        problem((*path, key), f'{value!r} is not true or false')
-        return default
-    return value
 
 
 def _text(value: object) -> str:

@@ -38,14 +38,14 @@ def test_every_problem_is_named_with_its_line(corpus: Path) -> None:
     lines = problems(path)
     name = str(path)
     assert lines == [
-        f"{name}:12:8: speed: unknown key 'speed' (known: bags, campaign, design, keep, mode, scenario, search, "
-        'seeds, sweep, timeout)',
-        f"{name}:11:7: mode: 'live' is not run or test",
         f'{name}:6:55: sweep.{BIAS}.range: step must be above 0 and give at most 100000 values',
         f'{name}:8:8: seeds: seeds are integers from 0 to 2^64 - 1',
         f'{name}:9:18: design.random: needs samples (1 to 100000) and an integer seed',
         f"{name}:10:7: keep: 'some' is not all, failed or none",
-    ]  # the swept paths are checked against the scenario once the file itself is sound: nope is not named
+        f"{name}:11:7: mode: 'live' is not run or test",
+        f"{name}:12:8: speed: unknown key 'speed' (known: bags, campaign, design, keep, mode, scenario, search, "
+        'seeds, sweep, timeout)',
+    ]  # in file order; the swept paths are checked against the scenario once the file itself is sound: nope is not named
 
 
 def test_swept_paths_and_values_are_checked_against_the_scenario(corpus: Path) -> None:
@@ -60,11 +60,11 @@ def test_swept_paths_and_values_are_checked_against_the_scenario(corpus: Path) -
         mode: test
     """)
     assert problems(path) == [
-        f'{path}:8:7: mode: test needs a system_under_test section in the scenario',
         f"{path}:5:25: sweep.faults.nope.config.x: no fault 'nope' (there are: bias)",
         f'{path}:6:40: sweep.faults.bias.config.drop_probability: 7 makes the scenario invalid: 7 is above the '
         'maximum 1.0',
         f"{path}:7:117: search.until.assertion: no assertion 'detected' in the scenario (there are: drift_detected)",
+        f'{path}:8:7: mode: test needs a system_under_test section in the scenario',
     ]
 
 

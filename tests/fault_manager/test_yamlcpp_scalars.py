@@ -76,7 +76,7 @@ def test_snapshots_enabled_is_a_bool_parameter() -> None:
     value is a string parameter there, refused; bagfault refuses it instead of reading it as true."""
     problems: list[str] = []
     parse_fault_manager({'snapshots': {'enabled': 'false'}}, lambda p, m: problems.append(m))
-    assert problems == ["'false' must be true or false (medkit declares snapshots.enabled as a bool parameter; "
+    assert problems == ["'false' is not true or false (medkit declares snapshots.enabled as a bool parameter; "
                         'a quoted value is a string there)']
     problems.clear()
     config = parse_fault_manager({'snapshots': {'enabled': False}}, lambda p, m: problems.append(m))

@@ -3,40 +3,98 @@ schema documents, and the JSON Schema made from it accepts the files bagfault ac
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
 import pytest
+import yaml
 from support.helpers import FIXTURES, ROOT
 
 from bagfault.campaign import loader as campaign_loader
 from bagfault.cli import main
-from bagfault.fault_manager import config as fault_manager_config
+from bagfault.errors import CampaignError
+from bagfault.injectors.registry import get_injector_type
 from bagfault.report.schema import json_schema
-from bagfault.scenario import loader as scenario_loader
-from bagfault.spec import sections, system
-from bagfault.spec.yamlnodes import load_located
+from bagfault.spec import sections
+from bagfault.spec.yamlnodes import format_path, load_located
 
 jsonschema = pytest.importorskip('jsonschema')
 
 
-def names(section: sections.Section) -> set[str]:
-    return {k.name for k in section.keys}
+SCENARIO_BASE = {
+    'injectors': [{'id': 'i', 'type': 'imu', 'input_topic': '/a', 'output_topic': '/b'},
+                  {'id': 's', 'type': 'trigger_service', 'trigger_service': {'proxy_service': '/p',
+                                                                             'target_service': '/t'}}],
+    'faults': [{'id': 'f', 'injector_id': 'i', 'repeat': {'period': 1.0, 'on': 0.5},
+                'report': {'code': 'IMU_BIAS'}},
+               {'id': 'g', 'injector_id': 'i', 'after': {'fault': 'f'}}],
+    'system_under_test': {'command': 'true', 'ready': [{'delay': 1.0}]},
+    'fault_manager': {'overrides': [{'source': '/x'}], 'diagnostics': {'codes': {}},
+                      'conditions': [{'topic': '/a', 'when': {'field': 'x', 'above': 1.0}, 'code': 'C'}],
+                      'snapshots': {}, 'clear': [{'code': 'C', 'at': 1.0}]},
+}
+PLACES = {  # each section and where it sits in SCENARIO_BASE
+    'scenario': (), 'injector': ('injectors', 0), 'trigger_service': ('injectors', 1, 'trigger_service'),
+    'fault': ('faults', 0), 'repeat': ('faults', 0, 'repeat'), 'report': ('faults', 0, 'report'),
+    'after': ('faults', 1, 'after'), 'system_under_test': ('system_under_test',),
+    'ready': ('system_under_test', 'ready', 0), 'fault_manager': ('fault_manager',),
+    'override': ('fault_manager', 'overrides', 0), 'diagnostics': ('fault_manager', 'diagnostics'),
+    'condition': ('fault_manager', 'conditions', 0), 'when': ('fault_manager', 'conditions', 0, 'when'),
+    'snapshots': ('fault_manager', 'snapshots'), 'clear': ('fault_manager', 'clear', 0),
+}
 
 
-@pytest.mark.parametrize(('section', 'parsed'), [
-    (sections.SCENARIO, scenario_loader.TOP_KEYS),
-    (sections.INJECTOR, scenario_loader.INJECTOR_KEYS),
-    (sections.TOPIC, scenario_loader.ENDPOINT_KEYS),
-    (sections.FAULT, scenario_loader.FAULT_KEYS),
-    (sections.SYSTEM, system.KEYS),
-    (sections.READY, system.READY_KEYS),
-    (sections.FAULT_MANAGER, fault_manager_config.TOP_KEYS),
-    (sections.CAMPAIGN, campaign_loader.KEYS),
-    (sections.SEARCH, campaign_loader.SEARCH_KEYS),
-], ids=lambda x: x.name if isinstance(x, sections.Section) else '')
-def test_the_declared_keys_are_the_keys_the_parser_reads(section: sections.Section, parsed: set[str]) -> None:
-    assert names(section) == set(parsed)
+def at(data: object, place: tuple[object, ...]) -> dict[str, object]:
+    for step in place:
+        data = data[step]  # type: ignore[index]
+    assert isinstance(data, dict)
+    return data
+
+
+@pytest.mark.parametrize('section', [s for s in sections.SCENARIO_SECTIONS if s.unknown != 'ignore'],
+                         ids=lambda s: s.name)
+def test_every_section_of_a_scenario_knows_exactly_its_declared_keys(section: sections.Section, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A key the declaration lacks is named at its place, with the declared keys as the known ones (an injector
+    also knows its type's options); the same file without it is valid."""
+    data = copy.deepcopy(SCENARIO_BASE)
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(yaml.safe_dump(data))
+    assert main(['validate', '--strict', str(path)]) == 0
+    if section.name == 'topic':
+        data['injectors'][0] = {'id': 'i', 'type': 'imu', 'topic': {'input_topic': '/a', 'output_topic': '/b'}}
+        place: tuple[object, ...] = ('injectors', 0, 'topic')
+    else:
+        place = PLACES[section.name]
+    at(data, place)['zz_undeclared'] = 1
+    path.write_text(yaml.safe_dump(data))
+    capsys.readouterr()
+    assert main(['validate', '--strict', str(path)]) == 2
+    known = {k.name for k in section.keys}
+    if section.name == 'injector':
+        known |= {f.key for f in get_injector_type('imu').options}
+    where = format_path((*place, 'zz_undeclared'))  # type: ignore[arg-type]
+    line = next(x for x in capsys.readouterr().err.splitlines() if f'{where}: ' in x)
+    assert "key 'zz_undeclared'" in line
+    assert set(line.split('(known: ')[1].split(')')[0].split(', ')) == known
+
+
+@pytest.mark.parametrize('section', [sections.CAMPAIGN, sections.SEARCH, sections.UNTIL], ids=lambda s: s.name)
+def test_every_section_of_a_campaign_knows_exactly_its_declared_keys(section: sections.Section,
+                                                                     tmp_path: Path) -> None:
+    data = {'campaign': 'c', 'scenario': 'missing.yaml', 'bags': ['a.mcap'],
+            'search': {'parameter': 'faults.f.duration', 'low': 0.1, 'high': 0.9, 'tolerance': 0.2,
+                       'until': {'assertion': 'a'}}}
+    place = {'campaign': (), 'search': ('search',), 'until': ('search', 'until')}[section.name]
+    at(data, place)['zz_undeclared'] = 1
+    path = tmp_path / 'campaign.yaml'
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(CampaignError) as caught:
+        campaign_loader.load_campaign(path)
+    line = next(x for x in str(caught.value).splitlines() if 'zz_undeclared' in x)
+    assert f"{format_path((*place, 'zz_undeclared'))}: unknown key" in line
+    assert set(line.split('(known: ')[1].split(')')[0].split(', ')) == {k.name for k in section.keys}
 
 
 def validator(kind: str) -> jsonschema.Draft202012Validator:

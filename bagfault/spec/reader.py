@@ -1,0 +1,205 @@
+"""The one reader of YAML sections: a mapping checked against its declaration in spec/sections.py.
+
+Every parser of a scenario, campaign or fault manager section reads its keys
+here, so a key's type, unit, range, default and whether it is required are
+said once (the declaration) and checked one way, with each problem reported
+at its place. Two dialects, declared per section:
+
+- `anchor`: sections ros2_fault_injection reads too. Scalars are read as its
+  yaml-cpp reads them (`as<double>()` of the scalar as written, so `'2'` is 2;
+  `yes`/`on` are true; a string is the text as written, so `id: on` is `on`),
+  a null value is an absent key, and an unknown key is a warning (the anchor
+  ignores it).
+- `yaml`: bagfault's own sections. YAML's types as they are; an unknown key
+  is an error.
+
+What a parser does beyond one key at a time (a command line split, a
+schedule's `on` within its `period`) stays in the parser.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from bagfault.yamlcpp import as_bool, as_double, as_int
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Collection
+
+    from bagfault.spec.sections import Key, Section
+    from bagfault.spec.yamlnodes import PathKey
+
+    Report = Callable[[PathKey, str], None]
+    RawText = Callable[[PathKey, object], str]
+
+
+@dataclass
+class Read:
+    """A section's values: each key read (given and valid, or its default), and which keys were written."""
+
+    values: dict[str, Any] = field(default_factory=dict)
+    given: set[str] = field(default_factory=set)
+    refused: set[str] = field(default_factory=set)  # given, but not a value of its key
+
+    def __contains__(self, key: object) -> bool:
+        return key in self.values
+
+    def get(self, key: str, default: Any = None) -> Any:
+        """The value read for `key`, or `default` when it has none."""
+        return self.values.get(key, default)
+
+
+@dataclass
+class Reader:
+    """Where problems go (`problem` for errors, `warn` for what the anchor accepts) and the scalars as written."""
+
+    problem: Report
+    warn: Report | None = None
+    raw: RawText | None = None
+
+    def read(self, section: Section, node: object, path: PathKey, *, extra: Collection[str] = (),
+             judge_unknown: bool = True) -> Read | None:
+        """Check `node` against `section`; None (and a problem) when it is not a mapping. `extra` are keys the
+        caller reads itself (an injector type's options); `judge_unknown=False` leaves other keys unjudged."""
+        if node is None and section.reads == 'anchor':
+            node = {}
+        if not isinstance(node, dict):
+            required = [k.name for k in section.keys if k.required]
+            self.problem(path, 'must be a mapping' + (f' with {_listing(required, "and")}' if required else ''))
+            return None
+        if judge_unknown:
+            self._unknown(section, node, path, extra)
+        result = Read()
+        for key in section.keys:
+            value = node.get(key.name)
+            if key.name not in node or (value is None and section.reads == 'anchor'):
+                if key.required:
+                    self.problem(path, f'missing required key {key.name!r}')
+                elif key.default is not None:
+                    result.values[key.name] = copy.copy(key.default)  # a list or mapping of its own
+                continue
+            result.given.add(key.name)
+            ok, read = self.value(section, key, value, (*path, key.name))
+            if ok:
+                result.values[key.name] = read
+            else:
+                result.refused.add(key.name)
+        return result
+
+    def value(self, section: Section, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
+        """One key's value read by its declaration: (True, value), or (False, None) with the problem told."""
+        anchor = section.reads == 'anchor'
+        if key.choices:
+            if value not in key.choices:
+                self.problem(path, f'{value!r} is not {_listing(list(key.choices), "or")}')
+                return False, None
+            return True, value
+        kind = key.type
+        if kind == 'string':
+            return self._string(key, value, path, anchor=anchor)
+        if kind == 'boolean':
+            read = as_bool(value) if anchor else (value if isinstance(value, bool) else None)
+            if read is None:
+                tail = f' ({key.what})' if key.what else \
+                    ' (nor yes/no, y/n, on/off, as yaml-cpp reads booleans)' if anchor else ''
+                self.problem(path, f'{value!r} is not true or false{tail}')
+                return False, None
+            return True, read
+        if kind in ('number', 'integer', 'seconds'):
+            return self._number(key, value, path, anchor=anchor)
+        if kind == 'list' and not isinstance(value, list):
+            self.problem(path, f'must be {key.what or "a list"}')
+            return False, None
+        if kind == 'mapping' and not isinstance(value, dict):
+            self.problem(path, f'must be {key.what or "a mapping"}')
+            return False, None
+        return True, value
+
+    def _unknown(self, section: Section, node: dict[Any, Any], path: PathKey, extra: Collection[str]) -> None:
+        if section.unknown == 'ignore':
+            return
+        names = {k.name for k in section.keys} | set(extra)
+        known = ', '.join(sorted(names))
+        noun = f'{section.noun} ' if section.noun else ''
+        for name in node:
+            if name in names:
+                continue
+            if section.unknown == 'warn':
+                (self.warn or self.problem)((*path, name), f'unknown {noun}key {name!r} is ignored (known: {known})')
+            else:
+                self.problem((*path, name), f'unknown {noun}key {name!r} (known: {known})')
+
+    def _string(self, key: Key, value: object, path: PathKey, *, anchor: bool) -> tuple[bool, Any]:
+        if isinstance(value, (dict, list)) or (not anchor and not isinstance(value, str)):
+            self.problem(path, f'must be {key.what}' if key.what else f'{value!r} is not a string')
+            return False, None
+        text = value if isinstance(value, str) else self.raw_text(path, value)
+        if not text:
+            self.problem(path, f'must be {key.what}' if key.what else 'must not be empty')
+            return False, None
+        return True, text
+
+    def _number(self, key: Key, value: object, path: PathKey, *, anchor: bool) -> tuple[bool, Any]:
+        """A number by its key: the type first, then finite and within the declared range."""
+        integer = key.type == 'integer'
+        number: float | int | None = None
+        if not isinstance(value, (bool, dict, list)) and value is not None:
+            if anchor and isinstance(value, (int, float, str)):
+                text = self.raw_text(path, value)
+                unsigned = key.minimum is not None and key.minimum >= 0
+                number = as_int(text, unsigned=unsigned) if integer else as_double(text)
+            elif isinstance(value, int) or (isinstance(value, float) and not integer):
+                number = value
+        message = _range_problem(key, value, number)
+        if message is not None:
+            self.problem(path, message)
+            return False, None
+        assert number is not None
+        return True, int(number) if integer else float(number)
+
+    def raw_text(self, path: PathKey, value: object) -> str:
+        """The scalar as the file writes it."""
+        return self.raw(path, value) if self.raw is not None else str(value)
+
+
+def _range_problem(key: Key, value: object, number: float | None) -> str | None:
+    """What is wrong with a number read for `key`, None when nothing is."""
+    low, high = key.minimum, key.maximum
+    if key.type == 'integer':
+        if number is not None and (low is None or number >= low) and (high is None or number <= high) \
+                and not (key.exclusive and low is not None and number <= low):
+            return None
+        if low == 1 and high is None:
+            return f'{value!r} is not a positive integer'
+        if low is not None and high is not None:
+            return f'{value!r} is not an integer from {_number(low)} to {_number(high)}'
+        return f'{value!r} is not an integer' + (f' of at least {_number(low)}' if low is not None else '')
+    seconds = key.type == 'seconds'
+    if number is None:
+        return f'{value!r} is not a number of seconds' if seconds else f'{value!r} is not a number'
+    unit = ' s' if seconds else ''
+    if not math.isfinite(number) or (high is not None and number > high):
+        if seconds:
+            return f'{value} is not a time bagfault can schedule (0 to {high:g} s)'
+        return f'{value} is not a finite number' if not math.isfinite(number) else \
+            f'{value} is above the maximum {high:g}'
+    if low is None:
+        return None
+    if key.exclusive and number <= low:
+        return f'{value} must be greater than {low:g}{unit if low else ""}'
+    if number < low:
+        return f'{value} is negative' if low == 0 else f'{value} is below the minimum {low:g}{unit}'
+    return None
+
+
+def _number(bound: float) -> str:
+    """A declared bound as written (2**64 - 1 whole, not rounded through a float)."""
+    return str(bound) if isinstance(bound, int) else f'{bound:g}'
+
+
+def _listing(words: list[str], last: str) -> str:
+    """'a', 'a and b', 'a, b and c'."""
+    return words[0] if len(words) == 1 else f'{", ".join(words[:-1])} {last} {words[-1]}'
