@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bagfault.fault_manager.model import CORRELATION_SEVERITY_NAMES, ClusterInfo, MutedFaultInfo
-from bagfault.yamlcpp import as_bool, as_int
+from bagfault.spec import sections
+from bagfault.spec.reader import Read, Reader
 
 Problem = Callable[[tuple[Any, ...], str], None]
 REPRESENTATIVES = ('first', 'most_recent', 'highest_severity')
@@ -74,59 +75,33 @@ def _codes(value: object, path: tuple[Any, ...], problem: Problem, empty: Proble
     return [wildcard(v) for v in value]
 
 
-def medkit_uint32(value: object) -> int | None:
-    """What config_parser.cpp's get_uint32 (`node.as<uint32_t>()`) reads: a quoted number counts, a float or a
-    negative one does not; None where yaml-cpp throws."""
-    if isinstance(value, bool) or not isinstance(value, (int, str)):
-        return None
-    return as_int(value if isinstance(value, str) else str(value), unsigned=True, bits=32)
-
-
-def medkit_bool(node: dict[str, Any], key: str, default: bool, path: tuple[Any, ...], problem: Problem) -> bool:
-    """medkit's `get_bool` (config_parser.cpp): yaml-cpp's `as<bool>()` of a scalar, the default when absent or
-    not a scalar; a scalar yaml-cpp cannot convert (where medkit throws) is a problem."""
-    value = node.get(key)
-    if key not in node or value is None or isinstance(value, (dict, list)):
-        return default
-    converted = as_bool(value)
-    if converted is None:
-        problem((*path, key), f"{value!r} is not a boolean as medkit's yaml-cpp reads one (true/false, yes/no, on/off, "
-                              'y/n)')
-        return default
-    return converted
-
-
 def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem = no_warning,
                       ) -> CorrelationConfig | None:
     """Parse and check; every problem reported, and what medkit's validator only warns about to `warn`."""
-    if not isinstance(node, dict):
-        problem(path, 'must be a mapping {enabled, default_window_ms, patterns, rules}')
+    read = Reader(problem).read(sections.CORRELATION, node, path)
+    if read is None:
         return None
-    config = CorrelationConfig(enabled=medkit_bool(node, 'enabled', False, path, problem))
-    written_window = node.get('default_window_ms', 500)
-    window = medkit_uint32(written_window)
-    if window is None or window <= 0:
-        problem((*path, 'default_window_ms'), f'{written_window!r} must be a positive integer (ms)')
-    else:
-        config.default_window_ms = window
-    if 'enabled' not in node:
+    config = CorrelationConfig(enabled=read.get('enabled', False), default_window_ms=read.get('default_window_ms',
+                                                                                             500))
+    if 'enabled' not in read.given:
         warn(path, "correlation is off without `enabled: true` (medkit's default); its rules are checked but "
                    'not applied')
-    elif config.enabled and not node.get('rules'):
+    elif config.enabled and not read.get('rules'):
         warn(path, 'correlation is enabled but no rules are defined')
     if not config.enabled:
         problem = warn  # medkit does not validate a disabled block: its mistakes are warnings here
-    patterns = _patterns(node.get('patterns') or {}, (*path, 'patterns'), problem, warn)
+    patterns = _patterns(read.get('patterns') or {}, (*path, 'patterns'), problem, warn)
     seen: set[str] = set()
-    for number, item in enumerate(node.get('rules') or []):
+    reader = Reader(problem)
+    for number, item in enumerate(read.get('rules', [])):
         where = (*path, 'rules', number)
-        if not isinstance(item, dict) or not isinstance(item.get('id'), str):
-            problem(where, 'a rule needs an id')
+        rule_read = reader.read(sections.RULE, item, where)
+        if rule_read is None or 'id' not in rule_read:
             continue
-        if item['id'] in seen:
-            problem((*where, 'id'), f"duplicate rule id {item['id']!r}")
-        seen.add(item['id'])
-        rule = _rule(item, where, config.default_window_ms, _References(patterns, problem, warn), problem, warn)
+        if rule_read.get('id') in seen:
+            problem((*where, 'id'), f"duplicate rule id {rule_read.get('id')!r}")
+        seen.add(rule_read.get('id'))
+        rule = _rule(rule_read, where, config.default_window_ms, _References(patterns, problem, warn), problem, warn)
         if rule is not None:
             config.rules.append(rule)
     return config
@@ -183,47 +158,41 @@ class _References:
         return out
 
 
-def _rule(item: dict[str, Any], where: tuple[Any, ...], default_window_ms: int, refs: _References,
+def _rule(read: Read, where: tuple[Any, ...], default_window_ms: int, refs: _References,
           problem: Problem, warn: Problem) -> Rule | None:
-    written = item.get('mode', 'hierarchical')
+    if 'mode' in read.refused:
+        return None
+    written = read.get('mode')
     mode = MODE_ALIASES.get(str(written).lower())
     if mode is None:
         problem((*where, 'mode'), f"{written!r} is not 'hierarchical' or 'auto_cluster'")
         return None
-    written_ms = item.get('window_ms', default_window_ms)
-    read_ms = medkit_uint32(written_ms)
-    window_ms = read_ms if read_ms is not None and read_ms > 0 else default_window_ms
-    if read_ms is None or read_ms <= 0:
-        problem((*where, 'window_ms'), f'{written_ms!r} must be a positive integer (ms)')
-    elif window_ms > 60_000:
+    window_ms = read.get('window_ms', default_window_ms)
+    if window_ms > 60_000:
         warn((*where, 'window_ms'), f'{window_ms} ms is over 60 s, which may be too long')
-    rule = Rule(item['id'], str(item.get('name', item['id'])), mode, window_ms)
+    rule = Rule(read.get('id'), read.get('name', read.get('id')), mode, window_ms)
     if mode == 'hierarchical':
-        root = item.get('root_cause')
+        root = read.get('root_cause')
         if not isinstance(root, dict) or 'codes' not in root:
             problem((*where, 'root_cause'), 'must be {codes: [...]}')
         else:
             rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
-        rule.symptom_codes = refs(item.get('symptoms'), (*where, 'symptoms'), 'symptoms')
-        rule.mute_symptoms = medkit_bool(item, 'mute_symptoms', True, where, problem)
-        rule.auto_clear_with_root = medkit_bool(item, 'auto_clear_with_root', True, where, problem)
+        rule.symptom_codes = refs(read.get('symptoms'), (*where, 'symptoms'), 'symptoms')
+        rule.mute_symptoms = read.get('mute_symptoms', True)
+        rule.auto_clear_with_root = read.get('auto_clear_with_root', True)
         return rule
-    rule.match_codes = refs(item.get('match'), (*where, 'match'), 'match patterns', inline=False)
-    written_count = item.get('min_count', 3)
-    min_count = medkit_uint32(written_count)
-    if min_count is None or min_count <= 0:
-        problem((*where, 'min_count'), f'{written_count!r} must be a positive integer')
-    else:
-        rule.min_count = min_count
-        if min_count < 2:
-            warn((*where, 'min_count'), f'{min_count} is under 2, which may cause false clusters')
-    rule.show_as_single = medkit_bool(item, 'show_as_single', True, where, problem)
-    written = item.get('representative', 'highest_severity')
+    rule.match_codes = refs(read.get('match'), (*where, 'match'), 'match patterns', inline=False)
+    if 'min_count' in read:
+        rule.min_count = read.get('min_count')
+        if rule.min_count < 2:
+            warn((*where, 'min_count'), f'{rule.min_count} is under 2, which may cause false clusters')
+    rule.show_as_single = read.get('show_as_single', True)
+    written = read.get('representative')
     representative = REPRESENTATIVE_ALIASES.get(str(written).lower())
-    if representative is None:
-        problem((*where, 'representative'), f'{written!r} is not one of {", ".join(REPRESENTATIVES)}')
-    else:
+    if representative is not None:
         rule.representative = representative
+    elif 'representative' not in read.refused:
+        problem((*where, 'representative'), f'{written!r} is not one of {", ".join(REPRESENTATIVES)}')
     return rule
 
 

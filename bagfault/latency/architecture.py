@@ -22,11 +22,17 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from bagfault.errors import LatencyError, one_line
+from bagfault.spec import sections
+from bagfault.spec.reader import Reader
+
+if TYPE_CHECKING:
+    from bagfault.spec.reader import Read
+    from bagfault.spec.sections import Section
 
 UNDEFINED = 'UNDEFINED'
 CONTEXT_TYPES = ('use_latest_message', 'inherit_unique_stamp', 'callback_chain', 'tilde')
@@ -127,63 +133,65 @@ class Architecture:
         return out
 
 
-def _required(obj: object, key: str, where: str) -> Any:
-    if not isinstance(obj, dict) or key not in obj:
-        raise LatencyError(f'{where}: required key {key!r} not found')
-    if obj[key] is None:
-        raise LatencyError(f'{where}: {key!r} value is None')
-    return obj[key]
+def _read(section: Section, node: object, where: str, required: tuple[str, ...] = ()) -> Read:
+    """A mapping of the file read by its declaration (spec/sections.py); LatencyError with caret_analyze's words
+    at the first missing or null required key."""
+    def fail(_path: object, message: str) -> None:
+        raise LatencyError(f'{where}: {message}')
+
+    read = Reader(fail).read(section, node, (), required=required)
+    assert read is not None  # (fail raised)
+    return read
 
 
 def _topic(value: object) -> str | None:
     return None if value is None or value == UNDEFINED else str(value)
 
 
-def _node(raw: dict[str, Any], warnings: list[str]) -> Node:
+def _node(raw: object, warnings: list[str]) -> Node:
     """Parse one node; raise LatencyError for anything that makes caret_analyze reject it."""
-    name = str(_required(raw, 'node_name', 'node'))
+    read = _read(sections.NODE, raw, 'node')
+    name = str(read.get('node_name'))
     where = f'node {name}'
     node = Node(name)
-    for number, callback in enumerate(raw.get('callbacks') or []):
+    for number, callback in enumerate(read.get('callbacks')):
         cb_where = f'{where}: callbacks[{number}]'
         if isinstance(callback, dict) and 'callback_type' not in callback and 'type' in callback:
             warnings.append(f"{where}: callback {callback.get('callback_name', number)!r} says 'type:'; "
                             "caret_analyze reads 'callback_type:' (accepted here as an alias)")
             callback = {**callback, 'callback_type': callback['type']}
-        kind = _required(callback, 'callback_type', cb_where)
+        kind = _read(sections.CALLBACK, callback, cb_where).get('callback_type')
         if kind not in CALLBACK_TYPES:
             continue  # caret_analyze reads timer and subscription callbacks only (service callbacks are ignored)
-        _required(callback, 'callback_name', cb_where)
-        _required(callback, 'symbol', cb_where)
-        _required(callback, 'period_ns' if kind == 'timer_callback' else 'topic_name', cb_where)
+        _read(sections.CALLBACK, callback, cb_where,
+              ('callback_name', 'symbol', 'period_ns' if kind == 'timer_callback' else 'topic_name'))
         node.callbacks.append({**callback, 'construction_order': callback.get('construction_order', 0)})
-    for number, group in enumerate(raw.get('callback_groups') or []):
-        for key in ('callback_group_type', 'callback_group_name', 'callback_names'):
-            _required(group, key, f'{where}: callback_groups[{number}]')
-    for number, passing in enumerate(raw.get('variable_passings') or []):
-        write, read = (str(_required(passing, key, f'{where}: variable_passings[{number}]'))
-                       for key in ('callback_name_write', 'callback_name_read'))
-        if UNDEFINED not in (write, read):
-            node.passings.append((write, read))
-    for number, publish in enumerate(raw.get('publishes') or []):
-        topic = str(_required(publish, 'topic_name', f'{where}: publishes[{number}]'))
+    for number, group in enumerate(read.get('callback_groups')):
+        _read(sections.CALLBACK_GROUP, group, f'{where}: callback_groups[{number}]')
+    for number, passing in enumerate(read.get('variable_passings')):
+        link = _read(sections.VARIABLE_PASSING, passing, f'{where}: variable_passings[{number}]')
+        write, reader = str(link.get('callback_name_write')), str(link.get('callback_name_read'))
+        if UNDEFINED not in (write, reader):
+            node.passings.append((write, reader))
+    for number, publish in enumerate(read.get('publishes')):
+        publisher = _read(sections.PUBLISH, publish, f'{where}: publishes[{number}]')
+        topic = str(publisher.get('topic_name'))
         node.publishes.append(topic)
-        names = _required(publish, 'callback_names', f'{where}: publishes[{number}]')
-        node.publishers.setdefault(topic, []).extend(str(n) for n in names or [])
-    for number, subscribe in enumerate(raw.get('subscribes') or []):
-        node.subscribes.append(str(_required(subscribe, 'topic_name', f'{where}: subscribes[{number}]')))
-        _required(subscribe, 'callback_name', f'{where}: subscribes[{number}]')
-    for number, context in enumerate(raw.get('message_contexts') or []):
+        node.publishers.setdefault(topic, []).extend(str(n) for n in publisher.get('callback_names') or [])
+    for number, subscribe in enumerate(read.get('subscribes')):
+        node.subscribes.append(str(_read(sections.SUBSCRIBE, subscribe,
+                                         f'{where}: subscribes[{number}]').get('topic_name')))
+    for number, context in enumerate(read.get('message_contexts')):
         ctx_where = f'{where}: message_contexts[{number}]'
-        kind = _required(context, 'context_type', ctx_where)
+        kind = _read(sections.MESSAGE_CONTEXT, context, ctx_where).get('context_type')
         if kind == UNDEFINED:
             continue  # no context: a callback chain may take its place
         if kind not in CONTEXT_TYPES:
             warnings.append(f'{ctx_where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)}); '
                             'context dropped')
             continue
-        subscribed = _topic(_required(context, 'subscription_topic_name', ctx_where))
-        published = _topic(_required(context, 'publisher_topic_name', ctx_where))
+        block = _read(sections.MESSAGE_CONTEXT, context, ctx_where, ('subscription_topic_name', 'publisher_topic_name'))
+        subscribed, published = _topic(block.get('subscription_topic_name')), _topic(block.get('publisher_topic_name'))
         missing = [f'{role} {topic}' for role, topic, known in (('subscribe to', subscribed, node.subscribes),
                                                                   ('publish', published, node.publishes))
                    if topic is not None and topic not in known]
@@ -208,11 +216,10 @@ def load_architecture(path: str | Path) -> Architecture:
     if not isinstance(data, dict):
         raise LatencyError(f'{file}: Failed to parse yaml: not a mapping')
     try:
-        named_paths = _required(data, 'named_paths', 'architecture')
-        executors = _required(data, 'executors', 'architecture')
-        raw_nodes = _required(data, 'nodes', 'architecture')
+        top = _read(sections.ARCHITECTURE, data, 'architecture')
     except LatencyError as exc:
         raise LatencyError(f'{file}: {one_line(exc)}') from None
+    named_paths, executors, raw_nodes = top.get('named_paths'), top.get('executors'), top.get('nodes')
     warnings: list[str] = []
     nodes: dict[str, Node] = {}
     skipped: dict[str, str] = {}
@@ -234,10 +241,12 @@ def load_architecture(path: str | Path) -> Architecture:
     dropped: dict[str, str] = {}
     for number, raw in enumerate(named_paths):
         try:
-            name = str(_required(raw, 'path_name', f'named_paths[{number}]'))
-            chain = [PathNode(str(_required(e, 'node_name', f'path {name}: node_chain[{i}]')),
-                              _topic(e.get('subscribe_topic_name')), _topic(e.get('publish_topic_name')))
-                     for i, e in enumerate(_required(raw, 'node_chain', f'path {name}'))]
+            named = _read(sections.NAMED_PATH, raw, f'named_paths[{number}]')
+            name = str(named.get('path_name'))
+            links = [_read(sections.CHAIN_NODE, e, f'path {name}: node_chain[{i}]')
+                     for i, e in enumerate(named.get('node_chain'))]
+            chain = [PathNode(str(link.get('node_name')), _topic(link.get('subscribe_topic_name')),
+                              _topic(link.get('publish_topic_name'))) for link in links]
         except LatencyError as exc:
             raise LatencyError(f'{file}: {one_line(exc)}') from None
         if name in paths:

@@ -135,7 +135,7 @@ KEY_JSON: dict[str, dict[str, Any]] = {
     'mapping': {'type': 'object'}, 'any': {},
     'string_or_list': {'anyOf': [{'type': 'string'}, {'type': 'array', 'items': {'type': 'string'}}]},
 }
-OPEN_SECTIONS = ('injector', 'assertion')  # their keys depend on a type
+OPEN_SECTIONS = ('injector',)  # its keys depend on its type
 
 
 def _field_json(field: dict[str, Any]) -> dict[str, Any]:
@@ -175,7 +175,7 @@ def _section_json(section: Any, ref: Callable[[str], dict[str, Any]]) -> dict[st
     required = [k.name for k in section.keys if k.required]
     if required:
         out['required'] = required
-    if section.name not in OPEN_SECTIONS:
+    if section.name not in OPEN_SECTIONS and section.unknown != 'ignore':
         out['additionalProperties'] = False
     return out
 

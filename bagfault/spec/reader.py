@@ -10,6 +10,12 @@ at its place. Two dialects, declared per section:
   `yes`/`on` are true; a string is the text as written, so `id: on` is `on`),
   a null value is an absent key, and an unknown key is a warning (the anchor
   ignores it).
+- `medkit`: ros2_medkit's correlation block, read as its config_parser.cpp
+  reads it: yaml-cpp scalars, 32-bit unsigned integers, a boolean key that
+  holds a list or mapping reads as its default (`get_bool`).
+- `caret`: caret_analyze's architecture file, read as its Util.get_value
+  reads it: a required key missing is "required key 'x' not found", a null
+  one "'x' value is None"; an optional null is absent; other keys ignored.
 - `yaml`: bagfault's own sections. YAML's types as they are; an unknown key
   is an error.
 
@@ -61,23 +67,35 @@ class Reader:
     raw: RawText | None = None
 
     def read(self, section: Section, node: object, path: PathKey, *, extra: Collection[str] = (),
-             judge_unknown: bool = True) -> Read | None:
+             judge_unknown: bool = True, required: Collection[str] = ()) -> Read | None:
         """Check `node` against `section`; None (and a problem) when it is not a mapping. `extra` are keys the
-        caller reads itself (an injector type's options); `judge_unknown=False` leaves other keys unjudged."""
-        if node is None and section.reads == 'anchor':
+        caller reads itself (an injector type's options); `judge_unknown=False` leaves other keys unjudged;
+        `required` are keys required here besides the declared ones (a timer callback's period)."""
+        caret = section.reads == 'caret'
+        yaml_cpp = section.reads in ('anchor', 'medkit')
+        if node is None and yaml_cpp:
             node = {}
+        needed = [k.name for k in section.keys if k.required or k.name in required]
         if not isinstance(node, dict):
-            required = [k.name for k in section.keys if k.required]
-            self.problem(path, 'must be a mapping' + (f' with {_listing(required, "and")}' if required else ''))
+            if caret and needed:
+                self.problem(path, f'required key {needed[0]!r} not found')
+            else:
+                self.problem(path, 'must be a mapping' + (f' with {_listing(needed, "and")}' if needed else ''))
             return None
         if judge_unknown:
             self._unknown(section, node, path, extra)
         result = Read()
         for key in section.keys:
             value = node.get(key.name)
-            if key.name not in node or (value is None and section.reads == 'anchor'):
-                if key.required:
-                    self.problem(path, f'missing required key {key.name!r}')
+            absent = (value is None and (yaml_cpp or (caret and key.name not in needed))) or (
+                section.reads == 'medkit' and key.type == 'boolean' and isinstance(value, (dict, list)))
+            if caret and key.name in needed and key.name in node and value is None:
+                self.problem(path, f'{key.name!r} value is None')
+                continue
+            if key.name not in node or absent:
+                if key.name in needed:
+                    self.problem(path, f'required key {key.name!r} not found' if caret else
+                                 f'missing required key {key.name!r}')
                 elif key.default is not None:
                     result.values[key.name] = copy.copy(key.default)  # a list or mapping of its own
                 continue
@@ -91,7 +109,7 @@ class Reader:
 
     def value(self, section: Section, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
         """One key's value read by its declaration: (True, value), or (False, None) with the problem told."""
-        anchor = section.reads == 'anchor'
+        anchor = section.reads != 'yaml'
         if key.choices:
             if value not in key.choices:
                 self.problem(path, f'{value!r} is not {_listing(list(key.choices), "or")}')
@@ -102,10 +120,14 @@ class Reader:
             return self._string(key, value, path, anchor=anchor)
         if kind == 'boolean':
             read = as_bool(value) if anchor else (value if isinstance(value, bool) else None)
-            if read is None:
+            if read is None and section.reads == 'medkit':
+                self.problem(path, f"{value!r} is not a boolean as medkit's yaml-cpp reads one (true/false, yes/no, "
+                                   'on/off, y/n)')
+            elif read is None:
                 tail = f' ({key.what})' if key.what else \
                     ' (nor yes/no, y/n, on/off, as yaml-cpp reads booleans)' if anchor else ''
                 self.problem(path, f'{value!r} is not true or false{tail}')
+            if read is None:
                 return False, None
             return True, read
         if kind in ('number', 'integer', 'seconds'):
@@ -150,7 +172,8 @@ class Reader:
             if anchor and isinstance(value, (int, float, str)):
                 text = self.raw_text(path, value)
                 unsigned = key.minimum is not None and key.minimum >= 0
-                number = as_int(text, unsigned=unsigned) if integer else as_double(text)
+                bits = 32 if key.maximum is not None and key.maximum < 2**32 else 64  # uint32_t, not size_t
+                number = as_int(text, unsigned=unsigned, bits=bits) if integer else as_double(text)
             elif isinstance(value, int) or (isinstance(value, float) and not integer):
                 number = value
         message = _range_problem(key, value, number)

@@ -16,7 +16,7 @@ from typing import Literal
 
 from bagfault.units import MAX_SECONDS
 
-Reads = Literal['anchor', 'yaml']
+Reads = Literal['anchor', 'caret', 'medkit', 'yaml']
 Unknown = Literal['warn', 'error', 'ignore']
 KeyType = Literal['string', 'number', 'integer', 'boolean', 'list', 'mapping', 'string_or_list', 'seconds', 'any']
 
@@ -177,7 +177,8 @@ FAULT_MANAGER = Section('fault_manager', 'fault_manager', "ros2_medkit's fault m
         default=[]),
     Key('diagnostics', 'any', 'Fault codes from /diagnostics statuses: true, or {topic, codes: {NAME: CODE}}.'),
     Key('conditions', 'list', 'Fault codes from conditions on message fields.', section='condition', default=[]),
-    Key('correlation', 'mapping', "Hierarchical and auto-cluster correlation (medkit's correlation block)."),
+    Key('correlation', 'mapping', "Hierarchical and auto-cluster correlation (medkit's correlation block).",
+        section='correlation'),
     Key('snapshots', 'mapping', 'Freeze frames and black boxes of confirmed faults.', section='snapshots'),
     Key('clear', 'list', 'ClearFault calls at given times.', section='clear', default=[]),
 ), noun='fault_manager')
@@ -229,6 +230,33 @@ REPORT = Section('report', 'faults[].report', 'A fault manager report made while
         exclusive=True, maximum=MAX_SECONDS),
     Key('source', 'string', 'The reporting source (default: /bagfault/<injector id>).', what='a non-empty source id'),
 ), noun='report')
+UINT32 = 2**32 - 1
+CORRELATION = Section('correlation', 'fault_manager.correlation', "ros2_medkit's correlation block, read as medkit "
+                      'reads it (unknown keys ignored).', (
+    Key('enabled', 'boolean', 'Apply the rules (a disabled block is checked with warnings only).', default=False),
+    Key('default_window_ms', 'integer', 'Window of a rule that sets none.', unit='ms', default=500, minimum=1,
+        maximum=UINT32),
+    Key('patterns', 'mapping', 'Named code lists rules refer to: {ID: {codes: [...]}}.',
+        what='a mapping of pattern ids to {codes: [...]}'),
+    Key('rules', 'list', 'The rules.', section='rule', default=[]),
+), reads='medkit', unknown='ignore')
+RULE = Section('rule', 'fault_manager.correlation.rules[]', 'A hierarchical or auto-cluster rule.', (
+    Key('id', 'string', 'Unique name.', required=True),
+    Key('name', 'string', 'Display name (default: the id).'),
+    Key('mode', 'string', '`hierarchical` or `auto_cluster` (and the aliases medkit takes, in any case).',
+        default='hierarchical'),
+    Key('window_ms', 'integer', 'Time after a root cause (or the first fault of a cluster) that counts.', unit='ms',
+        minimum=1, maximum=UINT32),
+    Key('root_cause', 'mapping', 'Hierarchical: {codes: [...]} of the root cause.', what='{codes: [...]}'),
+    Key('symptoms', 'list', 'Hierarchical: [{pattern: ID} or {codes: [...]}].'),
+    Key('mute_symptoms', 'boolean', 'Hierarchical: symptoms are muted.', default=True),
+    Key('auto_clear_with_root', 'boolean', 'Hierarchical: symptoms clear with the root.', default=True),
+    Key('match', 'list', 'Auto-cluster: [{pattern: ID}].'),
+    Key('min_count', 'integer', 'Auto-cluster: faults that make a cluster.', default=3, minimum=1, maximum=UINT32),
+    Key('show_as_single', 'boolean', 'Auto-cluster: one fault stands for the cluster.', default=True),
+    Key('representative', 'string', '`first`, `most_recent` or `highest_severity` (and their aliases).',
+        default='highest_severity'),
+), reads='medkit', unknown='ignore')
 CAMPAIGN = Section('campaign', '(top level of a campaign file)', 'Bags x fault parameters x seeds.', (
     Key('campaign', 'string', "The campaign's name.", required=True),
     Key('scenario', 'string', 'The scenario file, relative to this file.', required=True,
@@ -257,9 +285,68 @@ SEARCH = Section('search', 'search', 'Bisection of one parameter.', (
 ))
 
 SCENARIO_SECTIONS = (SCENARIO, INJECTOR, TOPIC, TRIGGER_SERVICE, FAULT, REPEAT, AFTER, REPORT, ASSERTION, SYSTEM,
-                     READY, FAULT_MANAGER, OVERRIDE, DIAGNOSTICS, CONDITION, WHEN, SNAPSHOTS, CLEAR)
+                     READY, FAULT_MANAGER, OVERRIDE, DIAGNOSTICS, CONDITION, WHEN, SNAPSHOTS, CLEAR, CORRELATION,
+                     RULE)
 UNTIL = Section('until', 'search.until', 'What counts as holding.', (
     Key('assertion', 'string', 'An assertion id of the scenario.', required=True),
     Key('state', 'string', 'The verdict that counts as holding.', default='passed', choices=('passed', 'failed')),
 ))
 CAMPAIGN_SECTIONS = (CAMPAIGN, SEARCH, UNTIL)
+
+# caret_analyze's architecture file (`--architecture`): the keys bagfault reads, as caret_analyze requires them
+ARCHITECTURE = Section('architecture', '(top level of a CARET architecture file)', 'Named paths, executors, nodes.', (
+    Key('named_paths', 'list', 'Paths: path_name and node_chain.', required=True, section='named_path'),
+    Key('executors', 'list', 'Executors (kept, not used).', required=True),
+    Key('nodes', 'list', 'Nodes: callbacks, publishes, subscribes, message contexts.', required=True,
+        section='node'),
+), reads='caret', unknown='ignore')
+NAMED_PATH = Section('named_path', 'named_paths[]', 'A path through nodes.', (
+    Key('path_name', 'any', 'Its name.', required=True),
+    Key('node_chain', 'list', 'The nodes in turn: node_name, subscribe_topic_name, publish_topic_name.',
+        required=True, section='chain_node'),
+), reads='caret', unknown='ignore')
+CHAIN_NODE = Section('chain_node', 'named_paths[].node_chain[]', 'One node of a path.', (
+    Key('node_name', 'any', 'The node.', required=True),
+    Key('subscribe_topic_name', 'any', 'The topic it takes (UNDEFINED: none).'),
+    Key('publish_topic_name', 'any', 'The topic it gives (UNDEFINED: none).'),
+), reads='caret', unknown='ignore')
+NODE = Section('node', 'nodes[]', 'A node.', (
+    Key('node_name', 'any', 'Its name.', required=True),
+    Key('callbacks', 'list', 'Timer and subscription callbacks (others ignored).', default=[]),
+    Key('callback_groups', 'list', 'Callback groups (checked, not used).', default=[]),
+    Key('variable_passings', 'list', 'Callback to callback links.', default=[]),
+    Key('publishes', 'list', 'Publishers: topic_name, callback_names.', default=[]),
+    Key('subscribes', 'list', 'Subscriptions: topic_name, callback_name.', default=[]),
+    Key('message_contexts', 'list', 'How a node passes a message on (use_latest_message, callback_chain).',
+        default=[]),
+), reads='caret', unknown='ignore')
+CALLBACK = Section('callback', 'nodes[].callbacks[]', 'A callback (a timer one needs period_ns, a subscription one '
+                   'topic_name).', (
+    Key('callback_type', 'any', 'timer_callback, subscription_callback or another caret ignores.', required=True),
+    Key('callback_name', 'any', 'Its name.'),
+    Key('symbol', 'any', 'Its symbol.'),
+    Key('period_ns', 'any', 'A timer callback: its period.'),
+    Key('topic_name', 'any', 'A subscription callback: its topic.'),
+), reads='caret', unknown='ignore')
+CALLBACK_GROUP = Section('callback_group', 'nodes[].callback_groups[]', 'A callback group.', (
+    Key('callback_group_type', 'any', 'Its type.', required=True),
+    Key('callback_group_name', 'any', 'Its name.', required=True),
+    Key('callback_names', 'any', 'Its callbacks.', required=True),
+), reads='caret', unknown='ignore')
+VARIABLE_PASSING = Section('variable_passing', 'nodes[].variable_passings[]', 'A callback writes, another reads.', (
+    Key('callback_name_write', 'any', 'The writer (UNDEFINED: none).', required=True),
+    Key('callback_name_read', 'any', 'The reader (UNDEFINED: none).', required=True),
+), reads='caret', unknown='ignore')
+PUBLISH = Section('publish', 'nodes[].publishes[]', 'A publisher.', (
+    Key('topic_name', 'any', 'Its topic.', required=True),
+    Key('callback_names', 'any', 'The callbacks that publish.', required=True),
+), reads='caret', unknown='ignore')
+SUBSCRIBE = Section('subscribe', 'nodes[].subscribes[]', 'A subscription.', (
+    Key('topic_name', 'any', 'Its topic.', required=True),
+    Key('callback_name', 'any', 'Its callback.', required=True),
+), reads='caret', unknown='ignore')
+MESSAGE_CONTEXT = Section('message_context', 'nodes[].message_contexts[]', 'How a node passes a message on.', (
+    Key('context_type', 'any', 'use_latest_message, callback_chain, or UNDEFINED.', required=True),
+    Key('subscription_topic_name', 'any', 'The topic taken (required unless the type is UNDEFINED).'),
+    Key('publisher_topic_name', 'any', 'The topic given (required unless the type is UNDEFINED).'),
+), reads='caret', unknown='ignore')

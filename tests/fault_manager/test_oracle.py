@@ -340,9 +340,9 @@ def test_13_cluster_window_is_fixed_from_the_first_fault():
                                 {'id': 'a', 'mode': 'auto_cluster', 'match': [{'codes': ['Y']}]}]}},
      "duplicate rule id 'a'"),
     ({'correlation': {'rules': [{'id': 'a', 'mode': 'auto_cluster', 'window_ms': 0, 'match': [{'codes': ['X']}]}]}},
-     'must be a positive integer (ms)'),
+     '0 is not an integer from 1 to 4294967295'),
     ({'correlation': {'rules': [{'id': 'a', 'mode': 'auto_cluster', 'min_count': 0, 'match': [{'codes': ['X']}]}]}},
-     '0 must be a positive integer'),
+     '0 is not an integer from 1'),
     ({'correlation': {'rules': [{'id': 'a', 'mode': 'sideways'}]}}, "'sideways' is not"),
 ])
 def test_correlation_config_errors(section, problem):

@@ -93,7 +93,7 @@ def test_correlation_windows_and_counts_are_uint32_as_medkit_reads_them(written:
             f'window_ms: {written}}}\n')
     config, problems = parsed(text)
     if read is None:
-        assert len(problems) == 3 and all('must be a positive integer' in p for p in problems)
+        assert len(problems) == 3 and all('is not an integer from 1 to 4294967295' in p for p in problems)
     else:
         assert problems == [] and config.default_window_ms == read
         (rule,) = config.rules

@@ -103,3 +103,32 @@ def test_a_default_list_is_a_fresh_list_each_time() -> None:
     assert first is not None and second is not None
     first.get('items').append(1)
     assert second.get('items') == [] and section.keys[0].default == []
+
+
+def test_caret_words_for_a_required_key_missing_or_null_and_an_optional_null_is_absent() -> None:
+    """caret_analyze's Util.get_value: "required key 'x' not found", "'x' value is None"."""
+    section = Section('c', 'c', 'caret-like.', (Key('name', 'any', 'Name.', required=True),
+                                                 Key('items', 'list', 'Items.', default=[])), reads='caret',
+                      unknown='ignore')
+    problems: list[str] = []
+    reader = Reader(lambda p, m: problems.append(m))
+    assert reader.read(section, {'items': None, 'other': 1}, ()) is not None
+    assert reader.read(section, {'name': None}, ()) is not None
+    assert reader.read(section, 'text', ()) is None
+    assert problems == ["required key 'name' not found", "'name' value is None", "required key 'name' not found"]
+    read = reader.read(section, {'name': 'n', 'items': None}, (), required=('items',))
+    assert read is not None and problems[-1] == "'items' value is None"
+
+
+def test_medkit_reads_uint32_and_a_boolean_that_is_no_scalar_as_its_default() -> None:
+    """config_parser.cpp: get_uint32 is as<uint32_t>() (a quoted number counts, 2^32 does not); get_bool gives
+    the default for a node that is not a scalar."""
+    section = Section('m', 'm', 'medkit-like.', (Key('window_ms', 'integer', 'Window.', minimum=1,
+                                                     maximum=2**32 - 1),
+                                                 Key('mute', 'boolean', 'Mute.', default=True)), reads='medkit')
+    values, problems, _ = read(section, "window_ms: '4294967295'\nmute: [false]\n")
+    assert problems == [] and values == {'window_ms': 2**32 - 1, 'mute': True}
+    _, problems, _ = read(section, "window_ms: '4294967296'\nmute: maybe\n")
+    assert problems == [('window_ms', "'4294967296' is not an integer from 1 to 4294967295"),
+                        ('mute', "'maybe' is not a boolean as medkit's yaml-cpp reads one (true/false, yes/no, "
+                                 'on/off, y/n)')]
