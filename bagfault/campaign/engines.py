@@ -241,7 +241,9 @@ class RayEngine:
             if address:
                 ray.init(address=address, **options)
             else:
-                ray.init(num_cpus=workers or os.cpu_count() or 1, **options)
+                # 'local': an instance of its own even when a cluster runs here (`ray start`, another suite's),
+                # which Ray would otherwise join (RAY_ADDRESS, /tmp/ray/ray_current_cluster) and refuse num_cpus
+                ray.init(address='local', num_cpus=workers or os.cpu_count() or 1, **options)
         except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; all mean "no cluster"
             if self._adopting is not None:
                 self._adopting.reap(timeout=1.0)  # and this process is no subreaper any more
