@@ -14,7 +14,7 @@ import pytest
 
 from bagfault.cli import main
 from bagfault.io.outputs import written_by_bagfault
-from tests.support.helpers import make_bag
+from support.helpers import make_bag
 
 SCENARIO = """
 injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}
