@@ -152,9 +152,9 @@ class Conditions:
 READS: list[int] = []  # bytes each job read from the storage device (not from the page cache), in order
 
 
-def run_job(code: str, **values: str) -> tuple[float, int, float]:
-    """Run one job in a fresh process; return (wall seconds, its peak RSS in bytes, its CPU seconds); the bytes
-    it read from the device go to READS."""
+def run_job(code: str, env: dict[str, str] | None = None, **values: str) -> tuple[float, int, float]:
+    """Run one job in a fresh process (`env`: added to its environment); return (wall seconds, its peak RSS in
+    bytes, its CPU seconds); the bytes it read from the device go to READS."""
     prelude = ''.join(f'{k} = {v!r}\n' for k, v in values.items())
     os.sync()  # the previous job's output is written back before this one is timed, not during it
     if Conditions.cold:
@@ -162,7 +162,8 @@ def run_job(code: str, **values: str) -> tuple[float, int, float]:
     before, blocks = os.times(), resource.getrusage(resource.RUSAGE_CHILDREN).ru_inblock
     started = time.perf_counter()
     done = subprocess.run([sys.executable, '-c', prelude + textwrap.dedent(code) + PEAK_RSS],
-                          stdout=subprocess.PIPE, text=True, check=False, env=JOB_ENV, preexec_fn=Conditions.enter)
+                          stdout=subprocess.PIPE, text=True, check=False, env={**JOB_ENV, **(env or {})},
+                          preexec_fn=Conditions.enter)
     elapsed = time.perf_counter() - started
     after = os.times()
     READS.append((resource.getrusage(resource.RUSAGE_CHILDREN).ru_inblock - blocks) * 512)
@@ -227,16 +228,22 @@ def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[st
     """Chunk copy against `cp` of the same file: no fault active, and an IMU bias active 10 s (from 100 s)."""
     bag = ensure_bag('sensor-heavy', seconds)
     out = DATA / 'out.mcap'
-    jobs = {'cp': (CP, {}), 'start and import only': (IMPORT_ONLY, {})}
+    jobs: dict[str, tuple[str, dict[str, str], dict[str, str]]] = {
+        'cp': (CP, {}, {}), 'start and import only': (IMPORT_ONLY, {}, {})}
     for case, what in (('a', 'none active'), ('w', 'IMU bias 10 s')):
         for copy in ('yes', 'no') if reference else ('yes',):
             name = f'{what}{"" if copy == "yes" else ", --no-chunk-copy"}'
-            jobs[name] = (BAGFAULT, {'SCENARIO': scenario('sensor-heavy', case), 'CHUNK_COPY': copy})
+            jobs[name] = (BAGFAULT, {'SCENARIO': scenario('sensor-heavy', case), 'CHUNK_COPY': copy}, {})
+        # the first run on a bag hashes it; later ones recall its digest (bagfault/io/digests.py): a cache
+        # folder that cannot be made is a miss every time
+        jobs[f'{what}, first run (input hashed)'] = (BAGFAULT, {'SCENARIO': scenario('sensor-heavy', case),
+                                                               'CHUNK_COPY': 'yes'},
+                                                     {'BAGFAULT_CACHE': '/proc/bagfault-bench-no-cache'})
     samples: dict[str, list[tuple[float, int, float]]] = {name: [] for name in jobs}
     reads: dict[str, list[int]] = {name: [] for name in jobs}
     for _ in range(repeat):
-        for name, (code, values) in jobs.items():
-            samples[name].append(run_job(code, SRC=str(bag), DST=str(out), **values))
+        for name, (code, values, env) in jobs.items():
+            samples[name].append(run_job(code, env, SRC=str(bag), DST=str(out), **values))
             reads[name].append(READS[-1])
             out.unlink(missing_ok=True)
     cp = statistics.median(t for t, _, _ in samples['cp'])

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+# the suite's caches (kept input digests, downloaded bags) in a folder of its own, not the user's ~/.cache
+os.environ['XDG_CACHE_HOME'] = str(Path(tempfile.gettempdir()) / 'bagfault-test-cache')
+os.environ.pop('BAGFAULT_CACHE', None)
 
 from support.helpers import ANCHORS, EXTERNAL, FIXTURES, need
 

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import blake3
 
 from bagfault.errors import InputError
+from bagfault.io import digests
 from bagfault.io.mcap_source import McapSource
 from bagfault.io.merged import MergedSource, Source
 from bagfault.io.rosbag2_source import Rosbag2Source
@@ -132,8 +133,7 @@ def fingerprint(path: Path, stop: threading.Event | None = None, mark: ReadMark 
     for file in input_files(path):
         try:
             key = stat_key(file)
-            digest = _known.get(key) or _blake3(file, stop, mark)
-            out.append(InputFile(file.name, key[2], digest))
+            out.append(InputFile(file.name, key[2], _digest(file, key, stop, mark)))
         except OSError as exc:
             raise InputError(f'{file}: cannot read: {exc.strerror or exc}') from None
     return out
@@ -141,7 +141,18 @@ def fingerprint(path: Path, stop: threading.Event | None = None, mark: ReadMark 
 
 def digests_of(path: Path) -> dict[StatKey, str]:
     """Each file of an input by its stat key, with its digest (to hand to `remember_digests` elsewhere)."""
-    return {stat_key(file): _known.get(stat_key(file)) or _blake3(file, None) for file in input_files(path)}
+    return {(key := stat_key(file)): _digest(file, key, None) for file in input_files(path)}
+
+
+def _digest(file: Path, key: StatKey, stop: threading.Event | None, mark: ReadMark | None = None) -> str:
+    """The file's BLAKE3: given to this process, kept from an earlier run (io/digests.py), or hashed now."""
+    known = _known.get(key) or digests.recall(key)
+    if known is not None:
+        return known
+    started = digests.now_ns()
+    digest = _blake3(file, stop, mark)
+    digests.keep(key, digest, started)
+    return digest
 
 
 class HashStopped(Exception):  # noqa: N818 - a signal to the hashing thread, never shown

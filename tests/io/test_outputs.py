@@ -11,10 +11,10 @@ import shutil
 import sqlite3
 
 import pytest
+from support.helpers import make_bag
 
 from bagfault.cli import main
 from bagfault.io.outputs import written_by_bagfault
-from support.helpers import make_bag
 
 SCENARIO = """
 injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}

@@ -1,0 +1,83 @@
+"""Input digests kept between runs: a bag's BLAKE3 is computed once per file version, not once per run.
+
+A run's provenance names each input file's BLAKE3 digest. Hashing a 10 GB bag
+costs 3.5 s of CPU, paid again by every run on the same bag (a scenario
+edited and run again, a CI job, a campaign on this machine). The digest is
+kept under the file's stat key (device, inode, size, mtime, ctime: any write
+changes the ctime, which nobody can set), in `~/.cache/bagfault/digests`
+(`$XDG_CACHE_HOME`, or `$BAGFAULT_CACHE/digests`), one small file per key.
+
+A file written within a second of being hashed is not kept, as git treats a
+"racily clean" index entry: a second write within the clock tick of the first
+(ext4 stamps ctime from a clock that ticks every few milliseconds) would keep
+the stat key while changing the bytes. Nothing here is needed: a cache that
+cannot be read or written is a cache miss.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import re
+import tempfile
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from bagfault.io.sources import StatKey
+
+log = logging.getLogger(__name__)
+SETTLED_NS = 1_000_000_000  # a file unchanged this long before it was hashed cannot change within its ctime tick
+HEX = re.compile(r'[0-9a-f]{64}')
+
+
+def root() -> Path:
+    """Where digests are kept."""
+    base = os.environ.get('BAGFAULT_CACHE')
+    if base:
+        return Path(base) / 'digests'
+    return Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'bagfault' / 'digests'
+
+
+def _name(key: StatKey) -> str:
+    return '-'.join(str(part) for part in key)
+
+
+def recall(key: StatKey) -> str | None:
+    """The digest kept for this version of a file, or None."""
+    try:
+        text = (root() / _name(key)).read_text(encoding='ascii').strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return text if HEX.fullmatch(text) else None
+
+
+def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
+    """Keep the digest of a file hashed from `hashed_from_ns` (wall clock) on, when the file had settled by
+    then; True when kept."""
+    if max(key[3], key[4]) > hashed_from_ns - SETTLED_NS or not HEX.fullmatch(digest):
+        return False
+    folder = root()
+    staging: str | None = None
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        handle, staging = tempfile.mkstemp(dir=folder, prefix='.', suffix='.tmp')
+        with os.fdopen(handle, 'w', encoding='ascii') as out:
+            out.write(digest)
+        os.replace(staging, folder / _name(key))
+        staging = None
+    except OSError as exc:
+        log.debug('input digest not kept in %s: %s', folder, exc)
+        return False
+    finally:
+        if staging is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(staging)
+    return True
+
+
+def now_ns() -> int:
+    """The wall clock, as file times are stamped."""
+    return time.time_ns()
