@@ -258,7 +258,7 @@ RULE = Section('rule', 'fault_manager.correlation.rules[]', 'A hierarchical or a
         default='highest_severity'),
 ), reads='medkit', unknown='ignore')
 CAMPAIGN = Section('campaign', '(top level of a campaign file)', 'Bags x fault parameters x seeds.', (
-    Key('campaign', 'string', "The campaign's name.", required=True),
+    Key('campaign', 'string', "The campaign's name (default: the file's name)."),
     Key('scenario', 'string', 'The scenario file, relative to this file.', required=True,
         what='a scenario file (relative to this file)'),
     Key('mode', 'string', '`run` (offline) or `test` (closed loop).', default='run', choices=('run', 'test')),

@@ -146,3 +146,12 @@ def test_a_sweep_too_large_is_refused_before_anything_is_expanded(tmp_path: Path
     sampled.design, sampled.samples, sampled.design_seed = 'random', 5, 3
     plan = make_plan(sampled)  # a random design draws points of the grid without building it
     assert len(plan.jobs) == 5 and len({tuple(j.values.values()) for j in plan.jobs}) == 5
+
+
+def test_a_campaign_without_a_name_is_named_after_its_file(corpus: Path) -> None:
+    path = campaign_file(corpus, """\
+        scenario: drift.yaml
+        bags: [bags/a.mcap]
+    """, name='nightly_drift.yaml')
+    campaign = load_campaign(path)
+    assert campaign.name == 'nightly_drift' and [Path(b).name for b in campaign.bags] == ['a.mcap']
