@@ -7,13 +7,12 @@ assertion row zooms them all to where it was decided. Built on report.page.
 from __future__ import annotations
 
 import json
-from html import escape
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from bagfault.report.fields import angle_of
-from bagfault.report.page import LEGEND, Page, buckets_hit, colorscale, envelope, paint, png, shade, title
+from bagfault.report.page import LEGEND, Page, buckets_hit, colorscale, envelope, macros, paint, png, shade, title
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -62,7 +61,7 @@ def _timeline(page: Page, report: dict[str, Any], rates: RateTracker | None) -> 
                          'marker': {'symbol': 'line-ns-open', 'size': 12}, 'name': topic, 'showlegend': False,
                          'hovertemplate': f'{topic} at %{{x:.3f}} s<extra></extra>'})
     if not data:
-        page.html('<p>No fault changed state and no assertion was decided.</p>')
+        page.paragraph('No fault changed state and no assertion was decided.')
         return
     rows = len({str(d['y'][0]) for d in data if len(d['y'])})
     page.figure(data, {'height': 90 + 28 * rows, 'xaxis': {'title': {'text': 'bag time (s)'},
@@ -74,19 +73,14 @@ def _timeline(page: Page, report: dict[str, Any], rates: RateTracker | None) -> 
 
 def _assertions(page: Page, report: dict[str, Any]) -> None:
     if not report['assertions']:
-        page.html('<p>No assertions in this scenario.</p>')
+        page.paragraph('No assertions in this scenario.')
         return
     span = max(1.0, 0.05 * _duration(report))
-    rows = []
-    for a in report['assertions']:
-        css = 'pass' if a['state'] == 'passed' else 'fail'
-        t = '' if a['t_s'] is None else f'{a["t_s"]:.3f}'
-        zoom = '' if a['t_s'] is None else f' data-zoom="{a["t_s"] - span:.3f},{a["t_s"] + span:.3f}"'
-        rows.append(f'<tr{zoom}><td class="{css}">{escape(a["state"].upper())}</td><td>{escape(a["id"])}</td>'
-                    f'<td>{escape(a["type"])}</td><td>{t}</td><td>{escape(a["message"])}</td></tr>')
-    page.html('<p class="muted">Click a row to zoom every time plot to where it was decided.</p>'
-              '<table><tr><th>result</th><th>assertion</th><th>type</th><th>t (s)</th><th>message</th></tr>'
-              + ''.join(rows) + '</table>')
+    rows = [{'state': a['state'], 'id': a['id'], 'type': a['type'], 'message': a['message'],
+             't': '' if a['t_s'] is None else f'{a["t_s"]:.3f}',
+             'zoom': '' if a['t_s'] is None else f'{a["t_s"] - span:.3f},{a["t_s"] + span:.3f}'}
+            for a in report['assertions']]
+    page.html(macros().assertions(rows))
 
 
 def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) -> None:
@@ -123,21 +117,13 @@ def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) 
         counts.setdefault(event['fault_code'], {}).setdefault(event['event_type'], 0)
         counts[event['fault_code']][event['event_type']] += 1
     kinds = ('fault_confirmed', 'fault_updated', 'fault_cleared')
-    rows = ''.join(
-        f'<tr><td>{escape(f["fault_code"])}</td><td>{escape(f["severity"])}</td><td>{escape(f["status"])}</td>'
-        f'<td>{f["occurrence_count"]}</td><td>{f["first_occurred_s"]:.3f}</td><td>{f["last_occurred_s"]:.3f}</td>'
-        + ''.join(f'<td>{counts.get(f["fault_code"], {}).get(k, 0)}</td>' for k in kinds) + '</tr>'
-        for f in summary['faults'])
-    snapshots = ''.join(
-        f'<details><summary>Snapshot of {escape(s["fault_code"])} at {s["t_s"]:.3f} s'
-        f'{", black box " + escape(s["black_box"]) if s["black_box"] else ""}</summary>'
-        f'<pre>{escape(json.dumps(s["freeze_frame"], indent=1, sort_keys=True)[:4000])}</pre></details>'
-        for s in summary['snapshots'])
-    page.html(f'<p>At the end of the bag: {len(summary["confirmed"])} confirmed, {summary["muted_count"]} muted, '
-              f'{summary["cluster_count"]} clusters.</p>'
-              '<table><tr><th>code</th><th>severity</th><th>status</th><th>occurrences</th><th>first (s)</th>'
-              '<th>last (s)</th><th>confirmed</th><th>updated</th><th>cleared</th></tr>'
-              f'{rows}</table>{snapshots}')
+    rows = [{'code': f['fault_code'], 'severity': f['severity'], 'status': f['status'],
+             'occurrences': f['occurrence_count'], 'first': f['first_occurred_s'], 'last': f['last_occurred_s'],
+             'counts': [counts.get(f['fault_code'], {}).get(k, 0) for k in kinds]} for f in summary['faults']]
+    snapshots = [{'code': s['fault_code'], 't': s['t_s'], 'black_box': s['black_box'],
+                  'frame': json.dumps(s['freeze_frame'], indent=1, sort_keys=True)[:4000]}
+                 for s in summary['snapshots']]
+    page.html(macros().fault_manager(summary, rows, snapshots))
 
 
 INF_COLOR, NAN_COLOR = '#ff00ff', '#000000'
@@ -195,7 +181,7 @@ def _heatmap(image: ArrayImage, text: str, axis: str, windows: list[tuple[float,
 
 def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> None:
     if not plots:
-        page.html('<p>No field was changed by an active fault.</p>')
+        page.paragraph('No field was changed by an active fault.')
         return
     for plot in plots:
         windows = _windows(report, set(plot.faults))
@@ -323,11 +309,11 @@ def _rates(page: Page, report: dict[str, Any], rates: RateTracker | None, topics
     """Small multiples on one shared time axis: each topic's rate over a window matched to its nominal rate,
     fault windows shaded, gaps marked."""
     if rates is None:
-        page.html('<p>Rates were not collected.</p>')
+        page.paragraph('Rates were not collected.')
         return
     shown = [t for t in topics if t in rates.times and not rates.is_event_topic(t)]
     if not shown:
-        page.html('<p>No topic has enough messages for a rate.</p>')
+        page.paragraph('No topic has enough messages for a rate.')
         return
     rows = len(shown)
     gap = 0.3 / rows
@@ -364,20 +350,14 @@ def render(
     report: dict[str, Any],
     rates: RateTracker | None = None,
     plots: Sequence[FieldPlot] = (),
-    extra_sections: Sequence[tuple[str, str]] = (),
     media: Sequence[MediaPlot] = (),
 ) -> str:
     """Whole HTML document."""
-    counts = report['assertion_counts']
-    verdict_css = 'fail' if report['verdict'] == 'failed' else 'pass'
     name = report['scenario']['name']
     page = Page(f'bagfault report: {name}')
-    inputs = ', '.join(f'<code>{escape(p)}</code>' for p in report['inputs'])
-    page.html(f'<h1>bagfault report: {escape(name)}</h1>'
-              f'<p class="verdict {verdict_css}">{escape(report["verdict"].upper())}: {counts["passed"]} passed, '
-              f'{counts["failed"]} failed</p><p>mode {escape(report["mode"])}; inputs {inputs}; output '
-              f'<code>{escape(str(report["output"]))}</code>; seed {report["seed"]}; bag duration '
-              f'{report["time"]["duration_s"]} s; bagfault {escape(report["tool"]["version"])}</p>')
+    page.html(macros().run_header(name, report['verdict'], report['assertion_counts'], report['mode'],
+                                  report['inputs'], str(report['output']), report['seed'],
+                                  report['time']['duration_s'], report['tool']['version']))
     page.section('Timeline')
     _timeline(page, report, rates)
     page.section('Assertions')
@@ -391,14 +371,9 @@ def render(
     topics = sorted(report['messages']['per_topic_written'])
     page.section('Topic rates')
     _rates(page, report, rates, topics)
-    for heading, body in extra_sections:
-        page.section(heading)
-        page.html(body)
     page.section('Messages written')
-    page.html('<table><tr><th>topic</th><th>messages</th></tr>' + ''.join(
-        f'<tr><td>{escape(t)}</td><td>{n}</td></tr>' for t, n in report['messages']['per_topic_written'].items())
-        + '</table>')
+    page.html(macros().messages(report['messages']['per_topic_written'].items()))
     if report['notes']:
         page.section('Notes')
-        page.html('<ul>' + ''.join(f'<li>{escape(n)}</li>' for n in report['notes']) + '</ul>')
+        page.html(macros().notes(report['notes']))
     return page.render()

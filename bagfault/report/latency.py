@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-from html import escape
 from typing import TYPE_CHECKING, Any
 
 from bagfault.latency.compute import by_fault, statistics
 from bagfault.latency.measure import LatencyReport
-from bagfault.report.page import Page, envelope, shade, title
+from bagfault.report.page import Page, envelope, macros, shade, title
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -49,8 +48,7 @@ def render_html(report: LatencyReport) -> str:
     windows = [((s - report.origin) / NS, ((e if e is not None else s) - report.origin) / NS, fault)
                for fault, spans in report.windows.items() for s, e in spans]
     page = Page('bagfault latency')
-    page.html(f'<h1>Path latency</h1><p>{escape(str(report.architecture.source))} on '
-              f'{escape(", ".join(report.inputs))}</p>')
+    page.html(macros().latency_header(str(report.architecture.source), report.inputs))
     for result in report.results:
         page.section(f'{result.name}: {" -> ".join(result.topics)}')
         seconds = (result.sample_times - report.origin) / NS
@@ -64,8 +62,8 @@ def render_html(report: LatencyReport) -> str:
                     {'title': title(f'{result.name} latency histogram'), 'height': 280,
                      'xaxis': {'title': {'text': 'latency (ms)'}}, 'yaxis': {'title': {'text': 'samples'}}},
                     name=f'histogram:{result.name}')
-        page.html('<pre>' + escape(render_text(LatencyReport(report.architecture, report.inputs, report.origin,
-                                                             [result], report.windows))) + '</pre>')
+        page.html(macros().preformatted(render_text(LatencyReport(report.architecture, report.inputs, report.origin,
+                                                                  [result], report.windows))))
     return page.render()
 
 

@@ -20,7 +20,6 @@ import struct
 import zlib
 from dataclasses import dataclass, field
 from functools import cache
-from html import escape
 from importlib import resources
 from typing import Any
 
@@ -115,12 +114,16 @@ class Page:
     figures: int = 0
 
     def html(self, text: str) -> None:
-        """Raw HTML (already escaped by the caller)."""
-        self.parts.append(text)
+        """HTML a template made (templates/page.html.j2, or the campaign report's)."""
+        self.parts.append(str(text))
 
     def section(self, title: str) -> None:
         """A section heading."""
-        self.parts.append(f'<h2>{escape(title)}</h2>')
+        self.html(macros().section(title))
+
+    def paragraph(self, text: str) -> None:
+        """A paragraph of plain text."""
+        self.html(macros().paragraph(text))
 
     def figure(self, data: list[dict[str, Any]], layout: dict[str, Any], *, timed: bool = False,
                name: str = '') -> None:
@@ -132,17 +135,22 @@ class Page:
         ident = f'figure-{self.figures}'
         spec = json.dumps(_plain({'data': data, 'layout': {'margin': {'l': 60, 'r': 20, 't': 36, 'b': 36},
                                                             **layout}}), separators=(',', ':'))
-        spec = spec.replace('</', '<\\/')
-        self.parts.append(f'<div class="figure" id="{ident}"></div><script type="application/json" '
-                          f'data-figure="{ident}" data-timed="{int(timed)}" data-name="{escape(name)}">{spec}'
-                          '</script>')
+        spec = spec.replace('</', '<\\/')  # JSON inside <script>: no end tag can close it early
+        self.html(macros().figure(ident, int(timed), name, spec))
 
     def render(self) -> str:
         """The whole document."""
-        return ('<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-                f'<meta name="generator" content="bagfault"><title>{escape(self.title)}</title>'
-                f'<style>{STYLE}</style><script>{plotly_js()}</script><script>{SCRIPT}</script></head>\n<body>\n'
-                + '\n'.join(self.parts) + '\n</body></html>\n')
+        return str(macros().document(self.title, STYLE, plotly_js(), SCRIPT, self.parts))
+
+
+@cache
+def macros() -> Any:
+    """The report pages' HTML (templates/page.html.j2), autoescaped."""
+    import jinja2  # noqa: PLC0415
+
+    environment = jinja2.Environment(loader=jinja2.PackageLoader('bagfault.report', 'templates'),
+                                     autoescape=True, keep_trailing_newline=True)
+    return environment.get_template('page.html.j2').module
 
 
 def shade(windows: list[tuple[float, float, str]], *, outline: bool = False) -> list[dict[str, Any]]:

@@ -43,3 +43,35 @@ def test_an_array_field_that_was_always_empty_is_a_blank_picture_not_a_broken_on
     data, _ = _heatmap(empty, 'empty', 'element', [], (0.0, 1.0))
     pixels = png_pixels(data[0]['source'])
     assert pixels.shape == (1, 4, 4) and not pixels[..., 3].any()
+
+
+def test_text_on_a_page_is_escaped_and_a_figure_cannot_close_its_script() -> None:
+    """The page is made by templates/page.html.j2 with autoescape: a heading, a paragraph, an assertion message
+    or a figure name holding HTML stays text; a figure's JSON holding `</script>` does not end its block."""
+    from html.parser import HTMLParser
+
+    from bagfault.report.page import macros
+
+    page = Page('<title> & co')
+    page.section('<h1>')
+    page.paragraph('a <b>bold</b> claim')
+    page.html(macros().assertions([{'state': 'failed', 'id': 'x', 'type': 't', 't': '', 'zoom': '',
+                                    'message': '<img src=x onerror=alert(1)>'}]))
+    page.figure([{'type': 'scatter', 'x': [0], 'y': [0], 'name': '</script><script>alert(1)</script>'}], {},
+                name='"><b>')
+    text = page.render()
+    assert '<title>&lt;title&gt; &amp; co</title>' in text and '<h2>&lt;h1&gt;</h2>' in text
+    assert '<p>a &lt;b&gt;bold&lt;/b&gt; claim</p>' in text and '&lt;img src=x onerror=alert(1)&gt;' in text
+    assert 'data-name="&#34;&gt;&lt;b&gt;"' in text
+
+    class Tags(HTMLParser):
+        def __init__(self) -> None:
+            super().__init__()
+            self.tags: list[str] = []
+
+        def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+            self.tags.append(tag)
+
+    parser = Tags()
+    parser.feed(text)
+    assert parser.tags.count('script') == 3 and 'img' not in parser.tags and 'b' not in parser.tags
