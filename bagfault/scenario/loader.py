@@ -132,7 +132,7 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
     scenario.faults = [f for i, n in enumerate(top.get('faults', [])) if (f := _fault(n, ('faults', i), out))]
     scenario.assertions = [a for i, n in enumerate(top.get('assertions', []))
                            if (a := _assertion(n, ('assertions', i), out))]
-    if 'seed' in top:
+    if 'seed' in top.given and 'seed' in top:  # (absent: None, so --seed or 0 decides later)
         scenario.seed = top.get('seed')
     if 'msg_paths' in top:
         paths = top.get('msg_paths')
