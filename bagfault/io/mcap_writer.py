@@ -13,6 +13,7 @@ indexes, summary offsets) and is byte-identical from run to run.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import struct
@@ -329,6 +330,9 @@ class McapWriter:
         fd, begin, end, at = span
         self._stream.flush()
         self._stream.seek(at + end - begin)
+        if self._in_kernel and hasattr(os, 'posix_fadvise'):  # the disk reads the span while earlier ones copy
+            with contextlib.suppress(OSError):
+                os.posix_fadvise(fd, begin, end - begin, os.POSIX_FADV_WILLNEED)
         self._copies.append(self._copier.submit(self._copy_range, fd, begin, end - begin, at))
         while self._copies and (self._copies[0].done() or len(self._copies) > COPIES_AHEAD):
             self._copies.popleft().result()  # a failed copy (a full disk) raises here, not at the end
