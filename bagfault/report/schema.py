@@ -93,18 +93,15 @@ def render_markdown() -> str:
     """Every injector type's options and fault config keys, and every assertion type's keys, as markdown tables
     (the docs site's scenario reference is generated from this)."""
     from bagfault.assertions.registry import ASSERTION_TYPES  # noqa: PLC0415
-    from bagfault.spec.sections import CAMPAIGN_SECTIONS, SCENARIO_SECTIONS  # noqa: PLC0415
+    from bagfault.spec.sections import ARCHITECTURE_SECTIONS, CAMPAIGN_SECTIONS, SCENARIO_SECTIONS  # noqa: PLC0415
 
     lines = ['## Sections', '']
     for section in (*SCENARIO_SECTIONS, *CAMPAIGN_SECTIONS):
-        lines += [f'### `{section.where}`', '', section.description, '', HEADER]
-        for key in section.keys:
-            limits = _limits(key.minimum, key.maximum, key.choices, markdown=True, exclusive=key.exclusive)
-            unit = f' ({key.unit})' if key.unit else ''
-            default = '' if key.default is None else f'`{key.default}`'
-            lines.append(f'| `{key.name}` | {key.type} | {"yes" if key.required else ""} | {default} | '
-                         f'{", ".join(limits)} | {key.description.replace("|", "/")}{unit} |')
-        lines.append('')
+        lines += _section_rows(section)
+    lines += ['## CARET architecture files', '', 'The keys `path_latency` and `bagfault latency` read, as '
+              "caret_analyze's architecture reader requires them (other keys are ignored).", '']
+    for section in ARCHITECTURE_SECTIONS:
+        lines += _section_rows(section)
     lines += ['## Injector types', '']
     for name, entry in schema_dict().items():
         kinds = ', '.join(f'`{k}`' for k in entry['message_types']) or 'any message type'
@@ -120,6 +117,18 @@ def render_markdown() -> str:
         lines += [f'### `{name}`', '', f'{cls.description}{within}', '', HEADER,
                   *(_row(f.to_dict()) for f in cls.fields), '']
     return '\n'.join(lines)
+
+
+def _section_rows(section: Any) -> list[str]:
+    """One section as a markdown table."""
+    lines = [f'### `{section.where}`', '', section.description, '', HEADER]
+    for key in section.keys:
+        limits = _limits(key.minimum, key.maximum, key.choices, markdown=True, exclusive=key.exclusive)
+        unit = f' ({key.unit})' if key.unit else ''
+        default = '' if key.default is None else f'`{key.default}`'
+        lines.append(f'| `{key.name}` | {key.type} | {"yes" if key.required else ""} | {default} | '
+                     f'{", ".join(limits)} | {key.description.replace("|", "/")}{unit} |')
+    return [*lines, '']
 
 
 # -- every section, and a JSON Schema of scenario and campaign files ---------------------------------------------

@@ -350,3 +350,5 @@ MESSAGE_CONTEXT = Section('message_context', 'nodes[].message_contexts[]', 'How 
     Key('subscription_topic_name', 'any', 'The topic taken (required unless the type is UNDEFINED).'),
     Key('publisher_topic_name', 'any', 'The topic given (required unless the type is UNDEFINED).'),
 ), reads='caret', unknown='ignore')
+ARCHITECTURE_SECTIONS = (ARCHITECTURE, NAMED_PATH, CHAIN_NODE, NODE, CALLBACK, CALLBACK_GROUP, VARIABLE_PASSING,
+                         PUBLISH, SUBSCRIBE, MESSAGE_CONTEXT)

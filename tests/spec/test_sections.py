@@ -166,3 +166,17 @@ def test_the_anchors_own_scenario_files_pass_the_json_schema(anchors: Path) -> N
     assert len(files) >= 9
     assert {p.name: [e.message for e in check.iter_errors(as_yaml_cpp_reads(p))] for p in files} == {
         p.name: [] for p in files}
+
+
+def test_the_docs_reference_has_a_table_of_every_section_and_every_key() -> None:
+    """docs/reference/scenario.md is generated from the declarations (docs/hooks.py): each section of scenario,
+    campaign and CARET architecture files is a heading followed by one row per key."""
+    from bagfault.report.schema import render_markdown
+
+    text = render_markdown()
+    for section in (*sections.SCENARIO_SECTIONS, *sections.CAMPAIGN_SECTIONS, *sections.ARCHITECTURE_SECTIONS):
+        body = text.split(f'### `{section.where}`\n', 1)[1].split('\n### ', 1)[0]
+        rows = [line.split(' | ')[0].removeprefix('| `').removesuffix('`') for line in body.splitlines()
+                if line.startswith('| `')]
+        assert rows == [k.name for k in section.keys], section.where
+    assert '| `node_chain` | list | yes |' in text and '| `default_window_ms` | integer |  | `500` | ≥ 1, ≤ 4294967295' in text
