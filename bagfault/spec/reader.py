@@ -109,7 +109,7 @@ class Reader:
 
     def value(self, section: Section, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
         """One key's value read by its declaration: (True, value), or (False, None) with the problem told."""
-        anchor = section.reads != 'yaml'
+        anchor = section.reads in ('anchor', 'medkit')  # yaml-cpp's scalars
         if key.choices:
             if value not in key.choices:
                 self.problem(path, f'{value!r} is not {_listing(list(key.choices), "or")}')
