@@ -55,6 +55,7 @@ if TYPE_CHECKING:
 POLL = 0.02  # seconds between looks while waiting for readiness
 DISCOVERY_PERIOD = 0.2  # seconds between looks at the graph for new topics of the system during the run
 WATCH_WAIT = 2.0  # seconds to learn the type of an asserted topic the system has not advertised yet
+RECORD_MATCH = 5.0  # seconds at most for the recorder's subscriptions to match the system's publishers
 NOT_RECORDED = ('/clock', '/parameter_events', '/rosout')
 SYSTEM_ALIVE = 'system_alive'
 
@@ -105,7 +106,6 @@ class SystemLink(LiveSink):
             self.watch.first_look()  # while the system starts: a domain other processes use is left for another
         for condition in self.system.conditions():
             self._await(condition)
-        time.sleep(MATCH_SETTLE)  # a publisher sees its subscriber first; the system's side matches a moment later
         self.ready_seconds = time.monotonic() - started
         own = {*self.played, *NOT_RECORDED}
         watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
@@ -125,6 +125,13 @@ class SystemLink(LiveSink):
         for topic, msgtype in watched.items():
             if topic not in self._recorder.subscriptions:
                 self._recorder.subscribe(topic, msgtype)  # advertised later (a monitor's first report)
+        # the recorder hears the system from the first played message on: its subscriptions, made just now,
+        # have matched the system's publishers (a short bag leaves only its tail to hear the system in)
+        deadline = time.monotonic() + RECORD_MATCH
+        while self._recorder.unmatched() and time.monotonic() < deadline:
+            time.sleep(POLL)
+        # a publisher sees its subscriber first; the system's side of its subscriptions matches a moment later
+        time.sleep(MATCH_SETTLE)
         self._thread = threading.Thread(target=self._spin, name='bagfault-test-listener', daemon=True)
         self._thread.start()
         if self.rate != 1:

@@ -108,6 +108,12 @@ class Recorder:
             interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
         self.node.get_logger().info(f'recording {topic} ({msgtype})')
 
+    def unmatched(self) -> list[str]:
+        """Topics whose subscription has not yet matched every publisher the graph shows (a message sent before
+        the match completes is not received)."""
+        return sorted(topic for topic, subscription in self.subscriptions.items()
+                      if subscription.get_publisher_count() < self.node.count_publishers(topic))
+
     def _received(self, topic: str, data: bytes) -> None:
         if self.echoes is not None and self.echoes.take(topic, data):
             return  # this process's own message on a shared topic
