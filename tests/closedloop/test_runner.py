@@ -381,3 +381,65 @@ def test_the_system_and_its_children_end_when_bagfault_is_killed(tester: LoopRun
     while running_with(token) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert running_with(token) == []
+
+
+HEARTBEAT = """
+import sys
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from std_msgs.msg import String
+
+rclpy.init(args=sys.argv)
+node = rclpy.create_node('heartbeat')
+publisher = node.create_publisher(String, '/heartbeat', 10)
+node.create_timer(0.05, lambda: publisher.publish(String(data='alive')))  # on sim time: only while /clock moves
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
+
+
+def one_message_bag(path: Path) -> Path:
+    """A bag of one /chatter message: nothing to play but the tail, where the system must be heard."""
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    string = store.types['std_msgs/msg/String']
+    with path.open('wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data')
+        chatter = writer.register_channel('/chatter', 'cdr', schema, {'offered_qos_profiles': VOLATILE})
+        writer.add_message(chatter, 1_700_000_000 * NS, bytes(store.serialize_cdr(string(data='hello'),
+                                                                                   string.__msgtype__)),
+                           1_700_000_000 * NS)
+        writer.finish()
+    return path
+
+
+@pytest.mark.parametrize(('ready', 'sim_time'), [('publisher', True), ('message', False)])
+def test_a_bag_with_nothing_to_play_hears_the_system_in_its_tail(tester: LoopRunner, tmp_path: Path, ready: str,
+                                                                 sim_time: bool) -> None:
+    """The recorder's subscriptions have matched the system's publishers before the first message plays, so a
+    0.5 s tail hears a 20 Hz heartbeat (on sim time it beats only while the tail's /clock moves); `message: true`
+    waits for a heartbeat of a system on wall time."""
+    (tmp_path / 'heartbeat.py').write_text(HEARTBEAT)
+    (tmp_path / 'beat.bagfault.yaml').write_text(f"""
+system_under_test:
+  command: ['{{python}}', heartbeat.py]
+  ready: [{{topic: /heartbeat, {ready}: true}}]
+  use_sim_time: {str(sim_time).lower()}
+  record: [/heartbeat]
+  tail: 0.5
+  stop_timeout: 10
+injectors: []
+""")
+    out = tmp_path / 'beat.mcap'
+    result = tester.run(str(tmp_path / 'beat.bagfault.yaml'), str(one_message_bag(tmp_path / 'one.mcap')),
+                        '-o', str(out))
+    assert result.code == 0, result.stdout + result.stderr
+    beats = len(decoded(out)['/heartbeat'])
+    assert beats >= 1 and result.report is not None
+    assert result.report['system_under_test']['heard_per_topic'] == {'/heartbeat': beats}
