@@ -26,6 +26,8 @@ if TYPE_CHECKING:
 
 EPROSIMA = b'\x01\x0f'
 QUIET_TOPICS = frozenset({'/rosout', '/parameter_events'})  # every rclpy node publishes these
+NAME_WAIT = 1.0  # seconds an intruder may stay unnamed before the run is stopped without its name
+NAME_POLL = 0.05  # seconds between looks meanwhile
 UNKNOWN = '_NODE_NAME_UNKNOWN_'  # rmw's name of a node whose participant has not told its nodes yet
 PRESTART = 0.4  # seconds a fresh participant looks for others before the system starts (discovery: ~0.2 s)
 
@@ -46,7 +48,8 @@ class Stranger:
     def describe(self) -> str:
         """'/foreign_talker (pid 24792) publishing /imu'."""
         what = f'publishing {", ".join(sorted(self.topics))}' if self.topics else 'listening only'
-        return f'{self.node} (pid {_full_pid(self.pid)}) {what}'
+        node = 'a node not named yet' if UNKNOWN in self.node else self.node
+        return f'{node} (pid {_full_pid(self.pid)}) {what}'
 
 
 def _full_pid(low: int) -> str:
@@ -111,6 +114,7 @@ class DomainWatch:
         self.listeners: dict[str, str] = {}  # node -> description, of strangers that published nothing
         self._last = 0.0
         self._cleared: set[int] = set()
+        self._unnamed_since: float | None = None  # when an intruder was first seen without its node's name
 
     def first_look(self) -> None:
         """CrowdedDomainError when other processes show nodes before `quiet_until` (PRESTART after this participant
@@ -143,6 +147,12 @@ class DomainWatch:
         for stranger in found:
             if not stranger.topics:
                 self.listeners[stranger.node] = stranger.describe()
+        if intruders and not now and any(UNKNOWN in s.node for s in intruders):
+            # the endpoints come before the node names: wait a moment to say which node it is
+            self._unnamed_since = self._unnamed_since or moment
+            if moment - self._unnamed_since < NAME_WAIT:
+                self._last = moment - self.period + NAME_POLL
+                return
         if intruders:
             raise invalid(self.domain, intruders, self.system_pid)
 

@@ -7,7 +7,9 @@ import re
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from support.loop import SCENARIO, LoopRunner, running_with
@@ -153,3 +155,39 @@ def test_a_crowded_domain_is_passed_over_and_the_system_started_there_stopped(
     sitter = sitters[0]
     assert 'no quiet ROS domain' in str(caught.value)
     assert f'{crowded}: /sitter (pid {sitter.pid}) publishing /imu' in str(caught.value)
+
+
+class GraphOfOneIntruder:
+    """A node's graph as rclpy gives it: one process (pid 4242) publishing /imu, its node's name unknown for the
+    first `unnamed` looks (Fast DDS reports endpoints before the participant tells its node names)."""
+
+    def __init__(self, unnamed: int) -> None:
+        self.unnamed = unnamed
+        self.looks = 0
+
+    def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        self.looks += 1
+        return [('/imu', ['sensor_msgs/msg/Imu'])]
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[SimpleNamespace]:
+        gid = b'\x01\x0f' + b'\x00\x00' + (4242).to_bytes(2, 'little') + bytes(18)
+        known = self.looks > self.unnamed
+        return [SimpleNamespace(endpoint_gid=list(gid), node_namespace='/' if known else '_NODE_NAMESPACE_UNKNOWN_',
+                                node_name='intruder' if known else '_NODE_NAME_UNKNOWN_')]
+
+
+@pytest.mark.parametrize(('unnamed', 'named'), [(3, '/intruder (pid '), (10**6, 'a node not named yet (pid ')])
+def test_an_intruder_is_named_once_its_process_says_its_name(unnamed: int, named: str) -> None:
+    """The run stops with the intruder's node name when the graph learns it within a second, else without it."""
+    from bagfault.closedloop.isolation import DomainWatch
+    from bagfault.errors import ClosedLoopError
+
+    graph = GraphOfOneIntruder(unnamed)
+    watch = DomainWatch(graph, 42, own_pid=1, system=set)
+    with pytest.raises(ClosedLoopError) as caught:
+        for _ in range(200):
+            watch.look()
+            time.sleep(0.01)
+    assert named in str(caught.value) and 'publishing /imu' in str(caught.value)
+    with pytest.raises(ClosedLoopError, match='a node not named yet'):
+        DomainWatch(GraphOfOneIntruder(10**6), 42, own_pid=1, system=set).look(now=True)  # the last look waits not
