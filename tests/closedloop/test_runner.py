@@ -314,8 +314,8 @@ LATCHED = '- history: keep_last\n  depth: 1\n  reliability: reliable\n  durabili
 VOLATILE = '- history: keep_last\n  depth: 10\n  reliability: reliable\n  durability: volatile\n'
 
 
-def latched_bag(path: Path) -> Path:
-    """/robot_description latched once at 0 s, /chatter at 10 Hz for 4 s (std_msgs/String, CDR from rosbags)."""
+def string_bag(path: Path, messages: list[tuple[str, str, int, str]]) -> Path:
+    """An MCAP of std_msgs/String messages (topic, offered QoS YAML, time in ns, text), CDR from rosbags."""
     from mcap.writer import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -325,16 +325,21 @@ def latched_bag(path: Path) -> Path:
         writer = Writer(stream)
         writer.start(profile='ros2', library='test')
         schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data')
-        described = writer.register_channel('/robot_description', 'cdr', schema, {'offered_qos_profiles': LATCHED})
-        chatter = writer.register_channel('/chatter', 'cdr', schema, {'offered_qos_profiles': VOLATILE})
-        start = 1_700_000_000 * NS
-        writer.add_message(described, start, bytes(store.serialize_cdr(string(data='bag urdf'), string.__msgtype__)),
-                           start)
-        for n in range(40):
-            data = bytes(store.serialize_cdr(string(data=f'hello {n}'), string.__msgtype__))
-            writer.add_message(chatter, start + n * NS // 10, data, start + n * NS // 10)
+        channels: dict[str, int] = {}
+        for topic, qos, time_ns, text in messages:
+            if topic not in channels:
+                channels[topic] = writer.register_channel(topic, 'cdr', schema, {'offered_qos_profiles': qos})
+            data = bytes(store.serialize_cdr(string(data=text), string.__msgtype__))
+            writer.add_message(channels[topic], time_ns, data, time_ns)
         writer.finish()
     return path
+
+
+def latched_bag(path: Path) -> Path:
+    """/robot_description latched once at 0 s, /chatter at 10 Hz for 4 s."""
+    start = 1_700_000_000 * NS
+    return string_bag(path, [('/robot_description', LATCHED, start, 'bag urdf'),
+                             *(('/chatter', VOLATILE, start + n * NS // 10, f'hello {n}') for n in range(40))])
 
 
 def test_a_latched_topic_the_system_publishes_on_late_keeps_bagfaults_history_out_of_what_is_heard(
@@ -402,21 +407,7 @@ except (KeyboardInterrupt, ExternalShutdownException):
 
 def one_message_bag(path: Path) -> Path:
     """A bag of one /chatter message: nothing to play but the tail, where the system must be heard."""
-    from mcap.writer import Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    string = store.types['std_msgs/msg/String']
-    with path.open('wb') as stream:
-        writer = Writer(stream)
-        writer.start(profile='ros2', library='test')
-        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data')
-        chatter = writer.register_channel('/chatter', 'cdr', schema, {'offered_qos_profiles': VOLATILE})
-        writer.add_message(chatter, 1_700_000_000 * NS, bytes(store.serialize_cdr(string(data='hello'),
-                                                                                   string.__msgtype__)),
-                           1_700_000_000 * NS)
-        writer.finish()
-    return path
+    return string_bag(path, [('/chatter', VOLATILE, 1_700_000_000 * NS, 'hello')])
 
 
 @pytest.mark.parametrize(('ready', 'sim_time'), [('publisher', True), ('message', False)])
