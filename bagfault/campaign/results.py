@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import CampaignError
 from bagfault.io.outputs import write_atomic
-from bagfault.report.page import LEGEND, Page, title
+from bagfault.report.page import LEGEND, Page, template, title
 
 if TYPE_CHECKING:
     from bagfault.campaign.plan import Bag, Job, Plan
@@ -171,15 +171,6 @@ def _order(values: list[Any]) -> list[Any]:
     return seen
 
 
-def _template() -> Any:
-    """The report's macros (templates/report.html.j2), autoescaped."""
-    import jinja2  # noqa: PLC0415
-
-    environment = jinja2.Environment(loader=jinja2.PackageLoader('bagfault.campaign', 'templates'),
-                                     autoescape=True, trim_blocks=True, lstrip_blocks=True)
-    return environment.get_template('report.html.j2').module
-
-
 def _passes(group: list[dict[str, Any]], column: str = 'status') -> dict[str, int]:
     decided = [r for r in group if r[column] is not None]
     return {'passed': sum(r[column] == 'passed' for r in decided), 'total': len(decided)}
@@ -193,7 +184,7 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
     rows = table.sweep_rows()
     counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}
     page = Page(f'{c.name}: bagfault campaign')
-    parts = _template()
+    parts = template('bagfault.campaign', 'report.html.j2')
     page.html(str(parts.header(c.name, str(c.scenario), c.mode, len(plan.bags), len(rows), counts, engine, STYLE)))
     bags = _order([r['bag'] for r in rows])
     if len(bags) > 1:  # per bag first: a bag that lacks a topic shows here, not as a lower rate of every value

@@ -21,7 +21,6 @@ import logging
 import os
 import re
 import tempfile
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -76,8 +75,3 @@ def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
             with contextlib.suppress(OSError):
                 os.unlink(staging)
     return True
-
-
-def now_ns() -> int:
-    """The wall clock, as file times are stamped."""
-    return time.time_ns()

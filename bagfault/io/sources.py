@@ -5,6 +5,7 @@ from __future__ import annotations
 import mmap
 import os
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -149,7 +150,7 @@ def _digest(file: Path, key: StatKey, stop: threading.Event | None, mark: ReadMa
     known = _known.get(key) or digests.recall(key)
     if known is not None:
         return known
-    started = digests.now_ns()
+    started = time.time_ns()  # the wall clock, as file times are stamped
     digest = _blake3(file, stop, mark)
     digests.keep(key, digest, started)
     return digest

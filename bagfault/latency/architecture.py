@@ -160,11 +160,13 @@ def _node(raw: object, warnings: list[str]) -> Node:
             warnings.append(f"{where}: callback {callback.get('callback_name', number)!r} says 'type:'; "
                             "caret_analyze reads 'callback_type:' (accepted here as an alias)")
             callback = {**callback, 'callback_type': callback['type']}
-        kind = _read(sections.CALLBACK, callback, cb_where).get('callback_type')
+        written = callback.get('callback_type') if isinstance(callback, dict) else None
+        needed: tuple[str, ...] = ('callback_name', 'symbol',
+                                   'period_ns' if written == 'timer_callback' else 'topic_name')
+        kind = _read(sections.CALLBACK, callback, cb_where, needed if written in CALLBACK_TYPES else ()).get(
+            'callback_type')
         if kind not in CALLBACK_TYPES:
             continue  # caret_analyze reads timer and subscription callbacks only (service callbacks are ignored)
-        _read(sections.CALLBACK, callback, cb_where,
-              ('callback_name', 'symbol', 'period_ns' if kind == 'timer_callback' else 'topic_name'))
         node.callbacks.append({**callback, 'construction_order': callback.get('construction_order', 0)})
     for number, group in enumerate(read.get('callback_groups')):
         _read(sections.CALLBACK_GROUP, group, f'{where}: callback_groups[{number}]')
@@ -183,14 +185,16 @@ def _node(raw: object, warnings: list[str]) -> Node:
                                          f'{where}: subscribes[{number}]').get('topic_name')))
     for number, context in enumerate(read.get('message_contexts')):
         ctx_where = f'{where}: message_contexts[{number}]'
-        kind = _read(sections.MESSAGE_CONTEXT, context, ctx_where).get('context_type')
+        written = context.get('context_type') if isinstance(context, dict) else None
+        needed = ('subscription_topic_name', 'publisher_topic_name') if written in CONTEXT_TYPES else ()
+        block = _read(sections.MESSAGE_CONTEXT, context, ctx_where, needed)
+        kind = block.get('context_type')
         if kind == UNDEFINED:
             continue  # no context: a callback chain may take its place
         if kind not in CONTEXT_TYPES:
             warnings.append(f'{ctx_where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)}); '
                             'context dropped')
             continue
-        block = _read(sections.MESSAGE_CONTEXT, context, ctx_where, ('subscription_topic_name', 'publisher_topic_name'))
         subscribed, published = _topic(block.get('subscription_topic_name')), _topic(block.get('publisher_topic_name'))
         missing = [f'{role} {topic}' for role, topic, known in (('subscribe to', subscribed, node.subscribes),
                                                                   ('publish', published, node.publishes))

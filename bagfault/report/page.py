@@ -144,13 +144,18 @@ class Page:
 
 
 @cache
-def macros() -> Any:
-    """The report pages' HTML (templates/page.html.j2), autoescaped."""
+def template(package: str, name: str) -> Any:
+    """The macros of a package's Jinja2 template (its `templates/` folder), autoescaped."""
     import jinja2  # noqa: PLC0415
 
-    environment = jinja2.Environment(loader=jinja2.PackageLoader('bagfault.report', 'templates'),
-                                     autoescape=True, keep_trailing_newline=True)
-    return environment.get_template('page.html.j2').module
+    environment = jinja2.Environment(loader=jinja2.PackageLoader(package, 'templates'), autoescape=True,
+                                     trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    return environment.get_template(name).module
+
+
+def macros() -> Any:
+    """The report pages' HTML (templates/page.html.j2)."""
+    return template('bagfault.report', 'page.html.j2')
 
 
 def shade(windows: list[tuple[float, float, str]], *, outline: bool = False) -> list[dict[str, Any]]:
