@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from bagfault.campaign.runner import CampaignResult, JobProgress
     from bagfault.engine.offline import Progress
     from bagfault.engine.run import Observer
+    from bagfault.io.leading_copy import LeadingCopy
     from bagfault.live.recorder import RecordResult
     from bagfault.spec.yamlnodes import PathKey
 
@@ -117,6 +118,7 @@ def run(
     chunk_copy: bool = True,
     force: bool = False,
     verify: bool = False,
+    lead: LeadingCopy | None = None,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP.
 
@@ -127,7 +129,8 @@ def run(
     and counts them on a second thread); False takes the reference path that decompresses and rewrites every
     chunk. An existing output (or black box) that bagfault did not write is refused unless `force`.
     `compression_level` applies to the chunks bagfault writes (copied chunks keep theirs); None: the MCAP C++
-    writer's default (zstd 1, lz4 0).
+    writer's default (zstd 1, lz4 0). `lead` is a leading copy the caller started before its imports
+    (`bagfault.engine.lead.start_lead`, which `bagfault run` calls first); the caller closes it.
     """
     loaded = scenario_of(scenario)
     paths = _paths(inputs)
@@ -139,7 +142,7 @@ def run(
                        start_offset=_seconds('--start', start_offset), compression=compression,
                        compression_level=compression_level, batch=batch,
                        progress=progress, observers=observers, salvage=salvage,
-                       msg_paths=[Path(p) for p in msg_paths], chunk_copy=chunk_copy, verify=verify)
+                       msg_paths=[Path(p) for p in msg_paths], chunk_copy=chunk_copy, verify=verify, lead=lead)
 
 
 def check(

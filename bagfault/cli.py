@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 
     from bagfault.engine.result import RunResult
     from bagfault.engine.run import Observer
+    from bagfault.io.leading_copy import LeadingCopy
     from bagfault.report.files import ReportPaths
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
@@ -270,26 +271,56 @@ def _finish(reports: ReportPaths, result: RunResult, collectors: Sequence[Observ
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-    from bagfault.progress import ProgressBar  # noqa: PLC0415
-
     reports = _reports(args)
     reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output,
                              **{'--msg-path': args.msg_path}))
-    scenario = api.load_scenario(args.scenario, strict=args.strict)
-    bar = ProgressBar()
-    collectors = reports.collectors()
-    try:
-        result = api.run(
-            scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
-            start_offset=args.start, compression=args.compression,
-            compression_level=args.compression_level, progress=bar, observers=collectors,
-            salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy, force=args.force,
-            verify=args.verify,
-        )
-    finally:
-        bar.close()
+    with _leading_copy(args) as lead:  # the leading chunks copy while the imports below run
+        from bagfault import api  # noqa: PLC0415
+        from bagfault.progress import ProgressBar  # noqa: PLC0415
+
+        scenario = api.load_scenario(args.scenario, strict=args.strict)
+        bar = ProgressBar()
+        collectors = reports.collectors()
+        try:
+            result = api.run(
+                scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
+                start_offset=args.start, compression=args.compression,
+                compression_level=args.compression_level, progress=bar, observers=collectors,
+                salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy, force=args.force,
+                verify=args.verify, lead=lead,
+            )
+        finally:
+            bar.close()
     return _finish(reports, result, collectors)
+
+
+@contextlib.contextmanager
+def _leading_copy(args: argparse.Namespace) -> Iterator[LeadingCopy | None]:
+    """`run`'s leading copy, started before anything heavy is imported (None when it cannot help)."""
+    if args.no_chunk_copy or args.salvage or args.html is not None or len(args.inputs) != 1 or \
+            not args.inputs[0].is_file():
+        yield None
+        return
+    from bagfault.engine.lead import start_lead  # noqa: PLC0415 - imports nothing heavy
+
+    activations = []
+    for text in args.activate:
+        fault, _, when = text.partition('@')
+        try:
+            activations.append((fault, float(when.partition('+')[0] or 0)))
+        except ValueError:
+            activations.append((fault, 0.0))  # refused later, with its message
+    try:
+        text = args.scenario.read_text(encoding='utf-8')
+    except (OSError, ValueError):
+        yield None  # said later, with the scenario's own message
+        return
+    lead = start_lead(text, args.inputs[0], args.output, start_offset=args.start, activations=activations)
+    if lead is None:
+        yield None
+        return
+    with lead:
+        yield lead
 
 
 def _cmd_check(args: argparse.Namespace) -> int:

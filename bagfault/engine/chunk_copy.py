@@ -13,12 +13,11 @@ mutated messages are written in chunks of their own.
 
 from __future__ import annotations
 
-import struct
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING
 
-from bagfault.errors import InputError, one_line
+from bagfault.errors import InputError
 from bagfault.io.mcap_writer import CopiedChunk
 
 if TYPE_CHECKING:
@@ -154,15 +153,15 @@ class ChunkCopy:
         return all(cid in self.passthrough for cid in ref.channel_ids)
 
     def copy_of(self, ref: ChunkRef) -> CopiedChunk:
-        """The chunk to write as it is: where it is, and its message indexes read from the input."""
+        """The chunk to write as it is, with its message indexes: where they are, what they hold."""
         source = self.source
-        indexes = source.read_indexes(ref, source.handle)
-        try:
-            return CopiedChunk.of(source.fileno(), ref.offset, ref.length, indexes, ref.start, ref.end,
-                                  ref.compression, ref.compressed_size, ref.uncompressed_size)
-        except (struct.error, ValueError) as exc:
-            raise InputError(f'{source.path}: corrupt message index after the chunk at offset {ref.offset}: '
-                             f'{one_line(exc)}') from None
+        first = ref.offset + ref.length
+        if ref.index_offsets and min(ref.index_offsets.values()) != first:
+            raise InputError(f'{source.path}: the message indexes of the chunk at offset {ref.offset} are not where '
+                             'its index says')
+        return CopiedChunk(source.fileno(), ref.offset, ref.length, ref.index_length,
+                           {cid: at - first for cid, at in ref.index_offsets.items()}, source.counts_of(ref),
+                           ref.start, ref.end, ref.compression, ref.compressed_size, ref.uncompressed_size)
 
     def quiet(self, ref: ChunkRef, scheduler: FaultScheduler) -> bool:
         """The exact answer, with every message before the chunk processed: nothing touches it."""

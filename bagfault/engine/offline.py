@@ -15,8 +15,9 @@ from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from typing import TYPE_CHECKING, Protocol, cast
 
-from bagfault.engine.chunk_copy import ChunkCopy, chunk_copy_for
+from bagfault.engine.chunk_copy import ChunkCopy, chunk_copy_for, wanted_topics
 from bagfault.engine.fault_state import FaultState
+from bagfault.engine.lead import start_lead
 from bagfault.engine.pipeline import Pipeline
 from bagfault.engine.provenance import provenance
 from bagfault.engine.routing import build_routing
@@ -40,6 +41,7 @@ if TYPE_CHECKING:
     from bagfault.engine.routing import Routing
     from bagfault.engine.run import Sink
     from bagfault.engine.scheduler import Activation
+    from bagfault.io.leading_copy import LeadingCopy
     from bagfault.spec.model import Scenario
 
 Progress = Callable[[int, int], None]
@@ -158,13 +160,55 @@ def run_to_file(
     msg_paths: Sequence[Path] = (),
     chunk_copy: bool = True,
     verify: bool = False,
+    lead: LeadingCopy | None = None,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing); with
     `chunk_copy`, the untouched chunks of a single MCAP input are copied as they are (and with `verify`
-    read again, decompressed and checked on a second thread)."""
+    read again, decompressed and checked on a second thread), the leading ones from the start, beside the
+    setup: by `lead` when the caller started it earlier (`bagfault run` does, before its imports; the caller
+    closes it), else by a leading copy of its own."""
+    with contextlib.ExitStack() as owned:
+        copying = chunk_copy and batch and len(paths) == 1 and paths[0].is_file()
+        if copying and lead is None:
+            lead = _own_lead(scenario, paths[0], output, start_offset, activations, observers)
+            if lead is not None:
+                owned.enter_context(lead)
+        return _run_to_file(scenario, paths, output, seed=seed, activations=activations, start_offset=start_offset,
+                            compression=compression, compression_level=compression_level, batch=batch,
+                            progress=progress, observers=observers, salvage=salvage, msg_paths=msg_paths,
+                            copying=copying, verify=verify, lead=lead)
+
+
+def _own_lead(scenario: Scenario, source: Path, output: Path, start_offset: float,
+              activations: Sequence[Activation], observers: Sequence[Observer]) -> LeadingCopy | None:
+    wanted = wanted_topics(observers)
+    if wanted is None:
+        return None  # an observer sees every topic: nothing is copied
+    return start_lead(scenario.text, source, output, start_offset=start_offset,
+                      activations=[(a.fault_id, a.start) for a in activations], observed=sorted(wanted))
+
+
+def _run_to_file(
+    scenario: Scenario,
+    paths: Sequence[Path],
+    output: Path,
+    *,
+    seed: int,
+    activations: Sequence[Activation],
+    start_offset: float,
+    compression: str,
+    compression_level: int | None,
+    batch: bool,
+    progress: Progress | None,
+    observers: Sequence[Observer],
+    salvage: bool,
+    msg_paths: Sequence[Path],
+    copying: bool,
+    verify: bool,
+    lead: LeadingCopy | None,
+) -> RunResult:
     definitions = load_definitions([*msg_paths, *scenario.msg_paths])
     stop = threading.Event()
-    copying = chunk_copy and batch and len(paths) == 1 and paths[0].is_file()
     mark = ReadMark() if copying else None  # the hash follows the chunk copy's reading: the input is read once
     hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
     try:  # the inputs' digests on the second core from the start, beside the setup, the run and the copy
@@ -172,22 +216,25 @@ def run_to_file(
         with InputSet(paths, salvage=salvage) as inputs:
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
+            chunks = chunk_copy_for(inputs, verify=verify, mark=mark) if copying else None
+            if chunks is None and mark is not None:
+                mark.release()
+            if chunks is None and lead is not None:
+                lead.close()  # nothing is copied as it is: the guess was wrong, its file goes
+                lead = None
             with McapSink(output, compression=compression, level=compression_level,
-                          ros_distro=inputs.ros_distro or '') as sink:
-                chunks = chunk_copy_for(inputs, verify=verify, mark=mark) if copying else None
-                if chunks is None and mark is not None:
-                    mark.release()
+                          ros_distro=inputs.ros_distro or '', lead=lead) as sink:
                 with chunks if chunks is not None else contextlib.nullcontext():
                     if chunks is not None:
                         chunks.reserve(sink)
-                    sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
-                                        inputs.start_time or 0)
                     run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
                                     start_offset=start_offset, batch=batch, progress=progress, observers=observers,
                                     blackbox_base=output, chunks=chunks)
                 with run:
                     check_declared(inputs, run, paths, salvage=salvage)
                     sink.flush()  # the copied chunks go to the file while the hash completes, not after it
+                    sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
+                                        inputs.start_time or 0)
                     sink.add_metadata('bagfault', origin.result())
                     finish(sink, run)
     finally:

@@ -20,9 +20,10 @@ from bagfault.engine.run import OutputChannel
 from bagfault.errors import EngineError
 from bagfault.injectors.base import Injector
 from bagfault.injectors.registry import get_injector_type
+from bagfault.io.channel import bag_name
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Collection
+    from collections.abc import Callable
 
     from bagfault.engine.fault_state import FaultState
     from bagfault.engine.run import Sink
@@ -76,14 +77,6 @@ class _Wired:
     channels: list[Channel]
     input_topic: str
     output_topic: str
-
-
-def bag_name(name: str, topics: Collection[str]) -> str:
-    """A scenario's topic name as the bag spells it: `/scan` and `scan` are one topic of the root namespace."""
-    if name in topics:
-        return name
-    other = name[1:] if name.startswith('/') else '/' + name
-    return other if other in topics else name
 
 
 def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink,

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Collection
 
 Data = bytes | memoryview
 InputMessage = tuple[int, int, int, Data]
@@ -42,3 +46,11 @@ class Channel:
     def qos(self) -> str:
         """offered_qos_profiles YAML as recorded, '' if unknown."""
         return dict(self.metadata).get('offered_qos_profiles', '')
+
+
+def bag_name(name: str, topics: Collection[str]) -> str:
+    """A scenario's topic name as the bag spells it: `/scan` and `scan` are one topic of the root namespace."""
+    if name in topics:
+        return name
+    other = name[1:] if name.startswith('/') else '/' + name
+    return other if other in topics else name

@@ -24,6 +24,7 @@ import yaml
 from mcap.records import Channel as McapChannel
 from mcap.records import Schema as McapSchema
 
+from bagfault import __version__
 from bagfault.errors import OutputError
 from bagfault.io.mcap_writer import LEVELS, CopiedChunk, McapWriter
 from bagfault.io.outputs import PUBLISHED, current_umask
@@ -31,6 +32,8 @@ from bagfault.io.qos import DEFAULT_QOS, normalized
 
 if TYPE_CHECKING:
     from typing_extensions import Self
+
+    from bagfault.io.leading_copy import LeadingCopy
 
 COMPRESSIONS = ('none', 'lz4', 'zstd')
 LIVE_FLUSH = 1.0  # seconds: a live recording loses at most this much to a kill
@@ -46,15 +49,37 @@ def check_level(path: Path, compression: str, level: int) -> None:
         raise OutputError(f'{path}: {compression} compression level {level} is outside {low}..{high}')
 
 
+def open_partial(path: Path) -> tuple[int, Path]:
+    """A new file beside `path` for its output to grow in (descriptor, name), with the usual permissions."""
+    directory = path.parent if str(path.parent) else Path('.')
+    if path.is_dir():
+        raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
+    if not directory.is_dir():
+        raise OutputError(f'{path}: directory {directory} does not exist')
+    try:
+        handle, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=directory)
+    except OSError as exc:
+        raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
+    os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
+    return handle, Path(tmp)
+
+
+def header_library() -> str:
+    """What an output's header names as its writer."""
+    return f'bagfault {__version__}'
+
+
 class McapSink:
     """Writes schemas, channels, messages, metadata and attachments.
 
     Nothing appears under the requested name until `finish` succeeds; `abort`
-    removes the partial file.
+    removes the partial file. With `lead`, the file is the one a leading copy
+    is filling (see `bagfault.io.leading_copy`).
     """
 
     def __init__(self, path: Path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 ros_distro: str = '', flush_every: float | None = None, level: int | None = None) -> None:
+                 ros_distro: str = '', flush_every: float | None = None, level: int | None = None,
+                 lead: LeadingCopy | None = None) -> None:
         self.path = path
         self.ros_distro = ros_distro  # the input's or the recording rclpy's; '' when unknown, never guessed
         self.flush_every = flush_every  # live recordings: complete a chunk at least this often (seconds)
@@ -63,22 +88,12 @@ class McapSink:
             raise OutputError(f'{path}: unknown compression {compression!r} (none, lz4, zstd)')
         if level is not None:
             check_level(path, compression, level)
-        directory = path.parent if str(path.parent) else Path('.')
-        if path.is_dir():
-            raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
-        if not directory.is_dir():
-            raise OutputError(f'{path}: directory {directory} does not exist')
-        try:
-            handle, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=directory)
-        except OSError as exc:
-            raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
-        self._tmp = Path(tmp)
+        handle, self._tmp = lead.adopt() if lead is not None else open_partial(path)
         self._ended = False  # published or aborted: leaving a `with` then does nothing
         self.partial = self._tmp  # where the file grows until `finish` (`bagfault recover` reads it after a kill)
-        os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
         self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
-                                  library=f'bagfault {_version()}', level=level)
+                                  library=header_library(), level=level, lead=lead)
         self._schemas: dict[tuple[str, str, str], int] = {}
         self._topics: dict[int, tuple[str, str, str, str, str]] = {}  # id -> topic, type, encoding, QoS, hash
         self._kept_schemas: set[int] = set()
@@ -263,9 +278,3 @@ class _PlainDumper(yaml.SafeDumper):
 
     def ignore_aliases(self, data: object) -> bool:
         return True
-
-
-def _version() -> str:
-    from bagfault import __version__  # noqa: PLC0415
-
-    return __version__

@@ -604,16 +604,12 @@ class McapSource:
             raise InputError(f'{self.path}: truncated chunk at offset {ref.offset}')
         return record
 
-    def read_indexes(self, ref: ChunkRef, handle: IO[bytes]) -> bytes:
-        """The chunk's message index records (they follow it), as bytes."""
-        if not ref.index_offsets:
-            return b''
-        handle.seek(ref.offset + ref.length)
-        indexes = handle.read(ref.index_length)
-        if len(indexes) != ref.index_length or min(ref.index_offsets.values()) != ref.offset + ref.length:
-            raise InputError(f'{self.path}: the message indexes of the chunk at offset {ref.offset} are not where '
-                             'its index says')
-        return indexes
+    def counts_of(self, ref: ChunkRef) -> dict[int, int]:
+        """Messages per channel id of a chunk, as its message indexes say (read and checked at opening)."""
+        counts = self._by_offset[ref.offset].counts
+        if counts is None:
+            raise InputError(f'{self.path}: the message indexes of the chunk at offset {ref.offset} were not read')
+        return dict(counts)
 
     @property
     def handle(self) -> IO[bytes]:

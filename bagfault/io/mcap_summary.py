@@ -89,10 +89,22 @@ def read_footer(stream: IO[bytes], size: int) -> tuple[int, int]:
     return summary_start, crc
 
 
+_LAST: list[tuple[bytes, Summary]] = []  # the last section parsed: a run's leading copy and its source read the same
+
+
 def parse_summary(section: bytes | memoryview) -> Summary:
     """Schemas, channels, statistics, chunk and metadata indexes of a summary section (the bytes from the
-    summary start to the footer); other records (summary offsets, attachment indexes, unknown ones) skipped."""
-    buf = memoryview(section)
+    summary start to the footer); other records (summary offsets, attachment indexes, unknown ones) skipped.
+    The same bytes twice in a row give the same records (not to be changed by the caller)."""
+    data = bytes(section)
+    if _LAST and _LAST[0][0] == data:
+        return _LAST[0][1]
+    summary = _parse(memoryview(data))
+    _LAST[:] = [(data, summary)]
+    return summary
+
+
+def _parse(buf: memoryview) -> Summary:
     summary = Summary()
     pos, total = 0, len(buf)
     while pos < total:

@@ -14,17 +14,16 @@ indexes, summary offsets) and is byte-identical from run to run.
 from __future__ import annotations
 
 import contextlib
-import errno
 import os
 import struct
 import zlib
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import IO
+from itertools import chain
+from typing import IO, TYPE_CHECKING
 
 import lz4.frame
-import numpy as np
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
@@ -42,6 +41,11 @@ from mcap.records import (
     SummaryOffset,
 )
 
+from bagfault.io.file_copy import IN_KERNEL, copy_range
+
+if TYPE_CHECKING:
+    from bagfault.io.leading_copy import LeadingCopy
+
 MAGIC = b'\x89MCAP0\r\n'
 _MESSAGE_HEAD = struct.Struct('<BQHIQQ')
 _MESSAGE_HEAD_SIZE = 2 + 4 + 8 + 8
@@ -54,6 +58,14 @@ PENDING_CHUNKS = 16
 SPAN_LIMIT = 64 << 20  # copied bytes handed to the copy thread at least this often
 COPIES_AHEAD = 2  # spans handed over and not yet copied: the writer reads the input at most ~128 MB ahead of the
 # copy, so what it (and the provenance hash that follows it) brought into the page cache is still there
+
+
+def record_bytes(record: object) -> bytes:
+    """One record as the file holds it (opcode, length, fields), packed by the `mcap` library."""
+    builder = RecordBuilder()
+    record.write(builder)  # type: ignore[attr-defined]
+    data: bytes = builder.end()  # type: ignore[no-untyped-call]
+    return data
 
 
 def chunk_index_record(start: int, end: int, offset: int, length: int, index_offsets: dict[int, int],
@@ -99,13 +111,14 @@ class _OpenChunk:
 
 @dataclass(frozen=True)
 class CopiedChunk:
-    """An input chunk to write as it is: where its record is, its message index records, what its index says."""
+    """An input chunk to write as it is, with the message index records that follow it in the input: where
+    they are, and what the input's indexes (checked when it was opened) say of them."""
 
     fd: int  # the input file, read with explicit offsets (copy_file_range where the kernel has it)
     offset: int
     length: int  # the whole chunk record, opcode and length included
-    indexes: bytes  # its message index records
-    index_offsets: dict[int, int]  # channel id -> offset of its message index record within `indexes`
+    index_length: int  # its message index records, right after it
+    index_offsets: dict[int, int]  # channel id -> offset of its message index record from the first one
     counts: dict[int, int]  # channel id -> messages
     start: int
     end: int
@@ -113,28 +126,18 @@ class CopiedChunk:
     compressed_size: int
     uncompressed_size: int
 
-    @classmethod
-    def of(cls, fd: int, offset: int, length: int, indexes: bytes, start: int, end: int, compression: str,
-           compressed_size: int, uncompressed_size: int) -> CopiedChunk:
-        """Read the message index records: their channel ids and entry counts."""
-        offsets, counts, position = {}, {}, 0
-        while position < len(indexes):
-            opcode, record_length, channel_id, entries = _INDEX_HEAD.unpack_from(indexes, position)
-            if opcode != Opcode.MESSAGE_INDEX:
-                raise ValueError(f'a record of type {opcode:#x} among the message indexes')
-            offsets[channel_id] = position
-            counts[channel_id] = entries // 16
-            position += 9 + record_length
-        return cls(fd, offset, length, indexes, offsets, counts, start, end, compression, compressed_size,
-                   uncompressed_size)
-
 
 class McapWriter:
     """Writes an MCAP stream; `finish` writes the summary and footer."""
 
     def __init__(self, stream: IO[bytes], *, compression: str = 'zstd', chunk_size: int = 1 << 20,
-                 profile: str = 'ros2', library: str = 'bagfault', level: int | None = None) -> None:
+                 profile: str = 'ros2', library: str = 'bagfault', level: int | None = None,
+                 lead: LeadingCopy | None = None) -> None:
         self._stream = stream
+        self._lead = lead  # copies an input's leading chunks into this file ahead of the run (until stopped)
+        self._lead_taken = 0  # output offset up to which copied spans were taken from it
+        self._lead_extent = 0  # how far it wrote, once stopped (the file is cut back to its own end)
+        self._deferred: list[Schema | Channel] = []  # numbered schemas and channels not written yet
         self._compression = '' if compression == 'none' else compression
         self._level = DEFAULT_LEVELS.get(compression, 0) if level is None else level
         self._chunk_size = chunk_size
@@ -155,7 +158,7 @@ class McapWriter:
         self._pending: deque[tuple[_OpenChunk | CopiedChunk, Future[tuple[bytes, int]] | None, int, bytes]] = deque()
         self._next_schema = 1
         self._next_channel = 1
-        self._in_kernel = hasattr(os, 'copy_file_range')
+        self._in_kernel = IN_KERNEL
         self._span: list[int] | None = None  # [fd, start, end, output offset]: copied bytes not yet handed over
         self._copier = ThreadPoolExecutor(max_workers=1, thread_name_prefix='mcap-copy')
         self._copies: deque[Future[None]] = deque()
@@ -166,15 +169,35 @@ class McapWriter:
     # -- plain records -------------------------------------------------------
     def _record(self, record: object) -> int:
         self._settle()
-        builder = RecordBuilder()
-        record.write(builder)  # type: ignore[attr-defined]
-        data: bytes = builder.end()  # type: ignore[no-untyped-call]
+        data = record_bytes(record)
         start = self._offset
-        self._stream.write(data)
-        self._offset += len(data)
+        self._write(data)
         if self._summary_crc is not None:
             self._summary_crc = zlib.crc32(data, self._summary_crc)
         return start
+
+    def _write(self, data: bytes) -> None:
+        """Bytes of the writer's own at the current offset; a leading copy whose range they fall in is stopped
+        first (once it has copied what was taken from it), so it never writes over them."""
+        lead = self._lead
+        if lead is not None and self._offset < lead.end and self._offset + len(data) > lead.start:
+            self._end_lead()
+        self._stream.write(data)
+        self._offset += len(data)
+
+    def _end_lead(self) -> None:
+        """The leading copy has copied every span taken from it, and copies nothing more (its failure raised)."""
+        lead, self._lead = self._lead, None
+        if lead is not None:
+            lead.stop(self._lead_taken)
+            self._lead_extent = lead.extent
+
+    def _write_deferred(self) -> None:
+        """Numbered schemas and channels, before the record that follows them: after the chunks copied before
+        it, so an input's leading chunks come right after its own channels, where a leading copy put them."""
+        records, self._deferred = self._deferred, []
+        for record in records:
+            self._record(record)
 
     def reserve(self, schema_ids: int, channel_ids: int) -> None:
         """Ids up to these are given explicitly (an input's, kept for copied chunks); new ones start above."""
@@ -182,32 +205,42 @@ class McapWriter:
         self._next_channel = max(self._next_channel, channel_ids + 1)
 
     def register_schema(self, name: str, encoding: str, data: bytes, schema_id: int | None = None) -> int:
-        """Add a schema (written at once, outside chunks); return its id (the next free one unless given)."""
+        """Add a schema (outside chunks); return its id. A given id (an input's) is written at once, a numbered
+        one (the next free id) before the next chunk, metadata or attachment this writer writes itself."""
+        given = schema_id is not None
         if schema_id is None:
             schema_id = self._next_schema
             self._next_schema += 1
         schema = Schema(id=schema_id, name=name, encoding=encoding, data=data)
         self._schemas.append(schema)
-        self._record(schema)
+        if given:
+            self._record(schema)
+        else:
+            self._deferred.append(schema)
         return schema.id
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str],
                          channel_id: int | None = None) -> int:
-        """Add a channel (written at once, before any chunk that uses it); return its id (the next free one
-        unless given)."""
+        """Add a channel (before any chunk that uses it); return its id. As with schemas, a given id is written at
+        once, a numbered one (the next free id) later."""
+        given = channel_id is not None
         if channel_id is None:
             channel_id = self._next_channel
             self._next_channel += 1
         channel = Channel(id=channel_id, topic=topic, message_encoding=message_encoding,
                           schema_id=schema_id, metadata=dict(metadata))
         self._channels.append(channel)
-        self._record(channel)
+        if given:
+            self._record(channel)
+        else:
+            self._deferred.append(channel)
         return channel.id
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """A metadata record in the data section."""
         self._flush_chunk()
         self._drain(wait=True)
+        self._write_deferred()
         start = self._record(Metadata(name=name, metadata=data))
         self._metadata_indexes.append(MetadataIndex(offset=start, length=self._offset - start, name=name))
         self._metadata_count += 1
@@ -216,6 +249,7 @@ class McapWriter:
         """An attachment record in the data section."""
         self._flush_chunk()
         self._drain(wait=True)
+        self._write_deferred()
         start = self._record(Attachment(create_time=create_time, log_time=log_time, name=name,
                                         media_type=media_type, data=data))
         self._attachment_indexes.append(AttachmentIndex(
@@ -296,7 +330,7 @@ class McapWriter:
         """The chunk record and its message indexes byte for byte; the chunk index pointing at them here. The
         bytes of consecutive copied chunks are copied in one call when something else is written next."""
         start = self._offset
-        size = chunk.length + len(chunk.indexes)  # the indexes follow the chunk in the input (the source checks)
+        size = chunk.length + chunk.index_length
         span = self._span
         if span is not None and span[0] == chunk.fd and span[2] == chunk.offset:
             span[2] += size
@@ -318,7 +352,7 @@ class McapWriter:
                 self._start, self._end = min(self._start, chunk.start), max(self._end, chunk.end)
         self._message_count += count
         self._chunk_indexes.append(chunk_index_record(
-            chunk.start, chunk.end, start, chunk.length, offsets, len(chunk.indexes), chunk.compression,
+            chunk.start, chunk.end, start, chunk.length, offsets, chunk.index_length, chunk.compression,
             chunk.compressed_size, chunk.uncompressed_size))
 
     def _settle(self) -> None:
@@ -330,6 +364,16 @@ class McapWriter:
         fd, begin, end, at = span
         self._stream.flush()
         self._stream.seek(at + end - begin)
+        lead = self._lead
+        if lead is not None:
+            taken = lead.covers(fd, begin, end - begin, at)
+            if taken:
+                self._lead_taken = at + taken
+                begin, at = begin + taken, at + taken
+            if begin < end and at < lead.end and at + end - begin > lead.start:
+                self._end_lead()
+        if begin == end:
+            return
         if self._in_kernel and hasattr(os, 'posix_fadvise'):  # the disk reads the span while earlier ones copy
             with contextlib.suppress(OSError):
                 os.posix_fadvise(fd, begin, end - begin, os.POSIX_FADV_WILLNEED)
@@ -343,28 +387,11 @@ class McapWriter:
             self._copies.popleft().result()
 
     def _copy_range(self, fd: int, offset: int, length: int, at: int) -> None:
-        """Bytes of another file into this one at `at`: in the kernel (copy_file_range) when it can, else read
-        and written (copy thread)."""
-        out = self._stream.fileno()
-        done = 0
-        if self._in_kernel:
-            try:
-                while done < length:
-                    copied = os.copy_file_range(fd, out, length - done, offset + done, at + done)
-                    if copied == 0:
-                        break
-                    done += copied
-            except OSError as exc:
-                if exc.errno not in (errno.EXDEV, errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP, errno.EBADF):
-                    raise  # a full disk, a lost mount: the write failed
-                self._in_kernel = False  # another file system, an old kernel: bytes through user space
-        while done < length:
-            data = os.pread(fd, min(length - done, 1 << 22), offset + done)
-            if not data:
-                raise OSError(f'the input ended {length - done} bytes before the chunk at offset {offset}')
-            done += os.pwrite(out, data, at + done)
+        """Bytes of another file into this one at `at` (copy thread)."""
+        self._in_kernel = copy_range(fd, self._stream.fileno(), offset, length, at, in_kernel=self._in_kernel)
 
     def _write_chunk(self, chunk: _OpenChunk, compressed: bytes, crc: int, size: int) -> None:
+        self._write_deferred()
         start = self._offset
         self._record(Chunk(message_start_time=chunk.start, message_end_time=chunk.end, uncompressed_size=size,
                            uncompressed_crc=crc, compression=self._compression, data=compressed))
@@ -374,10 +401,8 @@ class McapWriter:
         for channel_id in sorted(chunk.indexes):
             offsets[channel_id] = self._offset
             entries = chunk.indexes[channel_id]
-            body = np.array(entries, dtype='<u8').tobytes()
-            record = _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel_id, len(body)) + body
-            self._stream.write(record)
-            self._offset += len(record)
+            body = struct.pack(f'<{2 * len(entries)}Q', *chain.from_iterable(entries))
+            self._write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel_id, len(body)) + body)
             self._counts[channel_id] = self._counts.get(channel_id, 0) + len(entries)
         if self._message_count == 0:
             self._start, self._end = chunk.start, chunk.end
@@ -392,8 +417,10 @@ class McapWriter:
         """Write the open chunk and every pending one (counts and times are then complete)."""
         self._flush_chunk()
         self._drain(wait=True)
+        self._write_deferred()
         self._settle()
         self._wait_copies()
+        self._end_lead()
 
     @property
     def counts(self) -> dict[int, int]:
@@ -413,6 +440,9 @@ class McapWriter:
             self._drain(wait=True)
         finally:
             self._pool.shutdown(wait=True)
+        self._write_deferred()
+        self._settle()
+        self._end_lead()
         self._record(DataEnd(data_section_crc=0))
         summary_start = self._offset
         self._summary_crc = 0
@@ -447,18 +477,19 @@ class McapWriter:
         head = struct.pack('<BQQQ', Opcode.FOOTER, 8 + 8 + 4, summary_start, summary_offset_start)
         crc = zlib.crc32(head, self._summary_crc or 0)
         self._summary_crc = None
-        self._stream.write(head + struct.pack('<I', crc))
-        self._offset += len(head) + 4
-        self._stream.write(MAGIC)
+        self._write(head + struct.pack('<I', crc))
+        self._write(MAGIC)
         try:
             self._wait_copies()
         finally:
             self._copier.shutdown(wait=True)
+        if self._lead_extent > self._offset:  # a leading copy that went further than the run's copy
+            self._stream.flush()
+            os.ftruncate(self._stream.fileno(), self._offset)
 
     def _write_summary_bytes(self, data: bytes) -> None:
         """A packed summary record (chunk indexes), under the summary CRC."""
-        self._stream.write(data)
-        self._offset += len(data)
+        self._write(data)
         self._summary_crc = zlib.crc32(data, self._summary_crc or 0)
 
     def abandon(self) -> None:
@@ -466,3 +497,7 @@ class McapWriter:
         self._span = None
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._copier.shutdown(wait=True, cancel_futures=True)
+        lead, self._lead = self._lead, None
+        if lead is not None:  # before the sink closes the file it writes into
+            with contextlib.suppress(OSError):
+                lead.stop(0)

@@ -171,3 +171,33 @@ def test_a_level_the_compression_does_not_take_is_refused_before_anything_is_wri
         with pytest.raises(OutputError, match=problem):
             McapSink(tmp_path / 'out.mcap', compression=compression, level=level)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_numbered_schemas_and_channels_wait_for_the_writer_s_own_next_record() -> None:
+    """An input's channels (given ids) go first, where copied chunks can follow them; new ones (numbered) just
+    before the first chunk, metadata or attachment the writer writes itself, a channel without messages too."""
+    stream = io.BytesIO()
+    writer = McapWriter(stream, library='test')
+    writer.reserve(7, 9)
+    new_schema = writer.register_schema('std_msgs/msg/Float64', 'ros2msg', TEXT.encode())
+    new = writer.register_channel('/new', 'cdr', new_schema, {})
+    writer.register_schema('std_msgs/msg/Float64', 'ros2msg', TEXT.encode(), schema_id=7)
+    writer.register_channel('/input', 'cdr', 7, {}, channel_id=9)
+    writer.register_channel('/quiet', 'cdr', new_schema, {})
+    writer.add_message(new, 10, b'\x00\x01\x00\x00' + struct.pack('<d', 1.5), 10)
+    writer.add_message(9, 11, b'\x00\x01\x00\x00' + struct.pack('<d', 2.5), 11)
+    writer.add_metadata('info', {'k': 'v'})
+    writer.finish()
+    data = stream.getvalue()
+    order = []
+    for record in StreamReader(io.BytesIO(data), skip_magic=False, emit_chunks=True).records:
+        name = type(record).__name__
+        if name in ('Schema', 'Channel'):
+            order.append(f'{name} {record.id}')
+        elif name in ('Header', 'Chunk', 'Metadata', 'DataEnd'):
+            order.append(name)
+    assert order[:order.index('DataEnd') + 1] == ['Header', 'Schema 7', 'Channel 9', 'Schema 8', 'Channel 10',
+                                                  'Channel 11', 'Chunk', 'Metadata', 'DataEnd']
+    reader = make_reader(io.BytesIO(data))
+    assert {c.topic: c.id for c in reader.get_summary().channels.values()} == {'/new': 10, '/input': 9, '/quiet': 11}
+    assert [(c.topic, m.log_time) for _, c, m in reader.iter_messages()] == [('/new', 10), ('/input', 11)]

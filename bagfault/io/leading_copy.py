@@ -1,0 +1,151 @@
+"""A copy that runs ahead: an input's leading chunks copied into the output before the run has decided on them.
+
+`bagfault run` spends its first few hundred milliseconds importing and
+setting up, while the chunks at the start of a bag, before any fault, are
+copied as they are anyway. A `LeadingCopy` is started first, on a guess of
+where those chunks will land in the output, and copies them on a thread of
+its own. The writer takes a copied span from it only where it copied exactly
+those input bytes to exactly that place, and stops it at the first write of
+its own into the range it covers; so a wrong guess costs time, never a byte
+(see `McapWriter`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from bagfault.io.file_copy import copy_range
+from bagfault.io.mcap_sink import open_partial
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from pathlib import Path
+
+    from typing_extensions import Self
+
+PART = 64 << 20  # bytes per copy call: a stop waits for one part at most
+
+
+@dataclass(frozen=True)
+class Piece:
+    """Input bytes [source, source + length) belong at output offset `target`."""
+
+    source: int
+    target: int
+    length: int
+
+
+class LeadingCopy:
+    """Copies pieces of one input into a new partial output file, in order, until done or stopped.
+
+    The file is its own until a sink adopts it (`adopt`); `close` removes it
+    unless it was adopted, so an error before the run starts leaves nothing.
+    """
+
+    def __init__(self, source: Path, pieces: Sequence[Piece], output: Path) -> None:
+        """Open `source`, make the partial file of `output` (OSError, OutputError) and start copying (pieces as
+        far as the input goes)."""
+        self._input = os.open(source, os.O_RDONLY)
+        try:
+            stat = os.fstat(self._input)
+            self.fd, self.partial = open_partial(output)
+        except BaseException:
+            os.close(self._input)
+            raise
+        size = stat.st_size
+        self.pieces = sorted((Piece(p.source, p.target, min(p.length, size - p.source)) for p in pieces
+                              if p.source < size and p.length > 0), key=lambda p: p.target)
+        self.start = self.pieces[0].target if self.pieces else 0  # output offsets before this are never touched
+        self.end = max((p.target + p.length for p in self.pieces), default=0)
+        self.extent = 0  # the furthest output offset written
+        self._identity = (stat.st_dev, stat.st_ino)
+        self._same: dict[int, bool] = {}
+        self._limit = self.end  # copy up to here, then stop
+        self._lock = threading.Lock()
+        self._failure: tuple[int, OSError] | None = None  # where a copy failed, and why
+        self._adopted = False
+        self._closed = False
+        self._thread = threading.Thread(target=self._copy, name='bagfault-leading-copy', daemon=True)
+        self._thread.start()
+
+    def _copy(self) -> None:
+        in_kernel = True
+        if hasattr(os, 'posix_fadvise'):  # from a cold disk: read ahead further than the default
+            with contextlib.suppress(OSError):
+                os.posix_fadvise(self._input, 0, 0, os.POSIX_FADV_SEQUENTIAL)
+        for piece in self.pieces:
+            for done in range(0, piece.length, PART):
+                at, length = piece.target + done, min(PART, piece.length - done)
+                with self._lock:
+                    if at >= self._limit:
+                        return
+                self.extent = max(self.extent, at + length)
+                try:
+                    in_kernel = copy_range(self._input, self.fd, piece.source + done, length, at, in_kernel=in_kernel)
+                except OSError as exc:  # a full disk; or a guess past the input's end, which the writer never takes
+                    self._failure = (at, exc)
+                    return
+
+    # -- the writer's questions -------------------------------------------------------------
+    def covers(self, fd: int, offset: int, length: int, at: int) -> int:
+        """How many bytes of `fd` from `offset`, placed at output offset `at`, this copy has put there or will
+        (0 once stopped): a prefix of the span, as far as one of its pieces holds exactly those bytes."""
+        with self._lock:
+            if self._limit < self.end:
+                return 0
+        if not self._is_input(fd):
+            return 0
+        for piece in self.pieces:
+            if piece.target <= at < piece.target + piece.length:
+                if piece.source - piece.target != offset - at:
+                    return 0
+                return min(length, piece.target + piece.length - at)
+        return 0
+
+    def _is_input(self, fd: int) -> bool:
+        same = self._same.get(fd)
+        if same is None:
+            stat = os.fstat(fd)
+            same = self._same[fd] = (stat.st_dev, stat.st_ino) == self._identity
+        return same
+
+    def stop(self, keep: int) -> None:
+        """Copy what lies before output offset `keep` (the writer has taken it), then nothing more; raise a
+        copy of those bytes that failed (a failure past them only means the writer writes them itself)."""
+        with self._lock:
+            self._limit = min(self._limit, keep)
+        self._thread.join()
+        failure, self._failure = self._failure, None
+        if failure is not None and failure[0] < keep:
+            raise failure[1]
+
+    # -- ownership --------------------------------------------------------------------------------
+    def adopt(self) -> tuple[int, Path]:
+        """A sink takes the partial file (descriptor and name) and from then on removes it itself."""
+        self._adopted = True
+        return self.fd, self.partial
+
+    def close(self) -> None:
+        """Stop copying; remove the partial file unless a sink adopted it (once; later calls do nothing)."""
+        if self._closed:
+            return
+        self._closed = True
+        with self._lock:
+            self._limit = 0
+        self._thread.join()
+        with contextlib.suppress(OSError):
+            os.close(self._input)
+        if not self._adopted:
+            with contextlib.suppress(OSError):
+                os.close(self.fd)
+            self.partial.unlink(missing_ok=True)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
