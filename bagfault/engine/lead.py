@@ -108,20 +108,25 @@ def leading_pieces(summary: Summary, document: object, start_offset: float,
 class _Injector:
     """An injector the scenario wires to a topic of the bag."""
 
-    def __init__(self, spec: Mapping[object, object], topics: set[str]) -> None:
-        self.id = str(spec.get('id'))
-        self.input_topic = bag_name(str(spec.get('input_topic')), topics)
-        self.output_topic = bag_name(str(spec.get('output_topic')), topics)
+    def __init__(self, name: str, endpoints: Mapping[object, object], topics: set[str]) -> None:
+        self.id = name
+        self.input_topic = bag_name(str(endpoints.get('input_topic')), topics)
+        self.output_topic = bag_name(str(endpoints.get('output_topic')), topics)
         self.in_place = self.input_topic == self.output_topic
         self.freezes = False  # a fault of it freezes the stream: the injector sees every message
 
 
 def _injectors(document: Mapping[object, object], topics: set[str]) -> list[_Injector]:
+    """The topic injectors of every anchor layout (a list under `injectors:`, endpoints flat or under `topic:`,
+    or one `injector:`) whose input topic the bag has."""
     found = []
-    for spec in _list(document.get('injectors')):
-        if isinstance(spec, Mapping) and isinstance(spec.get('input_topic'), str) and \
-                isinstance(spec.get('output_topic'), str):
-            injector = _Injector(spec, topics)
+    for spec in [*_list(document.get('injectors')), document.get('injector')]:
+        if not isinstance(spec, Mapping):
+            continue
+        nested = spec.get('topic')
+        endpoints = nested if isinstance(nested, Mapping) else spec
+        if isinstance(endpoints.get('input_topic'), str) and isinstance(endpoints.get('output_topic'), str):
+            injector = _Injector(str(spec.get('id')), endpoints, topics)
             if injector.input_topic in topics:
                 found.append(injector)
     by_id = {i.id: i for i in found}
@@ -197,8 +202,8 @@ def _seconds(value: object) -> float:
     return seconds if math.isfinite(seconds) and seconds > 0 else 0.0
 
 
-OWN = {'injectors': frozenset(('id', 'type', 'input_topic', 'output_topic')),  # names of their own, not topics
-       'faults': frozenset(('id', 'injector_id'))}
+INJECTOR_OWN = frozenset(('id', 'type', 'input_topic', 'output_topic', 'topic'))  # names of its own, not topics
+OWN = {'injectors': INJECTOR_OWN, 'injector': INJECTOR_OWN, 'faults': frozenset(('id', 'injector_id'))}
 
 
 def _named(document: Mapping[object, object]) -> set[str]:
@@ -208,7 +213,7 @@ def _named(document: Mapping[object, object]) -> set[str]:
 
 
 def _strings(node: object, skip: frozenset[str]) -> list[str]:
-    """The strings in a YAML node; in the mappings of a list, those under keys other than `skip`."""
+    """The strings in a YAML node, but those under keys in `skip` (of the node, or of the mappings of a list)."""
     if isinstance(node, str):
         return [node]
     if isinstance(node, Mapping):

@@ -8,7 +8,11 @@ the GIL), and are written in order as they complete, so compression runs
 on the second core while the main thread reads and injects. The file has
 the layout of the `mcap` library's writer (chunks with message indexes,
 repeated schemas and channels, statistics, chunk/metadata/attachment
-indexes, summary offsets) and is byte-identical from run to run.
+indexes, summary offsets) and is byte-identical from run to run. An
+input's chunks can be copied into it as they are, by a copy thread or ahead
+of the run by a leading copy (`io/leading_copy.py`); so that they can come
+right after the header and the input's own schemas and channels, new ones
+are written just before the writer's next record of its own.
 """
 
 from __future__ import annotations

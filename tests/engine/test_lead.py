@@ -236,3 +236,14 @@ def test_bags_others_recorded_come_out_the_same_with_a_leading_copy(
     assert code == 0, said
     run_alone(recorded, tmp_path / 'late.yaml', tmp_path / 'api.mcap', monkeypatch)
     assert (tmp_path / 'cli.mcap').read_bytes() == (tmp_path / 'api.mcap').read_bytes()
+
+
+@pytest.mark.parametrize('layout', [
+    'injectors:\n  - {id: imu, type: imu, topic: {input_topic: imu, output_topic: imu}}\n',
+    'injector: {id: imu, type: imu, input_topic: /imu, output_topic: /imu}\n',
+    'injector:\n  id: imu\n  type: imu\n  topic: {input_topic: /imu, output_topic: /imu}\n',
+])
+def test_every_anchor_layout_gives_the_guess_of_the_flat_one(bag: Path, layout: str) -> None:
+    faults = IMU[IMU.index('faults:'):]
+    assert guess(bag, layout + faults) == guess(bag, IMU)
+    assert 0 < sum(p.length for p in guess(bag, IMU)) < bag.stat().st_size / 2
