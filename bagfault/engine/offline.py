@@ -222,6 +222,8 @@ def _run_to_file(
             if chunks is None and lead is not None:
                 lead.close()  # nothing is copied as it is: the guess was wrong, its file goes
                 lead = None
+            if lead is not None and mark is not None:
+                lead.pace(mark)  # the hash follows what the leading copy has read, not what the run took from it
             with McapSink(output, compression=compression, level=compression_level,
                           ros_distro=inputs.ros_distro or '', lead=lead) as sink:
                 with chunks if chunks is not None else contextlib.nullcontext():

@@ -27,6 +27,8 @@ if TYPE_CHECKING:
 
     from typing_extensions import Self
 
+    from bagfault.io.sources import ReadMark
+
 PART = 64 << 20  # bytes per copy call: a stop waits for one part at most
 
 
@@ -69,10 +71,29 @@ class LeadingCopy:
         self._failure: tuple[int, OSError] | None = None  # where a copy failed, and why
         self._adopted = False
         self._closed = False
+        self._mark: ReadMark | None = None  # told how far the input was read (`pace`)
+        self._copied = False  # the thread is done
+        self._source_reached = self.pieces[0].source if self.pieces else 0  # the input read up to here
         self._thread = threading.Thread(target=self._copy, name='bagfault-leading-copy', daemon=True)
         self._thread.start()
 
+    def pace(self, mark: ReadMark) -> None:
+        """Tell `mark` how far this copy has read the input, as it goes (the provenance hash follows it)."""
+        with self._lock:
+            if not self._copied:
+                self._mark = mark
+                mark.cap(self._source_reached)
+
     def _copy(self) -> None:
+        try:
+            self._copy_pieces()
+        finally:
+            with self._lock:
+                self._copied = True
+                if self._mark is not None:
+                    self._mark.cap(None)
+
+    def _copy_pieces(self) -> None:
         in_kernel = True
         if hasattr(os, 'posix_fadvise'):  # from a cold disk: read ahead further than the default
             with contextlib.suppress(OSError):
@@ -89,6 +110,10 @@ class LeadingCopy:
                 except OSError as exc:  # a full disk; or a guess past the input's end, which the writer never takes
                     self._failure = (at, exc)
                     return
+                with self._lock:
+                    self._source_reached = piece.source + done + length
+                    if self._mark is not None:
+                        self._mark.cap(self._source_reached)
 
     # -- the writer's questions -------------------------------------------------------------
     def covers(self, fd: int, offset: int, length: int, at: int) -> int:

@@ -31,6 +31,7 @@ class ReadMark:
     def __init__(self, lead: int = 128 << 20) -> None:
         self.lead = lead
         self._position = 0
+        self._cap: int | None = None  # how far a leading copy has copied, while it copies
         self._released = False
         self._moved = threading.Condition()
 
@@ -41,6 +42,13 @@ class ReadMark:
                 self._position = offset
                 self._moved.notify_all()
 
+    def cap(self, offset: int | None) -> None:
+        """A leading copy has read the input up to `offset` (None: it reads no more); the run's position counts
+        only up to there, since the run takes chunks from it before it has copied them."""
+        with self._moved:
+            self._cap = offset
+            self._moved.notify_all()
+
     def release(self) -> None:
         """The run reads no more of the input in order (it ended, failed, or reads it another way)."""
         with self._moved:
@@ -50,10 +58,13 @@ class ReadMark:
     def wait_for(self, offset: int, stop: threading.Event | None) -> None:
         """Block until the bytes before `offset` are within `lead` of the run (or the run released the file)."""
         with self._moved:
-            while not self._released and offset > self._position + self.lead:
+            while not self._released and offset > self._reached() + self.lead:
                 if stop is not None and stop.is_set():
                     return
                 self._moved.wait(0.1)
+
+    def _reached(self) -> int:
+        return self._position if self._cap is None else min(self._position, self._cap)
 
 
 @dataclass(frozen=True)

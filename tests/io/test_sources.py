@@ -223,6 +223,48 @@ def test_the_hash_keeps_pace_with_the_run_that_reads_the_input(tmp_path: Path) -
     assert not worker.is_alive()
 
 
+def test_the_hash_keeps_pace_with_a_leading_copy_the_run_took_chunks_from(tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The run takes a leading copy's chunks before it has copied them: the run's position then counts only as
+    far as the copy has read, until the copy is done."""
+    import threading
+
+    from bagfault.io import file_copy, leading_copy, sources
+    from bagfault.io.leading_copy import LeadingCopy, Piece
+
+    mark = sources.ReadMark(lead=0)
+    mark.advance(10_000)  # the run took everything
+    mark.cap(1000)  # the copy has read 1000 bytes
+    waiter = threading.Thread(target=mark.wait_for, args=(5000, None))
+    waiter.start()
+    waiter.join(0.3)
+    assert waiter.is_alive()
+    mark.cap(None)  # the copy is done
+    waiter.join(5)
+    assert not waiter.is_alive()
+
+    source = tmp_path / 'input.bin'
+    source.write_bytes(bytes(range(256)) * 100)
+    go = threading.Event()
+
+    def held(*args: object, **kwargs: object) -> bool:
+        go.wait(5)
+        return file_copy.copy_range(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(leading_copy, 'copy_range', held)
+    caps: list[int | None] = []
+    mark = sources.ReadMark()
+    mark.cap = caps.append  # type: ignore[method-assign]
+    with LeadingCopy(source, [Piece(100, 50, 20_000)], tmp_path / 'out.bin') as lead:
+        lead.pace(mark)  # before it has copied: the run counts up to where the copy starts
+        assert caps == [100]
+        go.set()
+        lead.stop(lead.end)
+        assert caps == [100, 20_100, None]  # copied, then done: the run's own position counts again
+        lead.pace(sources.ReadMark())  # a run that comes after the copy is not held back
+    assert caps == [100, 20_100, None]
+
+
 def test_a_fifo_is_refused_before_it_is_read(tmp_path):
     """A FIFO as the input, or listed in metadata.yaml, blocked the run for ever (SIGTERM did not end it)."""
     import os
