@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import mmap
 import os
 import threading
@@ -44,7 +45,8 @@ class ReadMark:
 
     def cap(self, offset: int | None) -> None:
         """A leading copy has read the input up to `offset` (None: it reads no more); the run's position counts
-        only up to there, since the run takes chunks from it before it has copied them."""
+        only up to there, since the run takes chunks from it before it has copied them, and a run that
+        released the file still holds the hash to the copy."""
         with self._moved:
             self._cap = offset
             self._moved.notify_all()
@@ -58,13 +60,16 @@ class ReadMark:
     def wait_for(self, offset: int, stop: threading.Event | None) -> None:
         """Block until the bytes before `offset` are within `lead` of the run (or the run released the file)."""
         with self._moved:
-            while not self._released and offset > self._reached() + self.lead:
+            while offset > self._reached() + self.lead:
                 if stop is not None and stop.is_set():
                     return
                 self._moved.wait(0.1)
 
-    def _reached(self) -> int:
-        return self._position if self._cap is None else min(self._position, self._cap)
+    def _reached(self) -> float:
+        """How far the input has been read in order, by the run and a leading copy."""
+        if self._cap is not None:
+            return self._cap if self._released else min(self._position, self._cap)
+        return math.inf if self._released else self._position
 
 
 @dataclass(frozen=True)

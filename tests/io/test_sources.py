@@ -232,16 +232,19 @@ def test_the_hash_keeps_pace_with_a_leading_copy_the_run_took_chunks_from(tmp_pa
     from bagfault.io import file_copy, leading_copy, sources
     from bagfault.io.leading_copy import LeadingCopy, Piece
 
-    mark = sources.ReadMark(lead=0)
-    mark.advance(10_000)  # the run took everything
-    mark.cap(1000)  # the copy has read 1000 bytes
-    waiter = threading.Thread(target=mark.wait_for, args=(5000, None))
-    waiter.start()
-    waiter.join(0.3)
-    assert waiter.is_alive()
-    mark.cap(None)  # the copy is done
-    waiter.join(5)
-    assert not waiter.is_alive()
+    for run in ('took everything', 'is done with the file'):
+        mark = sources.ReadMark(lead=0)
+        mark.advance(10_000)
+        if run == 'is done with the file':
+            mark.release()
+        mark.cap(1000)  # the copy has read 1000 bytes
+        waiter = threading.Thread(target=mark.wait_for, args=(5000, None))
+        waiter.start()
+        waiter.join(0.3)
+        assert waiter.is_alive()
+        mark.cap(None)  # the copy is done
+        waiter.join(5)
+        assert not waiter.is_alive()
 
     source = tmp_path / 'input.bin'
     source.write_bytes(bytes(range(256)) * 100)
