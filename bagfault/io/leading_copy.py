@@ -73,6 +73,7 @@ class LeadingCopy:
         self._closed = False
         self._mark: ReadMark | None = None  # told how far the input was read (`pace`)
         self._copied = False  # the thread is done
+        self._stopping = False  # asked to stop: it no longer waits for a hash
         self._source_reached = self.pieces[0].source if self.pieces else 0  # the input read up to here
         self._thread = threading.Thread(target=self._copy, name='bagfault-leading-copy', daemon=True)
         self._thread.start()
@@ -101,6 +102,9 @@ class LeadingCopy:
         for piece in self.pieces:
             for done in range(0, piece.length, PART):
                 at, length = piece.target + done, min(PART, piece.length - done)
+                mark = self._mark
+                if mark is not None:  # a first run's hash, reading the same input: not left behind
+                    mark.wait_for_hash(piece.source + done, lambda: self._stopping)
                 with self._lock:
                     if at >= self._limit:
                         return
@@ -141,6 +145,7 @@ class LeadingCopy:
     def stop(self, keep: int) -> None:
         """Copy what lies before output offset `keep` (the writer has taken it), then nothing more; raise a
         copy of those bytes that failed (a failure past them only means the writer writes them itself)."""
+        self._stopping = True
         with self._lock:
             self._limit = min(self._limit, keep)
         self._thread.join()
@@ -159,6 +164,7 @@ class LeadingCopy:
         if self._closed:
             return
         self._closed = True
+        self._stopping = True
         with self._lock:
             self._limit = 0
         self._thread.join()

@@ -268,6 +268,36 @@ def test_the_hash_keeps_pace_with_a_leading_copy_the_run_took_chunks_from(tmp_pa
     assert caps == [100, 20_100, None]
 
 
+def test_a_leading_copy_does_not_leave_the_hash_behind(tmp_path: Path) -> None:
+    """On a cold disk a copy far ahead of the hash leaves it pages the page cache no longer holds: the copy
+    waits while a hash is more than `lead` behind it, and not once the hash is done or the copy is stopped."""
+    import threading
+
+    from bagfault.io import sources
+
+    mark = sources.ReadMark(lead=100)
+    for ends in ('the hash moves on', 'the hash is done', 'the copy is stopped'):
+        stopping = threading.Event()
+        mark.hashed(0)
+        waiter = threading.Thread(target=mark.wait_for_hash, args=(500, stopping.is_set))
+        waiter.start()
+        waiter.join(0.2)
+        assert waiter.is_alive()
+        if ends == 'the hash moves on':
+            mark.hashed(400)  # within 100 of the copy
+        elif ends == 'the hash is done':
+            mark.hashed(None)
+        else:
+            stopping.set()
+        waiter.join(5)
+        assert not waiter.is_alive()
+    path = tmp_path / 'input.bin'
+    path.write_bytes(bytes(50_000))
+    mark = sources.ReadMark()
+    sources._blake3(path, None, mark, window=4096)
+    mark.wait_for_hash(10**9, lambda: False)  # returns: a finished hash holds nobody
+
+
 def test_a_fifo_is_refused_before_it_is_read(tmp_path):
     """A FIFO as the input, or listed in metadata.yaml, blocked the run for ever (SIGTERM did not end it)."""
     import os
