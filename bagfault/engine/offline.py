@@ -213,7 +213,9 @@ def _run_to_file(
     hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
     try:  # the inputs' digests on the second core from the start, beside the setup, the run and the copy
         origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset, stop, mark)
-        with InputSet(paths, salvage=salvage) as inputs:
+        with lead.opening() if lead is not None else contextlib.nullcontext():
+            inputs = InputSet(paths, salvage=salvage)
+        with inputs:
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
             chunks = chunk_copy_for(inputs, verify=verify, mark=mark) if copying else None

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -22,7 +23,7 @@ from bagfault.io.file_copy import copy_range
 from bagfault.io.mcap_sink import open_partial
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterator, Sequence
     from pathlib import Path
 
     from typing_extensions import Self
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
     from bagfault.io.sources import ReadMark
 
 PART = 64 << 20  # bytes per copy call: a stop waits for one part at most
+SLOW_OPEN = 0.3  # seconds: an input open that takes longer reads from the disk (warm: 0.14 s for 3000 chunks)
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,7 @@ class LeadingCopy:
         self._mark: ReadMark | None = None  # told how far the input was read (`pace`)
         self._copied = False  # the thread is done
         self._stopping = False  # asked to stop: it no longer waits for a hash
+        self._opening: float | None = None  # when the run began opening the input (see `opening`)
         self._source_reached = self.pieces[0].source if self.pieces else 0  # the input read up to here
         self._thread = threading.Thread(target=self._copy, name='bagfault-leading-copy', daemon=True)
         self._thread.start()
@@ -96,12 +99,10 @@ class LeadingCopy:
 
     def _copy_pieces(self) -> None:
         in_kernel = True
-        if hasattr(os, 'posix_fadvise'):  # from a cold disk: read ahead further than the default
-            with contextlib.suppress(OSError):
-                os.posix_fadvise(self._input, 0, 0, os.POSIX_FADV_SEQUENTIAL)
         for piece in self.pieces:
             for done in range(0, piece.length, PART):
                 at, length = piece.target + done, min(PART, piece.length - done)
+                self._wait_for_open()
                 mark = self._mark
                 if mark is not None:  # a first run's hash, reading the same input: not left behind
                     mark.wait_for_hash(piece.source + done, lambda: self._stopping)
@@ -118,6 +119,27 @@ class LeadingCopy:
                     self._source_reached = piece.source + done + length
                     if self._mark is not None:
                         self._mark.cap(self._source_reached)
+
+    @contextlib.contextmanager
+    def opening(self) -> Iterator[None]:
+        """The run opens the input meanwhile (its reads of every chunk's record header). An open that takes
+        longer than `SLOW_OPEN` reads from a cold disk: the copy waits for it to end, rather than share the
+        disk with it (the two together read a 9.9 GB bag up to 1.6 times in a 4 GB page cache)."""
+        with self._lock:
+            self._opening = time.monotonic()
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._opening = None
+
+    def _wait_for_open(self) -> None:
+        while True:
+            with self._lock:
+                since = self._opening
+            if since is None or self._stopping or time.monotonic() - since < SLOW_OPEN:
+                return
+            time.sleep(0.01)
 
     # -- the writer's questions -------------------------------------------------------------
     def covers(self, fd: int, offset: int, length: int, at: int) -> int:

@@ -14,6 +14,7 @@ kept and every skipped part is listed in `losses`.
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import io
 import itertools
@@ -118,6 +119,21 @@ def _string(buf: memoryview, pos: int, end: int) -> tuple[str, int]:
     if pos + length > end:
         raise Corrupt(f'a string of {length} bytes runs past its record')
     return bytes(buf[pos : pos + length]).decode(), pos + length
+
+
+@contextlib.contextmanager
+def _random_access(fd: int) -> Iterator[None]:
+    """Reads of `fd` without read-ahead inside the block (posix_fadvise RANDOM, then NORMAL)."""
+    advise = getattr(os, 'posix_fadvise', None)
+    if advise is not None:
+        with contextlib.suppress(OSError):
+            advise(fd, 0, 0, os.POSIX_FADV_RANDOM)
+    try:
+        yield
+    finally:
+        if advise is not None:
+            with contextlib.suppress(OSError):
+                advise(fd, 0, 0, os.POSIX_FADV_NORMAL)
 
 
 class McapSource:
@@ -231,7 +247,13 @@ class McapSource:
         length, times, compression, sizes) against its chunk index, its message index records (type, channel,
         entries inside the chunk's extent and time range) against the offsets the index gives, and every
         chunk the file holds against the chunk index. Record headers only: one read per chunk and one for its
-        message indexes, walking record by record only where something unindexed lies."""
+        message indexes, walking record by record only where something unindexed lies. The kernel reads no
+        more than those records (no read-ahead): from a cold disk that is all this walk needs, and a leading
+        copy reading the whole file meanwhile does not have to share the disk with it."""
+        with _random_access(self._file.fileno()):
+            self._walk_layout()
+
+    def _walk_layout(self) -> None:
         indexed = {c.offset: c for c in self._chunks}
         fd, position, end = self._file.fileno(), 8, self._data_end
         while position + 9 <= end:

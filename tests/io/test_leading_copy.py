@@ -184,3 +184,31 @@ def test_bytes_go_through_user_space_where_the_kernel_cannot_copy(tmp_path: Path
     with source.open('rb') as src, target.open('wb') as dst:
         assert file_copy.copy_range(src.fileno(), dst.fileno(), 1000, 9_000_000, 7, in_kernel=True) is False
     assert target.read_bytes() == bytes(7) + source.read_bytes()[1000:9_001_000]
+
+
+def test_a_slow_open_of_the_input_holds_the_copy_until_it_ends(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An open that takes longer than SLOW_OPEN reads from a cold disk: the copy does not share the disk with it
+    (between parts it waits for the open to end), then copies the rest."""
+    from bagfault.io import leading_copy
+
+    parts: list[int] = []
+
+    def slow_part(source: int, target: int, offset: int, length: int, at: int, *, in_kernel: bool = True) -> bool:
+        parts.append(at)
+        time.sleep(0.005)
+        return file_copy.copy_range(source, target, offset, length, at, in_kernel=in_kernel)
+
+    monkeypatch.setattr(leading_copy, 'copy_range', slow_part)
+    monkeypatch.setattr(leading_copy, 'PART', 1000)
+    monkeypatch.setattr(leading_copy, 'SLOW_OPEN', 0.05)
+    source = tmp_path / 'input.bin'
+    source.write_bytes(bytes(range(256)) * 800)  # 205 parts of 1000 bytes: a second at 5 ms each
+    with LeadingCopy(source, [Piece(0, 0, source.stat().st_size)], tmp_path / 'out.bin') as lead:
+        with lead.opening():
+            time.sleep(0.2)
+            held = len(parts)
+            time.sleep(0.3)
+            assert len(parts) == held < 205  # nothing copied from 0.2 s to 0.5 s of a slow open
+        lead.stop(lead.end)
+        assert len(parts) == 205
+        assert os.pread(lead.fd, source.stat().st_size, 0) == source.read_bytes()
