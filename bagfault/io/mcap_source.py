@@ -18,6 +18,7 @@ import contextlib
 import heapq
 import io
 import itertools
+import mmap
 import os
 import struct
 import zlib
@@ -121,19 +122,29 @@ def _string(buf: memoryview, pos: int, end: int) -> tuple[str, int]:
     return bytes(buf[pos : pos + length]).decode(), pos + length
 
 
-@contextlib.contextmanager
-def _random_access(fd: int) -> Iterator[None]:
-    """Reads of `fd` without read-ahead inside the block (posix_fadvise RANDOM, then NORMAL)."""
-    advise = getattr(os, 'posix_fadvise', None)
-    if advise is not None:
-        with contextlib.suppress(OSError):
-            advise(fd, 0, 0, os.POSIX_FADV_RANDOM)
-    try:
-        yield
-    finally:
-        if advise is not None:
-            with contextlib.suppress(OSError):
-                advise(fd, 0, 0, os.POSIX_FADV_NORMAL)
+class _ScatteredReads:
+    """Small reads at scattered offsets of a file, through a map of it advised MADV_RANDOM: the kernel reads
+    the pages asked for and nothing around them, even where another reader's read-ahead marks are (a read()
+    that meets one starts a read-ahead of its own, and a walk forward through the file then reads all of it:
+    the 2400 s bench's open read 9.8 GB beside a leading copy). Plain reads where the file cannot be mapped."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self._map: mmap.mmap | None = None
+        with contextlib.suppress(OSError, ValueError):
+            self._map = mmap.mmap(fd, 0, access=mmap.ACCESS_READ)
+            if hasattr(mmap, 'MADV_RANDOM'):
+                self._map.madvise(mmap.MADV_RANDOM)
+
+    def read(self, length: int, offset: int) -> bytes:
+        """Up to `length` bytes from `offset` (fewer at the end of the file)."""
+        if self._map is None:
+            return os.pread(self.fd, length, offset)
+        return self._map[offset:offset + length]
+
+    def close(self) -> None:
+        if self._map is not None:
+            self._map.close()
 
 
 class McapSource:
@@ -250,21 +261,24 @@ class McapSource:
         message indexes, walking record by record only where something unindexed lies. The kernel reads no
         more than those records (no read-ahead): from a cold disk that is all this walk needs, and a leading
         copy reading the whole file meanwhile does not have to share the disk with it."""
-        with _random_access(self._file.fileno()):
-            self._walk_layout()
+        reads = _ScatteredReads(self._file.fileno())
+        try:
+            self._walk_layout(reads)
+        finally:
+            reads.close()
 
-    def _walk_layout(self) -> None:
+    def _walk_layout(self, reads: _ScatteredReads) -> None:
         indexed = {c.offset: c for c in self._chunks}
-        fd, position, end = self._file.fileno(), 8, self._data_end
+        position, end = 8, self._data_end
         while position + 9 <= end:
             chunk = indexed.get(position)
             if chunk is not None:
-                self._check_chunk(fd, chunk)
+                self._check_chunk(reads, chunk)
                 position = chunk.offset + chunk.length
                 if chunk.index_offsets and min(chunk.index_offsets.values()) == position:
                     position += chunk.index_length
                 continue
-            head = os.pread(fd, 9 + 16, position)
+            head = reads.read(9 + 16, position)
             if len(head) < 9:
                 break
             opcode, length = _REC.unpack_from(head)
@@ -300,9 +314,9 @@ class McapSource:
             self._lost('the Statistics record', f'its messages per channel and the message indexes disagree '
                                                 f'({"; ".join(differ[:3])})')
 
-    def _check_chunk(self, fd: int, chunk: _Chunk) -> None:
+    def _check_chunk(self, reads: _ScatteredReads, chunk: _Chunk) -> None:
         """One indexed chunk's record header and message index records against its chunk index."""
-        head = os.pread(fd, 9 + _CHUNK_HEAD.size + 4 + 64, chunk.offset)
+        head = reads.read(9 + _CHUNK_HEAD.size + 4 + 64, chunk.offset)
         where = f'chunk at offset {chunk.offset}'
         if len(head) < 9 + _CHUNK_HEAD.size + 4:
             self._lost(where, 'the chunk index points past the end of the file')
@@ -322,7 +336,7 @@ class McapSource:
         if not chunk.index_offsets:
             return
         first = min(chunk.index_offsets.values())
-        data = os.pread(fd, chunk.index_length, first) if first >= chunk.offset + chunk.length else b''
+        data = reads.read(chunk.index_length, first) if first >= chunk.offset + chunk.length else b''
         counts, at, parts = {}, 0, []
         try:
             while at < len(data):
