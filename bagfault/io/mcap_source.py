@@ -126,10 +126,15 @@ class _ScatteredReads:
     """Small reads at scattered offsets of a file, through a map of it advised MADV_RANDOM: the kernel reads
     the pages asked for and nothing around them, even where another reader's read-ahead marks are (a read()
     that meets one starts a read-ahead of its own, and a walk forward through the file then reads all of it:
-    the 2400 s bench's open read 9.8 GB beside a leading copy). Plain reads where the file cannot be mapped."""
+    the 2400 s bench's open read 9.8 GB beside a leading copy). Pages mapped are let go every `UNMAP_EVERY`
+    reads (the kernel maps up to 64 KB around each fault), so they do not add up in the process's resident
+    size (1.6 GB on that bag before). Plain reads where the file cannot be mapped."""
+
+    UNMAP_EVERY = 256
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
+        self._reads = 0
         self._map: mmap.mmap | None = None
         with contextlib.suppress(OSError, ValueError):
             self._map = mmap.mmap(fd, 0, access=mmap.ACCESS_READ)
@@ -140,6 +145,9 @@ class _ScatteredReads:
         """Up to `length` bytes from `offset` (fewer at the end of the file)."""
         if self._map is None:
             return os.pread(self.fd, length, offset)
+        self._reads += 1
+        if self._reads % self.UNMAP_EVERY == 0 and hasattr(mmap, 'MADV_DONTNEED'):
+            self._map.madvise(mmap.MADV_DONTNEED)  # a file's map: its pages stay in the page cache
         return self._map[offset:offset + length]
 
     def close(self) -> None:

@@ -219,3 +219,23 @@ def test_statistics_that_move_messages_between_channels(tmp_path: Path, capsys: 
     error = capsys.readouterr().err.strip()
     assert code == 2 and error.count('\n') == 0 and 'messages per channel and the message indexes disagree' in error
     assert f'channel {channels[0]}: {PER_TOPIC + 3} declared, {PER_TOPIC} indexed' in error and not out.exists()
+
+
+def test_the_layout_walk_reads_what_plain_reads_read(tmp_path: Path) -> None:
+    """The walk's reads through a map (no read-ahead) give the bytes os.pread gives, short at the end of the
+    file; a file that cannot be mapped (an empty one) is read plainly."""
+    import os
+
+    from bagfault.io.mcap_source import _ScatteredReads
+
+    path = tmp_path / 'data.bin'
+    path.write_bytes(bytes(range(256)) * 64)
+    empty = tmp_path / 'empty.bin'
+    empty.write_bytes(b'')
+    with path.open('rb') as stream, empty.open('rb') as nothing:
+        reads, plain = _ScatteredReads(stream.fileno()), _ScatteredReads(nothing.fileno())
+        for length, offset in ((25, 8), (100, 16_300), (4096, 4000), (10, 16_384), (10, 99_999)):
+            assert reads.read(length, offset) == os.pread(stream.fileno(), length, offset)
+        assert plain.read(10, 0) == b''
+        reads.close()
+        plain.close()
