@@ -56,15 +56,16 @@ class Problem:
     message: str
 
     def __str__(self) -> str:
-        return f'{self.file}:{self.where}: {self.path}: {self.message}'
+        place = self.file + (f':{self.where}' if self.where else '') + (f': {self.path}' if self.path else '')
+        return f'{place}: {self.message}' if place else self.message
 
 
 class ScenarioError(BagfaultError):
     """A scenario cannot be used; carries every problem found."""
 
     def __init__(self, problems: list[Problem] | str) -> None:
-        if isinstance(problems, str):
-            problems = [Problem('<scenario>', '1:1', '<top>', problems)]
+        if isinstance(problems, str):  # about no place in particular
+            problems = [Problem('', '', '', problems)]
         self.problems = problems
         super().__init__('\n'.join(str(p) for p in problems))
 

@@ -57,11 +57,11 @@ def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = Fal
     try:
         text = file.read_text(encoding='utf-8')
     except FileNotFoundError:
-        raise ScenarioError(f'{file}: scenario file not found') from None
+        raise ScenarioError([Problem(str(file), '', '', 'scenario file not found')]) from None
     except IsADirectoryError:
-        raise ScenarioError(f'{file}: is a directory, not a scenario file') from None
+        raise ScenarioError([Problem(str(file), '', '', 'is a directory, not a scenario file')]) from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f'{file}: cannot read scenario file: {one_line(exc)}') from None
+        raise ScenarioError([Problem(str(file), '', '', f'cannot read scenario file: {one_line(exc)}')]) from None
     return parse_scenario(text, source=file, validate=validate, strict=strict)
 
 

@@ -220,9 +220,19 @@ def test_yaml_syntax_error_has_a_location():
     assert 'invalid YAML' in info.value.problems[0].message
 
 
-def test_missing_file_is_one_clear_problem(tmp_path):
+def test_missing_file_is_one_clear_problem(tmp_path, capsys):
     with pytest.raises(ScenarioError, match='scenario file not found'):
         load_scenario(tmp_path / 'nope.yaml')
+    (tmp_path / 'folder.yaml').mkdir()
+    from bagfault.cli import main
+
+    for command in (['validate', str(tmp_path / 'nope.yaml')], ['validate', str(tmp_path / 'folder.yaml')],
+                    ['run', str(tmp_path / 'nope.yaml'), str(tmp_path / 'bag.mcap'), '-o', str(tmp_path / 'o.mcap')]):
+        assert main(command) == 2
+    assert capsys.readouterr().err.splitlines() == [  # the file and the problem, no made-up place in it
+        f'bagfault: error: {tmp_path / "nope.yaml"}: scenario file not found',
+        f'bagfault: error: {tmp_path / "folder.yaml"}: is a directory, not a scenario file',
+        f'bagfault: error: {tmp_path / "nope.yaml"}: scenario file not found']
 
 
 def test_extended_schedules_parse_and_validate():
