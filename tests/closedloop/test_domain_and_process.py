@@ -13,6 +13,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from support.helpers import claim_port_base
 from support.loop import running_with
 
 from bagfault.closedloop.domain import DomainLease
@@ -25,7 +26,7 @@ def locks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """Lock files and claim ports of this test alone (a second suite beside it runs the same ids)."""
     folder = tmp_path / 'locks'
     monkeypatch.setenv('BAGFAULT_DOMAIN_LOCKS', str(folder))
-    monkeypatch.setenv('BAGFAULT_DOMAIN_PORT_BASE', str(random.Random().randrange(40000, 60000, 200)))
+    monkeypatch.setenv('BAGFAULT_DOMAIN_PORT_BASE', str(claim_port_base(random.Random())))
     monkeypatch.setenv('ROS_DOMAIN_ID', '0')
     return folder
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import random
 import re
 import socket
 import subprocess
@@ -12,9 +13,9 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from support.helpers import claim_port_base
 from support.loop import SCENARIO, LoopRunner, running_with
 
-from bagfault.closedloop.domain import COORDINATOR_PORT_BASE
 from bagfault.live import LOOPBACK_PROFILE
 
 pytestmark = pytest.mark.live  # needs rclpy
@@ -123,7 +124,7 @@ def test_a_crowded_domain_is_passed_over_and_the_system_started_there_stopped(
     claims = three_domains()  # outside the leases' range, and no other test suite's: no other run is there
     crowded, free, other = (domain for domain, _ in claims)
     # this test's own leases claim their ports at another base, so the claims above keep only others away
-    monkeypatch.setenv('BAGFAULT_DOMAIN_PORT_BASE', str(COORDINATOR_PORT_BASE + 1000))
+    monkeypatch.setenv('BAGFAULT_DOMAIN_PORT_BASE', str(claim_port_base(random.Random())))
     token = f'crowd{os.getpid()}'
     scenario = api.load_scenario(SCENARIO)
     system = api.system_of(scenario, {'command': f'{{python}} monitor.py --hardware-id {token}'})

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import random
 from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
@@ -136,3 +137,16 @@ def run_inline(tmp: Path, scenario_text: str, bag: Path, **kw: Any) -> tuple[Pat
     out = tmp / 'out.mcap'
     result = api.run(parse_scenario(textwrap.dedent(scenario_text)), [bag], out, **kw)
     return out, result
+
+
+def claim_port_base(rng: random.Random | None = None) -> int:
+    """A base for a test's own domain-claim ports (`BAGFAULT_DOMAIN_PORT_BASE`): below the kernel's ephemeral
+    range, where no outgoing connection of another process takes a port (the range's ports are what a busy
+    machine hands out: a claim there failed when some client had just been given it), above Ray's worker ports;
+    `rng` picks one of several (a second suite beside this one runs the same test)."""
+    try:
+        low = int(Path('/proc/sys/net/ipv4/ip_local_port_range').read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 32768
+    top = low - 300  # room for every domain id (0-232) above the base
+    return rng.randrange(20000, top, 300) if rng is not None else top
