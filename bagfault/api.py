@@ -17,9 +17,9 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from bagfault.engine.activation import Activation
 from bagfault.engine.offline import check_recording, run_to_file
 from bagfault.engine.result import RunResult
-from bagfault.engine.scheduler import Activation
 from bagfault.engine.stop import StopFlag
 from bagfault.errors import BagfaultError, Problem, ScenarioError, UsageError
 from bagfault.io.mcap_sink import check_level

@@ -301,15 +301,14 @@ def _leading_copy(args: argparse.Namespace) -> Iterator[LeadingCopy | None]:
             not args.inputs[0].is_file():
         yield None
         return
-    from bagfault.engine.lead import start_lead  # noqa: PLC0415 - imports nothing heavy
+    from bagfault.engine.activation import Activation  # noqa: PLC0415 - these two import nothing heavy
+    from bagfault.engine.lead import start_lead  # noqa: PLC0415
 
-    activations = []
-    for text in args.activate:
-        fault, _, when = text.partition('@')
-        try:
-            activations.append((fault, float(when.partition('+')[0] or 0)))
-        except ValueError:
-            activations.append((fault, 0.0))  # refused later, with its message
+    try:
+        activations = [Activation.parse(text) for text in args.activate]
+    except ValueError:
+        yield None  # refused later, with its message
+        return
     try:
         text = args.scenario.read_text(encoding='utf-8')
     except (OSError, ValueError):

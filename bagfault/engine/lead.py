@@ -26,7 +26,7 @@ from bagfault.errors import BagfaultError
 from bagfault.io.channel import bag_name
 from bagfault.io.leading_copy import LeadingCopy, Piece
 from bagfault.io.mcap_sink import header_library
-from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, parse_summary, read_footer
+from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, read_summary
 from bagfault.io.mcap_writer import MAGIC, record_bytes
 from bagfault.units import NS
 
@@ -35,26 +35,26 @@ if TYPE_CHECKING:
 
     from mcap.summary import Summary
 
+    from bagfault.engine.activation import Activation
+
 MARGIN = 2_000_000  # ns a guessed chunk ends before a fault can start (seconds become ns by rounding)
 SCHEDULED = ('active_on_startup', 'active', 'probability_per_second', 'repeat')  # keys of faults on from zero
 
 
 def start_lead(scenario_text: str, source: Path, output: Path, *, start_offset: float = 0.0,
-               activations: Sequence[tuple[str, float]] = (), observed: Sequence[str] = ()) -> LeadingCopy | None:
+               activations: Sequence[Activation] = (), observed: Sequence[str] = ()) -> LeadingCopy | None:
     """Start copying the input's leading chunks into a new partial output, or None when no chunk is guessed
     copied (or the guess cannot be made: not an indexed MCAP file, a scenario that does not parse).
-    `activations` are `--activate` requests (fault id, start seconds); `observed` topics that reports need."""
+    `activations` are the `--activate` requests; `observed` topics that reports need."""
     try:
         with source.open('rb') as stream:
             magic = stream.read(len(MAGIC))
             size = stream.seek(0, 2)
             if magic != MAGIC or size < 2 * len(MAGIC) + FOOTER_LENGTH:
                 return None
-            summary_start, _ = read_footer(stream, size)
-            if not summary_start:
+            _, summary = read_summary(stream, size)
+            if summary is None:
                 return None
-            stream.seek(summary_start)
-            summary = parse_summary(stream.read(size - len(MAGIC) - FOOTER_LENGTH - summary_start))
         document = yaml.load(scenario_text, Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))
         pieces = leading_pieces(summary, document, start_offset, activations, observed)
         if not pieces:
@@ -65,7 +65,7 @@ def start_lead(scenario_text: str, source: Path, output: Path, *, start_offset: 
 
 
 def leading_pieces(summary: Summary, document: object, start_offset: float,
-                   activations: Sequence[tuple[str, float]], observed: Sequence[str]) -> list[Piece]:
+                   activations: Sequence[Activation], observed: Sequence[str]) -> list[Piece]:
     """The input bytes of the chunks guessed copied from the start, and where they go in the output."""
     if not isinstance(document, Mapping) or not summary.chunk_indexes:
         return []
@@ -140,13 +140,13 @@ def _injectors(document: Mapping[object, object], topics: set[str]) -> list[_Inj
 
 
 def _horizons(document: Mapping[object, object], injectors: list[_Injector],
-              activations: Sequence[tuple[str, float]]) -> dict[str, float]:
+              activations: Sequence[Activation]) -> dict[str, float]:
     """Injector id -> the earliest second from time zero at which one of its faults, or a fault one of them
     follows, can start (0 when unsure)."""
     faults = {str(f.get('id')): f for f in _list(document.get('faults')) if isinstance(f, Mapping)}
     asked: dict[str, float] = {}
-    for fault_id, start in activations:
-        asked[fault_id] = min(asked.get(fault_id, math.inf), start)
+    for activation in activations:
+        asked[activation.fault_id] = min(asked.get(activation.fault_id, math.inf), activation.start)
 
     def earliest(fault_id: str, seen: frozenset[str]) -> float:
         fault = faults.get(fault_id)

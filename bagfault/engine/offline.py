@@ -35,12 +35,12 @@ if TYPE_CHECKING:
     from collections.abc import Mapping, Sequence
     from pathlib import Path
 
+    from bagfault.engine.activation import Activation
     from bagfault.engine.control import FaultControl
     from bagfault.engine.oracles import Schema
     from bagfault.engine.result import RunResult
     from bagfault.engine.routing import Routing
     from bagfault.engine.run import Sink
-    from bagfault.engine.scheduler import Activation
     from bagfault.io.leading_copy import LeadingCopy
     from bagfault.spec.model import Scenario
 
@@ -185,7 +185,7 @@ def _own_lead(scenario: Scenario, source: Path, output: Path, start_offset: floa
     if wanted is None:
         return None  # an observer sees every topic: nothing is copied
     return start_lead(scenario.text, source, output, start_offset=start_offset,
-                      activations=[(a.fault_id, a.start) for a in activations], observed=sorted(wanted))
+                      activations=activations, observed=sorted(wanted))
 
 
 def _run_to_file(

@@ -21,9 +21,10 @@ from bisect import bisect_left
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from bagfault.engine.activation import Activation
 from bagfault.engine.fault_state import FaultState, inject
 from bagfault.engine.merge import COPY_RANK, EVENT_RANK, TimeOrderedMerge
-from bagfault.engine.scheduler import Activation, FaultScheduler, seconds_to_ns
+from bagfault.engine.scheduler import FaultScheduler, seconds_to_ns
 from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.injectors.base import Injector, RawMessage

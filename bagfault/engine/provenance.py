@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from collections.abc import Sequence
     from pathlib import Path
 
-    from bagfault.engine.scheduler import Activation
+    from bagfault.engine.activation import Activation
     from bagfault.io.mcap_sink import McapSink
     from bagfault.io.sources import ReadMark
     from bagfault.spec.model import Scenario

@@ -17,14 +17,13 @@ Manual-only faults stay inactive until activated.
 from __future__ import annotations
 
 import heapq
-import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from bagfault.engine.activation import Activation
 from bagfault.events import FaultEvent
 from bagfault.faults.active import ActiveFault
 from bagfault.faults.rng import FaultRandom
-from bagfault.units import MAX_SECONDS, MS, NS
+from bagfault.units import MS, NS
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator, Sequence
@@ -37,32 +36,6 @@ if TYPE_CHECKING:
 def seconds_to_ns(seconds: float) -> int:
     """Seconds (float) to integer nanoseconds, rounded."""
     return round(seconds * NS)
-
-
-@dataclass(frozen=True)
-class Activation:
-    """A `--activate FAULT[@START[+DURATION]]` request (seconds)."""
-
-    fault_id: str
-    start: float = 0.0
-    duration: float | None = None
-
-    @classmethod
-    def parse(cls, text: str) -> Activation:
-        """Parse FAULT, FAULT@START or FAULT@START+DURATION."""
-        fault_id, _, when = text.partition('@')
-        if not fault_id:
-            raise ValueError(f'{text!r}: expected FAULT[@START[+DURATION]]')
-        start_text, plus, duration_text = when.partition('+')
-        try:
-            start = float(start_text) if start_text else 0.0
-            duration = float(duration_text) if plus else None
-        except ValueError:
-            raise ValueError(f'{text!r}: START and DURATION must be seconds, e.g. imu_bias@5+10') from None
-        for value in (start, duration):
-            if value is not None and not (math.isfinite(value) and 0 <= value <= MAX_SECONDS):
-                raise ValueError(f'{text!r}: times must be from 0 to {MAX_SECONDS:g} seconds')
-        return cls(fault_id, start, duration)
 
 
 def _ms(seconds: float) -> int:

@@ -37,7 +37,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel, normalize_msgtype
-from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, parse_summary, read_footer, read_metadata
+from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, read_metadata, read_summary
 from bagfault.io.rosbag2_record import distro_of
 
 if TYPE_CHECKING:
@@ -377,19 +377,11 @@ class McapSource:
         """The summary section (its CRC checked) and the metadata records its index points at; without a
         summary, the metadata records found by reading the file through."""
         try:
-            summary_start, crc = read_footer(self._file, self._size)
-            footer = self._size - 8 - FOOTER_LENGTH
-            self._data_end = summary_start or footer
-            if not summary_start:
+            summary_start, summary = read_summary(self._file, self._size)
+            self._data_end = summary_start or self._size - 8 - FOOTER_LENGTH
+            if summary is None:
                 self._file.seek(0)
                 return None, list(SeekingReader(self._file).iter_metadata())
-            if not 8 < summary_start <= footer:
-                raise Corrupt(f'the footer points the summary at offset {summary_start}, outside the file')
-            self._file.seek(summary_start)
-            covered = self._file.read(footer + FOOTER_LENGTH - 4 - summary_start)  # up to the footer's CRC
-            if crc and zlib.crc32(covered) != crc:
-                raise Corrupt(f'summary CRC mismatch (stored {crc:#010x}, computed {zlib.crc32(covered):#010x})')
-            summary = parse_summary(memoryview(covered)[: footer - summary_start])
             return summary, [read_metadata(self._file, index) for index in summary.metadata_indexes]
         except SummaryError as exc:
             raise Corrupt(str(exc)) from None

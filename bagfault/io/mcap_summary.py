@@ -11,6 +11,7 @@ on every file of the conformance set and the external bags.
 from __future__ import annotations
 
 import struct
+import zlib
 from typing import IO
 
 from mcap.records import Channel, ChunkIndex, Metadata, MetadataIndex, Schema, Statistics
@@ -146,6 +147,22 @@ def _parse(buf: memoryview) -> Summary:
             summary.metadata_indexes.append(MetadataIndex(offset=offset, length=record_length, name=fields.text()))
         pos = end
     return summary
+
+
+def read_summary(stream: IO[bytes], size: int) -> tuple[int, Summary | None]:
+    """(summary start, the summary section parsed, its CRC checked) of an MCAP file of `size` bytes; (0, None)
+    when the footer says it has none."""
+    summary_start, crc = read_footer(stream, size)
+    footer = size - 8 - FOOTER_LENGTH
+    if not summary_start:
+        return 0, None
+    if not 8 < summary_start <= footer:
+        raise SummaryError(f'the footer points the summary at offset {summary_start}, outside the file')
+    stream.seek(summary_start)
+    covered = stream.read(footer + FOOTER_LENGTH - 4 - summary_start)  # up to the footer's CRC
+    if crc and zlib.crc32(covered) != crc:
+        raise SummaryError(f'summary CRC mismatch (stored {crc:#010x}, computed {zlib.crc32(covered):#010x})')
+    return summary_start, parse_summary(memoryview(covered)[: footer - summary_start])
 
 
 def read_metadata(stream: IO[bytes], index: MetadataIndex) -> Metadata:

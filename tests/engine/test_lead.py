@@ -23,6 +23,7 @@ from bagfault import api
 from bagfault.cli import main
 from bagfault.demo.workloads import write_bag
 from bagfault.engine import offline
+from bagfault.engine.activation import Activation
 from bagfault.engine.lead import leading_pieces, start_lead
 from bagfault.io.leading_copy import Piece
 from bagfault.io.mcap_summary import FOOTER_LENGTH, parse_summary, read_footer
@@ -135,7 +136,7 @@ def test_a_follower_and_an_activation_count_from_their_leader_and_their_start(ba
     follower = IMU + '  - {id: later, injector_id: imu, after: {fault: first, delay: 0.1}}\n' \
                      '  - {id: first, injector_id: other, start: 0.8}\n'
     assert spans_until(bag, 0.79) <= sum(p.length for p in guess(bag, follower)) <= spans_until(bag, 0.8)
-    early = guess(bag, IMU, activations=[('bias', 0.6)])
+    early = guess(bag, IMU, activations=[Activation('bias', 0.6)])
     assert spans_until(bag, 0.59) <= sum(p.length for p in early) <= spans_until(bag, 0.6)
     assert sum(p.length for p in guess(bag, IMU, start_offset=1.0)) >= spans_until(bag, 2.49)
 

@@ -6,7 +6,8 @@ import textwrap
 
 import pytest
 
-from bagfault.engine.scheduler import Activation, FaultScheduler
+from bagfault.engine.activation import Activation
+from bagfault.engine.scheduler import FaultScheduler
 from bagfault.scenario import parse_scenario
 
 NS = 1_000_000_000
