@@ -27,7 +27,7 @@ from bagfault.io.channel import bag_name
 from bagfault.io.leading_copy import LeadingCopy, Piece
 from bagfault.io.mcap_sink import header_library
 from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, read_summary
-from bagfault.io.mcap_writer import MAGIC, record_bytes
+from bagfault.io.mcap_writer import MAGIC, padding_length, record_bytes
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -89,7 +89,7 @@ def leading_pieces(summary: Summary, document: object, start_offset: float,
             continue
         horizon = horizons.get(readers[0].id, math.inf) if readers else math.inf
         passing[channel_id] = origin + horizon * NS - MARGIN
-    pieces: list[Piece] = []
+    spans: list[tuple[int, int]] = []  # input bytes the writer copies as one span: (start, length)
     for chunk in chunks:
         if any(passing.get(cid, -math.inf) <= chunk.message_end_time for cid in chunk.message_index_offsets):
             break
@@ -97,11 +97,15 @@ def leading_pieces(summary: Summary, document: object, start_offset: float,
         if chunk.message_index_offsets and \
                 min(chunk.message_index_offsets.values()) != chunk.chunk_start_offset + chunk.chunk_length:
             break  # the writer copies a chunk and the message indexes right after it as one span
-        last = pieces[-1] if pieces else None
-        if last is not None and last.source + last.length == chunk.chunk_start_offset:
-            pieces[-1] = Piece(last.source, last.target, last.length + length)
+        if spans and sum(spans[-1]) == chunk.chunk_start_offset:
+            spans[-1] = (spans[-1][0], spans[-1][1] + length)
         else:
-            pieces.append(Piece(chunk.chunk_start_offset, last.target + last.length if last else offset, length))
+            spans.append((chunk.chunk_start_offset, length))
+    pieces: list[Piece] = []
+    for source, length in spans:  # one after the other, each after the padding the writer puts before it
+        offset += padding_length(offset, source, length)
+        pieces.append(Piece(source, offset, length))
+        offset += length
     return pieces
 
 

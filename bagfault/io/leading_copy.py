@@ -157,6 +157,10 @@ class LeadingCopy:
                 return min(length, piece.target + piece.length - at)
         return 0
 
+    def writes(self, at: int, length: int) -> bool:
+        """Whether this copy may write into output bytes [at, at + length) (where one of its pieces lies)."""
+        return any(p.target < at + length and at < p.target + p.length for p in self.pieces)
+
     def _is_input(self, fd: int) -> bool:
         same = self._same.get(fd)
         if same is None:

@@ -12,7 +12,10 @@ indexes, summary offsets) and is byte-identical from run to run. An
 input's chunks can be copied into it as they are, by a copy thread or ahead
 of the run by a leading copy (`io/leading_copy.py`); so that they can come
 right after the header and the input's own schemas and channels, new ones
-are written just before the writer's next record of its own.
+are written just before the writer's next record of its own. A run of
+copied chunks of ALIGN_FROM bytes or more is placed a multiple of ALIGN
+from where it is in the input, after a padding record (an application
+opcode every reader skips), where the kernel copies it as fast as `cp`.
 """
 
 from __future__ import annotations
@@ -62,6 +65,25 @@ PENDING_CHUNKS = 16
 SPAN_LIMIT = 64 << 20  # copied bytes handed to the copy thread at least this often
 COPIES_AHEAD = 2  # spans handed over and not yet copied: the writer reads the input at most ~128 MB ahead of the
 # copy, so what it (and the provenance hash that follows it) brought into the page cache is still there
+ALIGN = 64 << 10  # the kernel copies a span moved by a multiple of this as fast as `cp` (0.37 s for the 300 s bag),
+# one moved by any other amount a third slower (0.48-0.53 s; docs/notes/performance.md, Alignment)
+ALIGN_FROM = 1 << 20  # spans shorter than this are copied where they fall: a padding would cost more than it saves
+PADDING_OPCODE = 0xA1  # a record of zeros before an aligned span: an application opcode (0x80-0xFF), which every
+# reader skips (`mcap`, rosbags, the MCAP C++ reader of rosbag2 and the TypeScript one of Foxglove)
+
+
+def padding_length(at: int, source: int, length: int) -> int:
+    """Bytes of padding before `length` input bytes from `source` copied at output offset `at`, so that they land a
+    multiple of ALIGN from where they are: 0, or a whole record (its opcode and length, 9 bytes, at least)."""
+    if length < ALIGN_FROM:
+        return 0
+    gap = (source - at) % ALIGN
+    return gap + ALIGN if 0 < gap < 9 else gap
+
+
+def padding_record(length: int) -> bytes:
+    """A padding record `length` bytes long, opcode and length included."""
+    return struct.pack('<BQ', PADDING_OPCODE, length - 9) + bytes(length - 9)
 
 
 def record_bytes(record: object) -> bytes:
@@ -111,6 +133,17 @@ class _OpenChunk:
         self.start = 0
         self.end = 0
         self.indexes: dict[int, list[tuple[int, int]]] = {}
+
+
+class _Span:
+    """Copied bytes not yet handed to the copy thread: input [begin, end) of `fd`, placed at output offset `at`
+    (before any padding), and the chunk index fields of its chunks, packed once its place is final."""
+
+    __slots__ = ('at', 'begin', 'end', 'fd', 'indexes')
+
+    def __init__(self, fd: int, begin: int, at: int) -> None:
+        self.fd, self.begin, self.end, self.at = fd, begin, begin, at
+        self.indexes: list[tuple[CopiedChunk, int]] = []  # each chunk, and its offset from `at`
 
 
 @dataclass(frozen=True)
@@ -163,7 +196,7 @@ class McapWriter:
         self._next_schema = 1
         self._next_channel = 1
         self._in_kernel = IN_KERNEL
-        self._span: list[int] | None = None  # [fd, start, end, output offset]: copied bytes not yet handed over
+        self._span: _Span | None = None
         self._copier = ThreadPoolExecutor(max_workers=1, thread_name_prefix='mcap-copy')
         self._copies: deque[Future[None]] = deque()
         self._stream.write(MAGIC)
@@ -184,7 +217,7 @@ class McapWriter:
         """Bytes of the writer's own at the current offset; a leading copy whose range they fall in is stopped
         first (once it has copied what was taken from it), so it never writes over them."""
         lead = self._lead
-        if lead is not None and self._offset < lead.end and self._offset + len(data) > lead.start:
+        if lead is not None and lead.writes(self._offset, len(data)):
             self._end_lead()
         self._stream.write(data)
         self._offset += len(data)
@@ -331,21 +364,15 @@ class McapWriter:
         return False
 
     def _write_copied(self, chunk: CopiedChunk) -> None:
-        """The chunk record and its message indexes byte for byte; the chunk index pointing at them here. The
-        bytes of consecutive copied chunks are copied in one call when something else is written next."""
-        start = self._offset
-        size = chunk.length + chunk.index_length
+        """The chunk record and its message indexes byte for byte; the chunk index pointing at them. The bytes
+        of consecutive copied chunks are copied in one call when something else is written next."""
         span = self._span
-        if span is not None and span[0] == chunk.fd and span[2] == chunk.offset:
-            span[2] += size
-        else:
+        if span is None or span.fd != chunk.fd or span.end != chunk.offset:
             self._settle()
-            span = self._span = [chunk.fd, chunk.offset, chunk.offset + size, start]
-        if span[2] - span[1] >= SPAN_LIMIT:
-            self._settle()
-        self._offset += size
-        index_start = start + chunk.length
-        offsets = {cid: index_start + relative for cid, relative in sorted(chunk.index_offsets.items())}
+            span = self._span = _Span(chunk.fd, chunk.offset, self._offset)
+        span.indexes.append((chunk, span.end - span.begin))
+        span.end += chunk.length + chunk.index_length
+        self._offset += chunk.length + chunk.index_length
         for channel_id, count in chunk.counts.items():
             self._counts[channel_id] = self._counts.get(channel_id, 0) + count
         count = sum(chunk.counts.values())
@@ -355,17 +382,32 @@ class McapWriter:
             else:
                 self._start, self._end = min(self._start, chunk.start), max(self._end, chunk.end)
         self._message_count += count
-        self._chunk_indexes.append(chunk_index_record(
-            chunk.start, chunk.end, start, chunk.length, offsets, chunk.index_length, chunk.compression,
-            chunk.compressed_size, chunk.uncompressed_size))
+        if span.end - span.begin >= max(SPAN_LIMIT, ALIGN_FROM):  # the padding sees a run of ALIGN_FROM whole
+            self._settle()
 
     def _settle(self) -> None:
         """Hand the input bytes owed by copied chunks to the copy thread, which writes them at their place
-        in the file (os.copy_file_range with explicit offsets) while this thread writes on after them."""
+        in the file (os.copy_file_range with explicit offsets) while this thread writes on after them. A long
+        span is placed a multiple of ALIGN from where it is in the input, after a padding record."""
         span, self._span = self._span, None
         if span is None:
             return
-        fd, begin, end, at = span
+        fd, begin, end = span.fd, span.begin, span.end
+        pad = padding_length(span.at, begin, end - begin)
+        at = span.at + pad
+        self._offset += pad
+        for chunk, relative in span.indexes:
+            start = at + relative
+            index_start = start + chunk.length
+            offsets = {cid: index_start + offset for cid, offset in sorted(chunk.index_offsets.items())}
+            self._chunk_indexes.append(chunk_index_record(
+                chunk.start, chunk.end, start, chunk.length, offsets, chunk.index_length, chunk.compression,
+                chunk.compressed_size, chunk.uncompressed_size))
+        lead = self._lead
+        if pad:  # the stream stands at the span's first offset: nothing was written since
+            if lead is not None and lead.writes(span.at, pad):
+                self._end_lead()
+            self._stream.write(padding_record(pad))
         self._stream.flush()
         self._stream.seek(at + end - begin)
         lead = self._lead
@@ -374,7 +416,7 @@ class McapWriter:
             if taken:
                 self._lead_taken = at + taken
                 begin, at = begin + taken, at + taken
-            if begin < end and at < lead.end and at + end - begin > lead.start:
+            if begin < end and lead.writes(at, end - begin):
                 self._end_lead()
         if begin == end:
             return
@@ -396,8 +438,7 @@ class McapWriter:
 
     def _write_chunk(self, chunk: _OpenChunk, compressed: bytes, crc: int, size: int) -> None:
         self._write_deferred()
-        start = self._offset
-        self._record(Chunk(message_start_time=chunk.start, message_end_time=chunk.end, uncompressed_size=size,
+        start = self._record(Chunk(message_start_time=chunk.start, message_end_time=chunk.end, uncompressed_size=size,
                            uncompressed_crc=crc, compression=self._compression, data=compressed))
         chunk_length = self._offset - start
         index_start = self._offset

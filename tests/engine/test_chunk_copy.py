@@ -10,15 +10,18 @@ input's chunk index, independently of the code under test.
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 from typing import Any
 
 import pytest
 from mcap.reader import make_reader
-from mcap.records import Chunk
+from mcap.records import Channel, Chunk, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
+from support.foxglove import foxglove_reads
+from support.toolchain import converted
 
 from bagfault import api
 from bagfault.cli import main
@@ -227,20 +230,27 @@ def test_inputs_outside_the_fast_path_take_the_reference_path(bags: dict[str, Pa
 def test_copied_chunks_handed_over_in_any_span_give_the_same_file(bags: dict[str, Path], tmp_path: Path,
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     """Consecutive copied chunks go to the copy thread as one span (at most SPAN_LIMIT bytes): one chunk per
-    span and the whole file in one span write the same bytes, around the window's rewritten chunks too."""
+    span and the whole file in one span write the same bytes, around the window's rewritten chunks too; also
+    where no span is aligned and where every span is (ALIGN_FROM 1 byte: after a padding record, so placed
+    where it would be as one span)."""
     from bagfault.io import mcap_writer
 
     loaded = parse_scenario(IMU_WINDOW)
     outputs = []
-    for limit in (1, 1 << 40):
-        monkeypatch.setattr(mcap_writer, 'SPAN_LIMIT', limit)
-        out = tmp_path / f'span-{limit}.mcap'
-        result = api.run(loaded, [bags['sensor-heavy']], out, seed=4)
-        assert 0 < result.stats.chunks_copied < result.stats.chunks
-        outputs.append(out.read_bytes())
+    for align_from in (1 << 62, 1):
+        monkeypatch.setattr(mcap_writer, 'ALIGN_FROM', align_from)
+        for limit in (1, 1 << 40):
+            monkeypatch.setattr(mcap_writer, 'SPAN_LIMIT', limit)
+            out = tmp_path / f'span-{limit}-{align_from}.mcap'
+            result = api.run(loaded, [bags['sensor-heavy']], out, seed=4)
+            assert 0 < result.stats.chunks_copied < result.stats.chunks
+            outputs.append(out.read_bytes())
     assert outputs[0] == outputs[1]
+    assert outputs[2] == outputs[3]
+    assert outputs[2] != outputs[0]  # the spans moved
     api.run(loaded, [bags['sensor-heavy']], tmp_path / 'reference.mcap', seed=4, chunk_copy=False)
-    assert streams(tmp_path / 'span-1.mcap') == streams(tmp_path / 'reference.mcap')
+    for name in ('span-1-1.mcap', f'span-1-{1 << 62}.mcap'):
+        assert streams(tmp_path / name) == streams(tmp_path / 'reference.mcap')
 
 
 def test_chunk_index_records_are_packed_as_the_library_packs_them() -> None:
@@ -283,3 +293,79 @@ def test_a_copy_that_cannot_be_written_leaves_nothing(bags: dict[str, Path], tmp
     assert done.returncode == 2, done.stderr
     assert done.stderr.strip().splitlines() == [f'bagfault: error: {out}: cannot write: File too large']
     assert list(out.parent.iterdir()) == []
+
+
+def chunks(path: Path) -> list[Any]:
+    """The chunk indexes in file order (mcap library)."""
+    with path.open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+
+
+def top_level_records(data: bytes) -> list[tuple[int, int, int]]:
+    """(offset, opcode, whole length) of every record from the header to the footer, walked by the MCAP
+    specification (opcode u8, length u64)."""
+    out, position = [], 8
+    while True:
+        opcode, length = struct.unpack_from('<BQ', data, position)
+        out.append((position, opcode, 9 + length))
+        if opcode == 0x02:
+            return out
+        position += 9 + length
+
+
+@pytest.mark.parametrize('text', [IMU_WINDOW.replace('start: 1.0', 'start: 100.0'), IMU_WINDOW])
+def test_long_copied_runs_sit_64_kib_from_their_input_place_after_a_record_every_reader_skips(
+        bags: dict[str, Path], tmp_path: Path, text: str) -> None:
+    """A kernel copy that moves bytes by a multiple of 64 KiB runs at `cp`'s speed (docs/notes/performance.md):
+    every run of copied chunks of 1 MiB or more lands so, after a record of zeros of an application opcode;
+    the mcap library (indexed and reading through), rosbags, rosbags-convert, Foxglove's MCAP library (both
+    ways) and bagfault itself read every message as the input holds it."""
+    bag = bags['sensor-heavy']
+    out = tmp_path / 'out.mcap'
+    api.run(parse_scenario(text), [bag], out, seed=4)
+    data, written = bag.read_bytes(), out.read_bytes()
+    inputs = {(c.message_start_time, c.compressed_size): c for c in chunks(bag)}
+    runs: list[list[int]] = []  # [input offset, output offset, length] of chunks copied one after another
+    for chunk in chunks(out):
+        source = inputs.get((chunk.message_start_time, chunk.compressed_size))
+        size = chunk.chunk_length + chunk.message_index_length
+        if source is None or data[source.chunk_start_offset:][:size] != written[chunk.chunk_start_offset:][:size]:
+            continue
+        last = runs[-1] if runs else None
+        if last and last[0] + last[2] == source.chunk_start_offset and last[1] + last[2] == chunk.chunk_start_offset:
+            last[2] += size
+        else:
+            runs.append([source.chunk_start_offset, chunk.chunk_start_offset, size])
+    long_runs = [r for r in runs if r[2] >= 1 << 20]
+    assert long_runs and len(long_runs) == (1 if 'start: 100' in text else 2)
+    assert all((target - source) % 65536 == 0 for source, target, _ in long_runs)
+    records = top_level_records(written)
+    unknown = [(position, length) for position, opcode, length in records if opcode not in range(0x01, 0x10)]
+    assert {opcode for _, opcode, _ in records} - set(range(0x01, 0x10)) == {0xA1}
+    assert {position + length for position, length in unknown} <= {target for _, target, _ in long_runs}
+    assert all(written[position + 9:position + length] == bytes(length - 9) for position, length in unknown)
+    expected = streams(bag)
+    if 'start: 100' in text:
+        assert streams(out) == expected
+    linear: dict[str, int] = {}
+    with out.open('rb') as stream:
+        channels = {}
+        for record in StreamReader(stream, skip_magic=False).records:
+            if isinstance(record, Channel):
+                channels[record.id] = record.topic
+            if isinstance(record, Message):
+                linear[channels[record.channel_id]] = linear.get(channels[record.channel_id], 0) + 1
+    assert linear == {topic: len(found) for topic, found in streams(out).items()}
+    assert {t: n for t, n in linear.items() if not t.startswith('/fault_injection')} == \
+        {topic: len(found) for topic, found in expected.items()}
+    assert rosbags_count(out) == sum(linear.values())
+    assert converted(out, tmp_path) == linear
+    foxglove = foxglove_reads(out)
+    assert foxglove['indexed'] == foxglove['stream']['counts'] == linear
+    assert foxglove['stream']['done'] and foxglove['stream']['unknown'] == [0xA1] * len(unknown)
+    again = tmp_path / 'again.mcap'  # bagfault reads its own output (its records walked, the padding skipped)
+    result = api.run(parse_scenario(IMU_WINDOW.replace('start: 1.0', 'start: 100.0')), [out], again, seed=4)
+    assert result.stats.chunks_copied > 0
+    assert streams(again) == streams(out)

@@ -1,4 +1,5 @@
-"""The ROS toolchain's view of an output: rosbag2's rules (rosbag2_rules), rosbags' AnyReader, `rosbags-convert`."""
+"""The toolchain's view of an output: rosbag2's rules (rosbag2_rules), rosbags' AnyReader, `rosbags-convert`,
+Foxglove's MCAP library (support.foxglove)."""
 
 from __future__ import annotations
 
@@ -15,9 +16,11 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
+from support.foxglove import foxglove_reads
 from support.helpers import counts
 from support.rosbag2_rules import DISTROS, check_mcap, decode_qos
 
+PADDING = 0xA1  # bagfault's padding record before an aligned run of copied chunks (docs/modes/run.md)
 NINE_KEYS = {'history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan', 'liveliness',
              'liveliness_lease_duration', 'avoid_ros_namespace_conventions'}
 
@@ -82,4 +85,7 @@ def assert_toolchain_opens(path: Path, tmp_path: Path, *, distro: str | None = N
     undefined = {c.topic for c in summary.channels.values() if not summary.schemas[c.schema_id].data}
     assert converted(path, tmp_path, undecodable) == Counter(
         {t: n for t, n in found.items() if n and t not in undefined and t not in undecodable})
+    foxglove = foxglove_reads(path)
+    assert foxglove['indexed'] == foxglove['stream']['counts'] == {t: n for t, n in found.items() if n}
+    assert foxglove['stream']['done'] and set(foxglove['stream']['unknown']) <= {PADDING}
     return info
