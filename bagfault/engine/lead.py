@@ -6,7 +6,8 @@ no numpy, no rosbags, no scenario loader). It mirrors what chunk copy and
 routing will decide (`engine/chunk_copy.py`, `engine/routing.py`) on the
 cheap and on the safe side: a chunk is guessed copied when it ends before
 any fault of its topics' injectors can start, and no assertion, fault manager
-or injector that rewrites its topics names them. A wrong guess costs the
+or injector that rewrites its topics names them; a long run of them lands
+where the writer puts it, after its alignment padding. A wrong guess costs the
 copy's time only: the writer takes nothing from a leading copy that is not
 byte for byte what it would have written (`io/leading_copy.py`).
 """
