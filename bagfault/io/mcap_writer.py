@@ -438,8 +438,9 @@ class McapWriter:
 
     def _write_chunk(self, chunk: _OpenChunk, compressed: bytes, crc: int, size: int) -> None:
         self._write_deferred()
-        start = self._record(Chunk(message_start_time=chunk.start, message_end_time=chunk.end, uncompressed_size=size,
-                           uncompressed_crc=crc, compression=self._compression, data=compressed))
+        start = self._record(Chunk(message_start_time=chunk.start, message_end_time=chunk.end,
+                                   uncompressed_size=size, uncompressed_crc=crc, compression=self._compression,
+                                   data=compressed))
         chunk_length = self._offset - start
         index_start = self._offset
         offsets = {}
