@@ -14,6 +14,7 @@ import struct
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message
@@ -21,6 +22,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
 from support.foxglove import foxglove_reads
+from support.helpers import rosbags_counts
 from support.toolchain import converted
 
 from bagfault import api
@@ -369,3 +371,56 @@ def test_long_copied_runs_sit_64_kib_from_their_input_place_after_a_record_every
     result = api.run(parse_scenario(IMU_WINDOW.replace('start: 1.0', 'start: 100.0')), [out], again, seed=4)
     assert result.stats.chunks_copied > 0
     assert streams(again) == streams(out)
+
+
+@pytest.fixture(scope='module')
+def rosbags_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A rosbag2 MCAP bag written by rosbags (its own chunking: 1 MiB uncompressed chunks, message indexes)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    types = store.types
+    folder = tmp_path_factory.mktemp('rosbags') / 'bag'
+    with Writer(folder, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        imu = writer.add_connection('/imu', 'sensor_msgs/msg/Imu', typestore=store)
+        camera = writer.add_connection('/camera', 'sensor_msgs/msg/Image', typestore=store)
+        for i in range(2000):
+            t = 10**9 + i * 5_000_000
+            header = types['std_msgs/msg/Header'](stamp=types['builtin_interfaces/msg/Time'](sec=t // 10**9,
+                                                                                              nanosec=t % 10**9),
+                                                  frame_id='imu')
+            vector = types['geometry_msgs/msg/Vector3']
+            message = types['sensor_msgs/msg/Imu'](
+                header=header, orientation=types['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=np.zeros(9), angular_velocity=vector(x=0.0, y=0.0, z=0.01 * i),
+                angular_velocity_covariance=np.zeros(9), linear_acceleration=vector(x=0.0, y=0.0, z=9.8),
+                linear_acceleration_covariance=np.zeros(9))
+            writer.write(imu, t, store.serialize_cdr(message, 'sensor_msgs/msg/Imu'))
+            if i % 20 == 0:
+                pixels = np.random.default_rng(i).integers(0, 255, 160 * 120, dtype=np.uint8)
+                image = types['sensor_msgs/msg/Image'](header=header, height=120, width=160, encoding='mono8',
+                                                        is_bigendian=0, step=160, data=pixels)
+                writer.write(camera, t, store.serialize_cdr(image, 'sensor_msgs/msg/Image'))
+    return folder / 'bag.mcap'
+
+
+def test_a_bag_rosbags_wrote_comes_out_aligned_and_every_reader_reads_it(rosbags_bag: Path, tmp_path: Path) -> None:
+    """rosbags' own chunking (1 MiB chunks, not bagfault's): with no fault due, every chunk is copied, each a
+    multiple of 64 KiB from its input place after one padding record; rosbags, the mcap library and
+    Foxglove's read the 2000 IMU and 100 image messages rosbags wrote."""
+    out = tmp_path / 'out.mcap'
+    result = api.run(parse_scenario(IMU_WINDOW.replace('start: 1.0', 'start: 100.0')), [rosbags_bag], out, seed=4)
+    found = chunks(rosbags_bag)
+    assert len(found) >= 3 and result.stats.chunks_copied == len(found)
+    data, written = rosbags_bag.read_bytes(), out.read_bytes()
+    for source, target in zip(found, chunks(out), strict=True):
+        size = source.chunk_length + source.message_index_length
+        assert data[source.chunk_start_offset:][:size] == written[target.chunk_start_offset:][:size]
+        assert (target.chunk_start_offset - source.chunk_start_offset) % 65536 == 0
+    assert [op for _, op, _ in top_level_records(written) if op >= 0x80] == [0xA1]
+    expected = {'/imu': 2000, '/camera': 100}
+    assert dict(rosbags_counts(out)) == expected
+    assert {topic: len(found) for topic, found in streams(out).items()} == expected
+    foxglove = foxglove_reads(out)
+    assert foxglove['indexed'] == foxglove['stream']['counts'] == expected
