@@ -12,6 +12,10 @@ A file written within a second of being hashed is not kept, as git treats a
 (ext4 stamps ctime from a clock that ticks every few milliseconds) would keep
 the stat key while changing the bytes. Nothing here is needed: a cache that
 cannot be read or written is a cache miss.
+
+The folder keeps at most `KEPT` digests: a file version that is gone (a bag
+deleted or rewritten) is never asked for again, so keeping a digest past
+`KEPT` lets the least recently used go (a recall marks its digest used).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 SETTLED_NS = 1_000_000_000  # a file unchanged this long before it was hashed cannot change within its ctime tick
 HEX = re.compile(r'[0-9a-f]{64}')
+KEPT = 20_000  # digests kept (a 4 KB block each); past it, the least recently used go down to 90 % of it
 
 
 def root() -> Path:
@@ -46,11 +51,16 @@ def _name(key: StatKey) -> str:
 
 def recall(key: StatKey) -> str | None:
     """The digest kept for this version of a file, or None."""
+    path = root() / _name(key)
     try:
-        text = (root() / _name(key)).read_text(encoding='ascii').strip()
+        text = path.read_text(encoding='ascii').strip()
     except (OSError, UnicodeDecodeError):
         return None
-    return text if HEX.fullmatch(text) else None
+    if not HEX.fullmatch(text):
+        return None
+    with contextlib.suppress(OSError):
+        os.utime(path)  # used now: the last to go
+    return text
 
 
 def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
@@ -67,6 +77,7 @@ def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
             out.write(digest)
         os.replace(staging, folder / _name(key))
         staging = None
+        _prune(folder)
     except OSError as exc:
         log.debug('input digest not kept in %s: %s', folder, exc)
         return False
@@ -75,3 +86,15 @@ def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
             with contextlib.suppress(OSError):
                 os.unlink(staging)
     return True
+
+
+def _prune(folder: Path) -> None:
+    """Past KEPT digests, the least recently used go, down to 90 % of KEPT (so not at every keep)."""
+    with os.scandir(folder) as entries:
+        kept = [(entry.stat().st_mtime_ns, entry.name) for entry in entries if not entry.name.startswith('.')]
+    if len(kept) <= KEPT:
+        return
+    kept.sort()
+    for _, name in kept[:len(kept) - KEPT * 9 // 10]:
+        with contextlib.suppress(OSError):
+            os.unlink(folder / name)

@@ -95,3 +95,19 @@ def test_two_runs_write_the_same_bytes_the_second_without_hashing(cache: Path, t
     with (tmp_path / 'second.mcap').open('rb') as stream:
         [meta] = [m for m in make_reader(stream).iter_metadata() if m.name == 'bagfault']
     assert json.loads(meta.metadata['inputs'])[0]['files'][0]['blake3'] == b3(BAG)
+
+
+def test_past_the_limit_the_least_recently_used_digests_go(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """KEPT 10: the eleventh digest kept prunes down to 9, oldest use first; a recall counts as a use."""
+    monkeypatch.setattr(digests, 'KEPT', 10)
+    long_ago = time.time_ns() - 10 * digests.SETTLED_NS
+    keys = [(1, inode, 100, long_ago, long_ago) for inode in range(11)]
+    for age, key in enumerate(keys[:10]):
+        assert digests.keep(key, f'{age:064x}', time.time_ns())
+        path = cache / '-'.join(map(str, key))
+        os.utime(path, ns=(long_ago + age * 1000, long_ago + age * 1000))  # used in the order kept
+    assert digests.recall(keys[0]) == f'{0:064x}'  # the oldest, used again now
+    assert digests.keep(keys[10], f'{10:064x}', time.time_ns())
+    left = sorted(int(p.name.split('-')[1]) for p in cache.iterdir())
+    assert left == [0, 3, 4, 5, 6, 7, 8, 9, 10]  # 11 kept, 2 over 90 % of 10: the two least recently used
+    assert digests.recall(keys[1]) is None and digests.recall(keys[3]) == f'{3:064x}'
