@@ -26,6 +26,7 @@ import argparse
 import json
 import os
 import platform
+import random
 import resource
 import statistics
 import subprocess
@@ -106,8 +107,10 @@ subprocess.run(['cp', SRC, DST], check=True)
 
 # `bagfault run` as a user types it: its leading copy starts before the heavy imports (bagfault/engine/lead.py)
 CLI = """
+import sys
 from bagfault.cli import main
-main(['run', SCENARIO_FILE, SRC, '-o', DST])
+sys.argv = ['bagfault', 'run', SCENARIO_FILE, SRC, '-o', DST]
+main()  # as the console script calls it
 """
 
 # The kernel copying the input's chunks moved by SHIFT bytes (64 MB copy_file_range calls, as bagfault does): on
@@ -268,15 +271,19 @@ def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[st
     subprocess.run([sys.executable, '-c', 'import sys; from pathlib import Path; from bagfault.io.sources import '
                     'digests_of; digests_of(Path(sys.argv[1]))', str(bag)], check=True, env=JOB_ENV)  # kept, as
     # after a first run: the jobs that are not "first run" recall it (a new bag would make the first of them hash)
+    order = random.Random(29)  # each round in its own order: no job always follows the same one
     for _ in range(repeat):
-        for name, (code, values, env) in jobs.items():
+        for name in order.sample(list(jobs), len(jobs)):
+            code, values, env = jobs[name]
             samples[name].append(run_job(code, env, SRC=str(bag), DST=str(out), **values))
             reads[name].append(READS[-1])
             out.unlink(missing_ok=True)
     cp = statistics.median(t for t, _, _ in samples['cp'])
     cp_cpu = statistics.median(c for _, _, c in samples['cp'])
+    cp_best = min(t for t, _, _ in samples['cp'])  # this machine's copies are bimodal: the fast runs compared too
     results = {name: {'seconds': statistics.median(t for t, _, _ in runs), 'runs': [t for t, _, _ in runs],
                       'vs_cp': statistics.median(t for t, _, _ in runs) / cp,
+                      'best_vs_cp': min(t for t, _, _ in runs) / cp_best,
                       'cpu_seconds': statistics.median(c for _, _, c in runs),
                       'cpu_vs_cp': statistics.median(c for _, _, c in runs) / cp_cpu,
                       'read_from_device_gb': statistics.median(reads[name]) / 1e9,
@@ -289,10 +296,12 @@ def copy_table(block: dict) -> str:
     """Printable table of the chunk copy block."""
     lines = [f'chunk copy: {block["bag"]} ({block["bytes"] / 1e6:.0f} MB)',
              f'  load {block["load_before"]:.1f}, cold cache {block["cold"]}, page cache {block["page_cache_gb"]} GB',
-             f'  {"job":<32}{"median s":>10}{"x cp":>8}{"CPU s":>8}{"CPU x cp":>9}{"RSS MB":>8}{"read GB":>9}']
+             f'  {"job":<40}{"median s":>10}{"x cp":>8}{"best x cp":>10}{"CPU s":>8}{"CPU x cp":>9}{"RSS MB":>8}'
+             f'{"read GB":>9}']
     for name, entry in block['results'].items():
-        lines.append(f'  {name:<32}{entry["seconds"]:>10.2f}{entry["vs_cp"]:>8.2f}{entry["cpu_seconds"]:>8.2f}'
-                     f'{entry["cpu_vs_cp"]:>9.2f}{entry["peak_rss_mb"]:>8.0f}{entry["read_from_device_gb"]:>9.2f}')
+        lines.append(f'  {name:<40}{entry["seconds"]:>10.2f}{entry["vs_cp"]:>8.2f}{entry["best_vs_cp"]:>10.2f}'
+                     f'{entry["cpu_seconds"]:>8.2f}{entry["cpu_vs_cp"]:>9.2f}{entry["peak_rss_mb"]:>8.0f}'
+                     f'{entry["read_from_device_gb"]:>9.2f}')
     return '\n'.join(lines)
 
 

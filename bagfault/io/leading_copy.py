@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from bagfault.io.file_copy import copy_range
-from bagfault.io.mcap_sink import open_partial
+from bagfault.io.outputs import open_partial
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence

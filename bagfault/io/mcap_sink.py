@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import os
 import struct
-import tempfile
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,10 +23,10 @@ import yaml
 from mcap.records import Channel as McapChannel
 from mcap.records import Schema as McapSchema
 
-from bagfault import __version__
 from bagfault.errors import OutputError
+from bagfault.io.mcap_layout import header_library
 from bagfault.io.mcap_writer import LEVELS, CopiedChunk, McapWriter
-from bagfault.io.outputs import PUBLISHED, current_umask
+from bagfault.io.outputs import PUBLISHED, open_partial
 from bagfault.io.qos import DEFAULT_QOS, normalized
 
 if TYPE_CHECKING:
@@ -47,26 +46,6 @@ def check_level(path: Path, compression: str, level: int) -> None:
     low, high = LEVELS[compression]
     if not low <= level <= high:
         raise OutputError(f'{path}: {compression} compression level {level} is outside {low}..{high}')
-
-
-def open_partial(path: Path) -> tuple[int, Path]:
-    """A new file beside `path` for its output to grow in (descriptor, name), with the usual permissions."""
-    directory = path.parent if str(path.parent) else Path('.')
-    if path.is_dir():
-        raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
-    if not directory.is_dir():
-        raise OutputError(f'{path}: directory {directory} does not exist')
-    try:
-        handle, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=directory)
-    except OSError as exc:
-        raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
-    os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
-    return handle, Path(tmp)
-
-
-def header_library() -> str:
-    """What an output's header names as its writer."""
-    return f'bagfault {__version__}'
 
 
 class McapSink:

@@ -13,9 +13,9 @@ input's chunks can be copied into it as they are, by a copy thread or ahead
 of the run by a leading copy (`io/leading_copy.py`); so that they can come
 right after the header and the input's own schemas and channels, new ones
 are written just before the writer's next record of its own. A run of
-copied chunks of ALIGN_FROM bytes or more is placed a multiple of ALIGN
-from where it is in the input, after a padding record (an application
-opcode every reader skips), where the kernel copies it as fast as `cp`.
+copied chunks of 1 MiB or more is placed a multiple of 64 KiB from where it
+is in the input, after a padding record (an application opcode every reader
+skips), where the kernel copies it as fast as `cp` (`io/mcap_layout.py`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ from typing import IO, TYPE_CHECKING
 
 import lz4.frame
 import zstandard
-from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
     Attachment,
@@ -48,12 +47,13 @@ from mcap.records import (
     SummaryOffset,
 )
 
+from bagfault.io import mcap_layout
 from bagfault.io.file_copy import IN_KERNEL, copy_range
+from bagfault.io.mcap_layout import MAGIC, padding_length, padding_record, record_bytes
 
 if TYPE_CHECKING:
     from bagfault.io.leading_copy import LeadingCopy
 
-MAGIC = b'\x89MCAP0\r\n'
 _MESSAGE_HEAD = struct.Struct('<BQHIQQ')
 _MESSAGE_HEAD_SIZE = 2 + 4 + 8 + 8
 _INDEX_HEAD = struct.Struct('<BQHI')
@@ -65,35 +65,6 @@ PENDING_CHUNKS = 16
 SPAN_LIMIT = 64 << 20  # copied bytes handed to the copy thread at least this often
 COPIES_AHEAD = 2  # spans handed over and not yet copied: the writer reads the input at most ~128 MB ahead of the
 # copy, so what it (and the provenance hash that follows it) brought into the page cache is still there
-ALIGN = 64 << 10  # the kernel copies a span moved by a multiple of this as fast as `cp` (0.37 s for the 300 s bag),
-# one moved by any other amount a third slower (0.48-0.53 s; docs/notes/performance.md, Alignment)
-ALIGN_FROM = 1 << 20  # spans shorter than this are copied where they fall: a padding would cost more than it saves
-PADDING_OPCODE = 0xA1  # a record of zeros before an aligned span: an application opcode (0x80-0xFF), which every
-# reader skips (`mcap`, rosbags, the MCAP C++ reader of rosbag2 and the TypeScript one of Foxglove)
-
-
-def padding_length(at: int, source: int, length: int) -> int:
-    """Bytes of padding before `length` input bytes from `source` copied at output offset `at`, so that they land a
-    multiple of ALIGN from where they are: 0, or a whole record (its opcode and length, 9 bytes, at least)."""
-    if length < ALIGN_FROM:
-        return 0
-    gap = (source - at) % ALIGN
-    return gap + ALIGN if 0 < gap < 9 else gap
-
-
-def padding_record(length: int) -> bytes:
-    """A padding record `length` bytes long, opcode and length included."""
-    return struct.pack('<BQ', PADDING_OPCODE, length - 9) + bytes(length - 9)
-
-
-def record_bytes(record: object) -> bytes:
-    """One record as the file holds it (opcode, length, fields), packed by the `mcap` library."""
-    builder = RecordBuilder()
-    record.write(builder)  # type: ignore[attr-defined]
-    data: bytes = builder.end()  # type: ignore[no-untyped-call]
-    return data
-
-
 def chunk_index_record(start: int, end: int, offset: int, length: int, index_offsets: dict[int, int],
                        index_length: int, compression: str, compressed_size: int, uncompressed_size: int) -> bytes:
     """A chunk index record, packed as the `mcap` library's ChunkIndex.write packs it (ten times faster: the
@@ -382,13 +353,13 @@ class McapWriter:
             else:
                 self._start, self._end = min(self._start, chunk.start), max(self._end, chunk.end)
         self._message_count += count
-        if span.end - span.begin >= max(SPAN_LIMIT, ALIGN_FROM):  # the padding sees a run of ALIGN_FROM whole
+        if span.end - span.begin >= max(SPAN_LIMIT, mcap_layout.ALIGN_FROM):  # the padding sees ALIGN_FROM whole
             self._settle()
 
     def _settle(self) -> None:
         """Hand the input bytes owed by copied chunks to the copy thread, which writes them at their place
         in the file (os.copy_file_range with explicit offsets) while this thread writes on after them. A long
-        span is placed a multiple of ALIGN from where it is in the input, after a padding record."""
+        span is placed a multiple of mcap_layout.ALIGN from where it is in the input, after a padding record."""
         span, self._span = self._span, None
         if span is None:
             return

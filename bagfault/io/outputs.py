@@ -203,3 +203,18 @@ def _mcap_library(head: bytes) -> bytes:
         return b''
     library_length = int.from_bytes(head[at:at + 4], 'little')
     return head[at + 4:at + 4 + library_length]
+
+
+def open_partial(path: Path) -> tuple[int, Path]:
+    """A new file beside `path` for its output to grow in (descriptor, name), with the usual permissions."""
+    directory = path.parent if str(path.parent) else Path('.')
+    if path.is_dir():
+        raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
+    if not directory.is_dir():
+        raise OutputError(f'{path}: directory {directory} does not exist')
+    try:
+        handle, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=directory)
+    except OSError as exc:
+        raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
+    os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
+    return handle, Path(tmp)

@@ -235,12 +235,12 @@ def test_copied_chunks_handed_over_in_any_span_give_the_same_file(bags: dict[str
     span and the whole file in one span write the same bytes, around the window's rewritten chunks too; also
     where no span is aligned and where every span is (ALIGN_FROM 1 byte: after a padding record, so placed
     where it would be as one span)."""
-    from bagfault.io import mcap_writer
+    from bagfault.io import mcap_layout, mcap_writer
 
     loaded = parse_scenario(IMU_WINDOW)
     outputs = []
     for align_from in (1 << 62, 1):
-        monkeypatch.setattr(mcap_writer, 'ALIGN_FROM', align_from)
+        monkeypatch.setattr(mcap_layout, 'ALIGN_FROM', align_from)
         for limit in (1, 1 << 40):
             monkeypatch.setattr(mcap_writer, 'SPAN_LIMIT', limit)
             out = tmp_path / f'span-{limit}-{align_from}.mcap'
