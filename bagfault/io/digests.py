@@ -77,7 +77,6 @@ def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
             out.write(digest)
         os.replace(staging, folder / _name(key))
         staging = None
-        _prune(folder)
     except OSError as exc:
         log.debug('input digest not kept in %s: %s', folder, exc)
         return False
@@ -85,13 +84,19 @@ def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
         if staging is not None:
             with contextlib.suppress(OSError):
                 os.unlink(staging)
+    with contextlib.suppress(OSError):  # kept either way
+        _prune(folder)
     return True
 
 
 def _prune(folder: Path) -> None:
     """Past KEPT digests, the least recently used go, down to 90 % of KEPT (so not at every keep)."""
+    kept = []
     with os.scandir(folder) as entries:
-        kept = [(entry.stat().st_mtime_ns, entry.name) for entry in entries if not entry.name.startswith('.')]
+        for entry in entries:
+            if not entry.name.startswith('.'):
+                with contextlib.suppress(OSError):  # gone meanwhile: another run pruned it
+                    kept.append((entry.stat().st_mtime_ns, entry.name))
     if len(kept) <= KEPT:
         return
     kept.sort()

@@ -4,6 +4,7 @@ bytes."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -111,3 +112,24 @@ def test_past_the_limit_the_least_recently_used_digests_go(cache: Path, monkeypa
     left = sorted(int(p.name.split('-')[1]) for p in cache.iterdir())
     assert left == [0, 3, 4, 5, 6, 7, 8, 9, 10]  # 11 kept, 2 over 90 % of 10: the two least recently used
     assert digests.recall(keys[1]) is None and digests.recall(keys[3]) == f'{3:064x}'
+
+
+def test_a_digest_another_run_prunes_meanwhile_is_passed_over(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two runs keeping digests at once: an entry gone between this run's listing and its stat is no error, and
+    the digest being kept is kept."""
+    monkeypatch.setattr(digests, 'KEPT', 1)
+    long_ago = time.time_ns() - 10 * digests.SETTLED_NS
+    first, second = (1, 1, 100, long_ago, long_ago), (1, 2, 100, long_ago, long_ago)
+    assert digests.keep(first, f'{1:064x}', time.time_ns())
+    original = os.scandir
+    stale = list(original(cache))  # listed here, then pruned by the other run before this one reads its stat
+    (cache / '-'.join(map(str, first))).unlink()
+
+    def listing(path: Path) -> contextlib.nullcontext[list[os.DirEntry[str]]]:
+        with original(path) as now:
+            return contextlib.nullcontext(stale + [e for e in now if e.name not in {s.name for s in stale}])
+
+    monkeypatch.setattr(os, 'scandir', listing)
+    assert digests.keep(second, f'{2:064x}', time.time_ns())
+    monkeypatch.undo()
+    assert [p.name for p in cache.iterdir()] == ['-'.join(map(str, second))]
