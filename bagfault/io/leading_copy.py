@@ -63,7 +63,6 @@ class LeadingCopy:
         size = stat.st_size
         self.pieces = sorted((Piece(p.source, p.target, min(p.length, size - p.source)) for p in pieces
                               if p.source < size and p.length > 0), key=lambda p: p.target)
-        self.start = self.pieces[0].target if self.pieces else 0  # output offsets before this are never touched
         self.end = max((p.target + p.length for p in self.pieces), default=0)
         self.extent = 0  # the furthest output offset written
         self._identity = (stat.st_dev, stat.st_ino)

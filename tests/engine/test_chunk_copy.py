@@ -10,7 +10,6 @@ input's chunk index, independently of the code under test.
 
 from __future__ import annotations
 
-import struct
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,8 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
 from support.foxglove import foxglove_reads
-from support.helpers import rosbags_counts
+from support.helpers import chunk_indexes, rosbags_counts
+from support.mutations import mcap_records
 from support.toolchain import converted
 
 from bagfault import api
@@ -297,26 +297,6 @@ def test_a_copy_that_cannot_be_written_leaves_nothing(bags: dict[str, Path], tmp
     assert list(out.parent.iterdir()) == []
 
 
-def chunks(path: Path) -> list[Any]:
-    """The chunk indexes in file order (mcap library)."""
-    with path.open('rb') as stream:
-        summary = make_reader(stream).get_summary()
-    assert summary is not None
-    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-
-
-def top_level_records(data: bytes) -> list[tuple[int, int, int]]:
-    """(offset, opcode, whole length) of every record from the header to the footer, walked by the MCAP
-    specification (opcode u8, length u64)."""
-    out, position = [], 8
-    while True:
-        opcode, length = struct.unpack_from('<BQ', data, position)
-        out.append((position, opcode, 9 + length))
-        if opcode == 0x02:
-            return out
-        position += 9 + length
-
-
 @pytest.mark.parametrize('text', [IMU_WINDOW.replace('start: 1.0', 'start: 100.0'), IMU_WINDOW])
 def test_long_copied_runs_sit_64_kib_from_their_input_place_after_a_record_every_reader_skips(
         bags: dict[str, Path], tmp_path: Path, text: str) -> None:
@@ -328,9 +308,9 @@ def test_long_copied_runs_sit_64_kib_from_their_input_place_after_a_record_every
     out = tmp_path / 'out.mcap'
     api.run(parse_scenario(text), [bag], out, seed=4)
     data, written = bag.read_bytes(), out.read_bytes()
-    inputs = {(c.message_start_time, c.compressed_size): c for c in chunks(bag)}
+    inputs = {(c.message_start_time, c.compressed_size): c for c in chunk_indexes(bag)}
     runs: list[list[int]] = []  # [input offset, output offset, length] of chunks copied one after another
-    for chunk in chunks(out):
+    for chunk in chunk_indexes(out):
         source = inputs.get((chunk.message_start_time, chunk.compressed_size))
         size = chunk.chunk_length + chunk.message_index_length
         if source is None or data[source.chunk_start_offset:][:size] != written[chunk.chunk_start_offset:][:size]:
@@ -343,8 +323,8 @@ def test_long_copied_runs_sit_64_kib_from_their_input_place_after_a_record_every
     long_runs = [r for r in runs if r[2] >= 1 << 20]
     assert long_runs and len(long_runs) == (1 if 'start: 100' in text else 2)
     assert all((target - source) % 65536 == 0 for source, target, _ in long_runs)
-    records = top_level_records(written)
-    unknown = [(position, length) for position, opcode, length in records if opcode not in range(0x01, 0x10)]
+    records = mcap_records(written)
+    unknown = [(position, 9 + length) for position, opcode, length in records if opcode not in range(0x01, 0x10)]
     assert {opcode for _, opcode, _ in records} - set(range(0x01, 0x10)) == {0xA1}
     assert {position + length for position, length in unknown} <= {target for _, target, _ in long_runs}
     assert all(written[position + 9:position + length] == bytes(length - 9) for position, length in unknown)
@@ -411,14 +391,14 @@ def test_a_bag_rosbags_wrote_comes_out_aligned_and_every_reader_reads_it(rosbags
     Foxglove's read the 2000 IMU and 100 image messages rosbags wrote."""
     out = tmp_path / 'out.mcap'
     result = api.run(parse_scenario(IMU_WINDOW.replace('start: 1.0', 'start: 100.0')), [rosbags_bag], out, seed=4)
-    found = chunks(rosbags_bag)
+    found = chunk_indexes(rosbags_bag)
     assert len(found) >= 3 and result.stats.chunks_copied == len(found)
     data, written = rosbags_bag.read_bytes(), out.read_bytes()
-    for source, target in zip(found, chunks(out), strict=True):
+    for source, target in zip(found, chunk_indexes(out), strict=True):
         size = source.chunk_length + source.message_index_length
         assert data[source.chunk_start_offset:][:size] == written[target.chunk_start_offset:][:size]
         assert (target.chunk_start_offset - source.chunk_start_offset) % 65536 == 0
-    assert [op for _, op, _ in top_level_records(written) if op >= 0x80] == [0xA1]
+    assert [op for _, op, _ in mcap_records(written) if op >= 0x80] == [0xA1]
     expected = {'/imu': 2000, '/camera': 100}
     assert dict(rosbags_counts(out)) == expected
     assert {topic: len(found) for topic, found in streams(out).items()} == expected

@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 import yaml
 from mcap.reader import make_reader
-from support.helpers import EXTERNAL, third_party
+from support.helpers import EXTERNAL, chunk_indexes, third_party
 
 from bagfault import api
 from bagfault.cli import main
@@ -44,14 +44,6 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp('guess') / 'sensor.mcap'
     write_bag(path, 'sensor-heavy', 3.0)
     return path
-
-
-def chunks(path: Path) -> list[Any]:
-    """The chunk indexes in file order (mcap library)."""
-    with path.open('rb') as stream:
-        summary = make_reader(stream).get_summary()
-    assert summary is not None
-    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
 
 
 def topics_of(path: Path) -> dict[int, str]:
@@ -81,9 +73,9 @@ def run_alone(bag: Path, scenario: str | Path, out: Path, monkeypatch: pytest.Mo
 def copied(bag: Path, out: Path) -> tuple[int, int]:
     """(output offset of the output's first chunk, bytes of the input's leading chunks found there in a row)."""
     data, written = bag.read_bytes(), out.read_bytes()
-    target = chunks(out)[0].chunk_start_offset
+    target = chunk_indexes(out)[0].chunk_start_offset
     length = 0
-    for chunk in chunks(bag):
+    for chunk in chunk_indexes(bag):
         size = chunk.chunk_length + chunk.message_index_length
         offset = chunk.chunk_start_offset
         if data[offset:offset + size] != written[target + length:target + length + size]:
@@ -94,7 +86,7 @@ def copied(bag: Path, out: Path) -> tuple[int, int]:
 
 def spans_until(bag: Path, before: float) -> int:
     """Bytes of the input's leading chunks that end before `before` seconds from the first message."""
-    found = chunks(bag)
+    found = chunk_indexes(bag)
     limit = found[0].message_start_time + before * NS
     return sum(c.chunk_length + c.message_index_length for c in found if c.message_end_time < limit)
 
@@ -105,7 +97,7 @@ def test_the_guess_is_where_the_run_puts_the_chunks_before_the_fault(bag: Path, 
     target, length = copied(bag, tmp_path / 'out.mcap')
     pieces = guess(bag, IMU)
     assert len(pieces) == 1
-    assert (pieces[0].source, pieces[0].target) == (chunks(bag)[0].chunk_start_offset, target)
+    assert (pieces[0].source, pieces[0].target) == (chunk_indexes(bag)[0].chunk_start_offset, target)
     assert spans_until(bag, 1.5 - 0.01) <= pieces[0].length <= length
     assert pieces[0].length < bag.stat().st_size / 2  # the chunks from 1.5 s on are not guessed
 
@@ -114,7 +106,7 @@ def test_with_no_fault_due_every_chunk_is_guessed(bag: Path, tmp_path: Path, mon
     text = IMU.replace('start: 1.5', 'start: 100')
     run_alone(bag, text, tmp_path / 'out.mcap', monkeypatch)
     assert [(p.target, p.length) for p in guess(bag, text)] == [copied(bag, tmp_path / 'out.mcap')]
-    assert copied(bag, tmp_path / 'out.mcap')[1] == sum(c.chunk_length + c.message_index_length for c in chunks(bag))
+    assert copied(bag, tmp_path / 'out.mcap')[1] == sum(c.chunk_length + c.message_index_length for c in chunk_indexes(bag))
 
 
 @pytest.mark.parametrize(('change', 'until'), [
@@ -149,9 +141,9 @@ def test_a_follower_and_an_activation_count_from_their_leader_and_their_start(ba
 def test_a_topic_that_something_watches_or_rewrites_stops_the_guess_at_its_first_chunk(bag: Path,
                                                                                          text: str) -> None:
     imu = next(cid for cid, topic in topics_of(bag).items() if topic == '/imu')
-    first = next(k for k, c in enumerate(chunks(bag)) if imu in c.message_index_offsets)
+    first = next(k for k, c in enumerate(chunk_indexes(bag)) if imu in c.message_index_offsets)
     assert sum(p.length for p in guess(bag, text)) == sum(c.chunk_length + c.message_index_length
-                                                          for c in chunks(bag)[:first])
+                                                          for c in chunk_indexes(bag)[:first])
 
 
 def test_observers_name_topics_too(bag: Path) -> None:

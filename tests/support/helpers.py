@@ -73,6 +73,14 @@ def counts(path: Path) -> Counter[str]:
         return Counter({summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()})
 
 
+def chunk_indexes(path: Path) -> list[Any]:
+    """The chunk indexes of an MCAP file in file order (mcap library)."""
+    with path.open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+
+
 def raw_messages(path: Path) -> dict[str, list[tuple[int, int, bytes]]]:
     """topic -> [(log_time, publish_time, data)] in log-time order, with the mcap library."""
     out: dict[str, list[tuple[int, int, bytes]]] = defaultdict(list)
