@@ -8,6 +8,7 @@ names that time and what was observed.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
@@ -36,6 +37,10 @@ class AssertionResult:
     message: str = ''
     value: float | None = None  # what was measured, in the assertion's own unit (see `unit`)
     unit: str = ''
+    # how far from failing, in `margin_unit`: positive passed with that much to spare, negative failed by that
+    # much, None where the verdict has no distance (a crash, a sequence out of order, a type never seen)
+    margin: float | None = None
+    margin_unit: str = ''
     wall_ns: int = 0  # wall time spent evaluating it (JUnit's testcase time)
 
 TICK = 100_000_000  # ns: the anchor's assertion timer (fault_assertion_runner.cpp), looks every 100 ms
@@ -114,19 +119,28 @@ class AssertionType:
         return f'{self.spec.type} {self.spec.id}'
 
     # -- decisions ------------------------------------------------------------
-    def passed(self, time: int, message: str, value: float | None = None, unit: str = '') -> None:
-        """Decide: passed at `time`, having measured `value` (campaigns tabulate it)."""
+    def passed(self, time: int, message: str, value: float | None = None, unit: str = '',
+               margin: float | None = None, margin_unit: str | None = None) -> None:
+        """Decide: passed at `time`, having measured `value` (campaigns tabulate it), `margin` from failing (in
+        `margin_unit`, default `unit`)."""
         if self.pending:
             self.result.state, self.result.time, self.result.message = PASSED, time, message
-            self.result.value, self.result.unit = value, unit
+            self._measured(value, unit, margin, margin_unit)
             self.runner.decided(self)
 
-    def fail(self, time: int, message: str, value: float | None = None, unit: str = '') -> None:
-        """Decide: failed at `time`, having measured `value`."""
+    def fail(self, time: int, message: str, value: float | None = None, unit: str = '',
+             margin: float | None = None, margin_unit: str | None = None) -> None:
+        """Decide: failed at `time`, having measured `value`, `margin` past failing (0 or negative)."""
         if self.pending:
             self.result.state, self.result.time, self.result.message = FAILED, time, message
-            self.result.value, self.result.unit = value, unit
+            self._measured(value, unit, margin, margin_unit)
             self.runner.decided(self)
+
+    def _measured(self, value: float | None, unit: str, margin: float | None, margin_unit: str | None) -> None:
+        result = self.result
+        result.value, result.unit = value, unit
+        if margin is not None and math.isfinite(margin):
+            result.margin, result.margin_unit = float(margin), unit if margin_unit is None else margin_unit
 
 
 def fault_reference_problem(

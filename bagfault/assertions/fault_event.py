@@ -44,8 +44,10 @@ class FaultEventAssertion(AssertionType):
     def on_event(self, event: FaultEvent) -> None:
         """Pass when the watched fault reaches the expected state."""
         if event.fault_id == self.params['fault_id'] and event.state == self.params['state']:
+            seconds = (event.time - self.runner.origin) / NS
             self.passed(event.time, f'fault {event.fault_id} reached {event.state} at {self.runner.t(event.time)} '
-                                    f'({event.source})', (event.time - self.runner.origin) / NS, 's')
+                                    f'({event.source})', seconds, 's',
+                        margin=None if self.spec.within is None else self.spec.within - seconds)
 
     def waiting_for(self) -> str:
         """Failure text."""

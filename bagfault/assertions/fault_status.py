@@ -93,7 +93,8 @@ class FaultStatusAssertion(AssertionType):
         if self.params.get('never'):
             self.fail(time, text, seconds, 's')
         else:
-            self.passed(time, text, seconds, 's')
+            spare = None if self.spec.within is None else self.spec.within - seconds
+            self.passed(time, text, seconds, 's', margin=spare)
 
     def on_deadline(self, time: int) -> None:
         """Not reached in time."""
@@ -148,9 +149,11 @@ class FaultCountAssertion(AssertionType):
         codes = sorted(f.fault_code for f in result.faults)
         low, high = self.params.get('min', 0), self.params.get('max')
         text = f'{len(codes)} confirmed faults at {self.runner.t(time)}: {", ".join(codes) or "none"}'
+        room = float(min(len(codes) - low, *([high - len(codes)] if high is not None else [])))
         if len(codes) < low or (high is not None and len(codes) > high):
-            self.fail(time, f'{text}; expected [{low}, {high if high is not None else "inf"}]', len(codes), 'faults')
+            self.fail(time, f'{text}; expected [{low}, {high if high is not None else "inf"}]', len(codes), 'faults',
+                      margin=room)
         else:
-            self.passed(time, text, len(codes), 'faults')
+            self.passed(time, text, len(codes), 'faults', margin=room)
 
 

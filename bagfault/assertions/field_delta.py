@@ -70,6 +70,7 @@ class FieldDeltaAssertion(AssertionType):
         self.pending_inputs: dict[Any, deque[tuple[int, np.ndarray, bool]]] = {}
         self.order: deque[tuple[int, Any]] = deque()
         self.compared = 0
+        self.worst = 0.0  # the largest |delta - expected| so far (tolerance - worst is the margin)
         self.path: Any = None
 
     def topics(self) -> set[str]:
@@ -126,20 +127,24 @@ class FieldDeltaAssertion(AssertionType):
             return
         delta = after - before
         finite = np.isfinite(before) & np.isfinite(after)
-        bad = finite & (np.abs(delta - expected) > self.tolerance)
+        error = np.where(finite, np.abs(delta - expected), 0.0)
+        bad = finite & (error > self.tolerance)
         self.compared += 1
         if bad.any():
             index = int(np.argmax(bad))
             where = f' (element {index})' if delta.size > 1 else ''
             window = describe(self) if condition else f' (not{describe(self)})'
             self.fail(time, f"at {self.runner.t(in_time)} {self.params['field']}{where} changed by {delta[index]:.9g}, "
-                            f'expected {expected:g} +- {self.tolerance:g}{window}')
+                            f'expected {expected:g} +- {self.tolerance:g}{window}',
+                      margin=self.tolerance - float(error[index]))
+        elif error.size:
+            self.worst = max(self.worst, float(error.max()))
 
     def finish(self, time: int) -> None:
         """Pass if pairs were compared."""
         if self.compared:
             self.passed(time, f"{self.compared} message pairs {self.input_topic} -> {self.params['topic']} had the "
-                              f"expected change of {self.params['field']}")
+                              f"expected change of {self.params['field']}", margin=self.tolerance - self.worst)
         else:
             self.fail(time, f"no message pair {self.input_topic} -> {self.params['topic']} compared: "
                             'not observed before the end of the bag')

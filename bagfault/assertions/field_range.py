@@ -46,6 +46,7 @@ class FieldRangeAssertion(AssertionType):
         self.checked = 0
         self.low = self.params.get('min', -np.inf)
         self.high = self.params.get('max', np.inf)
+        self.closest = np.inf  # the smallest distance of a value to a bound so far (the margin)
 
     def topics(self) -> set[str]:
         """The checked topic."""
@@ -67,11 +68,18 @@ class FieldRangeAssertion(AssertionType):
         bad = ~((values >= self.low) & (values <= self.high)) if bounded else np.zeros(values.shape, bool)
         if self.params.get('finite'):
             bad |= ~np.isfinite(values)
+        room = None
+        if bounded and values.size:
+            with np.errstate(invalid='ignore'):  # inf - inf: no distance, left out of the margin
+                room = np.minimum(values - self.low, self.high - values)
         if bad.any():
             index = int(np.argmax(bad))
             where = f' (element {index})' if values.size > 1 else ''
             self.fail(time, f"at {self.runner.t(time)} {topic} {self.params['field']}{where} = {values[index]:g} "
-                            f'is outside {self.expectation()}')
+                            f'is outside {self.expectation()}', float(values[index]),
+                      margin=None if room is None else float(room[index]))
+        elif room is not None:
+            self.closest = min(self.closest, float(room.min()))
 
     def expectation(self) -> str:
         """Text of the accepted range."""
@@ -86,7 +94,8 @@ class FieldRangeAssertion(AssertionType):
         """Pass if messages were checked and none failed."""
         if self.checked:
             self.passed(time, f"{self.checked} messages on {self.params['topic']}{describe(self)} kept "
-                              f"{self.params['field']} within {self.expectation()}")
+                              f"{self.params['field']} within {self.expectation()}",
+                        margin=self.closest if np.isfinite(self.closest) else None)
         else:
             self.fail(time, f"no message on {self.params['topic']}{describe(self)} to check: {self.waiting_for()}")
 

@@ -56,14 +56,22 @@ class MessageCountAssertion(AssertionType):
         self.count += 1
         if 'max' in self.params and self.count > self.params['max']:
             self.fail(time, f'{topic}{describe(self)}: message {self.count} at {self.runner.t(time)} is more than '
-                            f"max {self.params['max']}", self.count, 'messages')
+                            f"max {self.params['max']}", self.count, 'messages', margin=self.room())
 
     def finish(self, time: int) -> None:
         """Decide on the total."""
         topic = self.params['topic']
         if self.count < self.params.get('min', 0):
             self.fail(time, f'{topic}{describe(self)}: {self.count} messages by the end of the bag at '
-                            f'{self.runner.t(time)}, expected {self.expectation()}', self.count, 'messages')
+                            f'{self.runner.t(time)}, expected {self.expectation()}', self.count, 'messages',
+                      margin=self.room())
         else:
             self.passed(time, f'{topic}{describe(self)}: {self.count} messages, expected {self.expectation()}',
-                        self.count, 'messages')
+                        self.count, 'messages', margin=self.room())
+
+    def room(self) -> float:
+        """Messages from the nearer bound: count - min, max - count (negative past it)."""
+        sides = [self.count - self.params.get('min', 0)]
+        if 'max' in self.params:
+            sides.append(self.params['max'] - self.count)
+        return float(min(sides))

@@ -122,6 +122,6 @@ class PathLatencyAssertion(AssertionType):
         text = (f'{name} of path {self.path.name}{scope} = {stats[name]:.3f} ms (max {limit:g} ms, '
                 f'{stats["count"]} samples, max {stats["max"]:.3f} ms)')
         if stats[name] > limit:
-            self.fail(time, text, float(stats[name]), 'ms')
+            self.fail(time, text, float(stats[name]), 'ms', margin=limit - float(stats[name]))
         else:
-            self.passed(time, text, float(stats[name]), 'ms')
+            self.passed(time, text, float(stats[name]), 'ms', margin=limit - float(stats[name]))

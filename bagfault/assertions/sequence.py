@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import TYPE_CHECKING, ClassVar
 
 from bagfault.assertions.base import FAILED, PASSED, AssertionType
 from bagfault.schema import ConfigField
+from bagfault.units import NS
 
 if TYPE_CHECKING:
     from bagfault.spec.model import AssertionSpec, Scenario
@@ -70,8 +72,9 @@ class SequenceAssertion(AssertionType):
                 self.fail(now, f'step {step.spec.id} passed at {self.runner.t(at(step))}, before step '
                                f'{steps[number - 1].spec.id} at {self.runner.t(at(steps[number - 1]))}')
                 return
+        spare = min((at(b) - at(a)) / NS for a, b in itertools.pairwise(steps))  # the closest two steps came
         self.passed(now, 'steps passed in order: ' + ', '.join(
-            f'{s.spec.id} ({self.runner.t(at(s))})' for s in steps))
+            f'{s.spec.id} ({self.runner.t(at(s))})' for s in steps), margin=spare, margin_unit='s')
 
     def waiting_for(self) -> str:
         """Failure text."""

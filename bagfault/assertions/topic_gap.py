@@ -62,7 +62,8 @@ class TopicGapAssertion(AssertionType):
         self.longest = max(self.longest, gap)
         if gap > self.max_gap:
             self.fail(end, f"gap of {gap / NS:.3f} s on {self.params['topic']} from {self.runner.t(start)} to "
-                           f"{self.runner.t(end)}{what} exceeds max_gap {self.params['max_gap']:g} s", gap / NS, 's')
+                           f"{self.runner.t(end)}{what} exceeds max_gap {self.params['max_gap']:g} s", gap / NS, 's',
+                      margin=(self.max_gap - gap) / NS)
 
     def on_event(self, event: FaultEvent) -> None:
         """Open or close the fault window."""
@@ -91,4 +92,5 @@ class TopicGapAssertion(AssertionType):
             self.fail(time, f"fault {self.params['during']} was never active: nothing was checked")
         else:
             self.passed(time, f"longest gap on {self.params['topic']} {self.longest / NS:.3f} s "
-                              f"(max {self.params['max_gap']:g} s)", self.longest / NS, 's')
+                              f"(max {self.params['max_gap']:g} s)", self.longest / NS, 's',
+                        margin=(self.max_gap - self.longest) / NS)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from bagfault.assertions.base import TICK, AssertionType
+from bagfault.assertions.base import END_OF_BAG, TICK, AssertionType
 from bagfault.schema import ConfigField
 from bagfault.units import NS
 
@@ -77,11 +77,18 @@ class TopicHzAssertion(AssertionType):
         self.best = max(self.best, rate)
         if rate >= self.params['min_hz']:
             self.passed(time, f"{self.params['topic']} at {rate:.2f} Hz over {self.params['window']:g} s at "
-                              f"{self.runner.t(time)} (min {self.params['min_hz']:g} Hz)", rate, 'Hz')
+                              f"{self.runner.t(time)} (min {self.params['min_hz']:g} Hz)", rate, 'Hz',
+                        margin=rate - self.params['min_hz'])
         elif self.spec.within is not None and time - self.runner.origin > round(self.spec.within * NS):
-            self.fail(time, f'{self.waiting_for()} within {self.spec.within:g} s (looked at {self.runner.t(time)})')
+            self.fail(time, f'{self.waiting_for()} within {self.spec.within:g} s (looked at {self.runner.t(time)})',
+                      self.best, 'Hz', margin=self.best - self.params['min_hz'])
         else:
             self.runner.schedule(self, time + TICK)
+
+    def finish(self, time: int) -> None:
+        """The bag ended before the rate was reached: failed by what the best window lacked."""
+        self.fail(time, f'{self.waiting_for()}: {END_OF_BAG}', self.best, 'Hz',
+                  margin=self.best - self.params['min_hz'])
 
     def on_message(self, topic: str, time: int, message: Any) -> None:
         """Counted at the next look."""

@@ -55,6 +55,7 @@ def run_job(spec: dict[str, Any]) -> dict[str, Any]:
                 'seconds': round(time.monotonic() - started, 3), 'output': None}
     origin = result.stats.origin
     assertions = {a.id: {'state': a.state, 'message': a.message, 'value': a.value, 'unit': a.unit,
+                         'margin': a.margin, 'margin_unit': a.margin_unit,
                          't_s': None if a.time is None or origin is None else round((a.time - origin) / NS, 9)}
                   for a in result.assertions}
     detections: dict[str, float] = {}

@@ -48,7 +48,8 @@ def build(result: RunResult) -> dict[str, Any]:
              for spec in result.scenario.assertions}
     assertions = [
         {'id': r.id, 'type': r.type, 'state': r.state, 't_s': seconds(r.time, origin), 'stamp_ns': r.time,
-         'message': r.message, 'line': lines.get(r.id), 'wall_s': round(r.wall_ns / NS, 6)}
+         'message': r.message, 'line': lines.get(r.id), 'wall_s': round(r.wall_ns / NS, 6),
+         'value': r.value, 'unit': r.unit, 'margin': r.margin, 'margin_unit': r.margin_unit}
         for r in result.assertions
     ]
     counts = {state: sum(a['state'] == state for a in assertions) for state in ('passed', 'failed', 'pending')}

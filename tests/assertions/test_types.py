@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import textwrap
 
 import pytest
@@ -189,3 +190,64 @@ def test_fault_event_within_is_judged_at_the_anchors_100_ms_looks(tmp_path, star
     """, bag)
     [verdict] = result.assertions
     assert (verdict.state, round((verdict.time - START) / NS, 3)) == (state, decided)
+
+
+# -- margins: how far each assertion was from failing, in its own unit, by hand from the fixture bag --------
+# rover_20s.mcap (bagfault.demo.synthetic): /odom_raw every 20 ms with x = 0.1 t, /scan_raw every 100 ms, 200 of
+# them; BASE's odom_drift adds 0.5 m to x on [5, 15) s, lidar_blind is active on [8, 10) s.
+
+
+def test_margins_of_passing_assertions(tmp_path):
+    results, _ = run(tmp_path, """
+        - {id: gap, type: topic_gap, topic: /scan_raw, max_gap: 0.15}
+        - {id: hz, type: topic_hz, topic: /odom_raw, message_type: nav_msgs/msg/Odometry, min_hz: 40, window: 1.0}
+        - {id: range, type: field_range, topic: /odom, field: pose.pose.position.x, min: -2.0, max: 3.0}
+        - {id: finite, type: field_range, topic: /odom, field: pose.pose.position.x, finite: true}
+        - {id: count, type: message_count, topic: /scan_raw, min: 150, max: 250}
+        - {id: drift_on, type: fault_event, fault_id: odom_drift, state: active, within: 6.0}
+        - {id: blind_on, type: fault_event, fault_id: lidar_blind, state: active}
+        - {id: delta, type: field_delta, topic: /odom, field: pose.pose.position.x, equals: 0.5, during: odom_drift,
+           tolerance: 0.001}
+        - {id: order, type: sequence, steps: [drift_on, blind_on]}
+    """)
+    margins = {k: (r.state, r.margin, r.margin_unit) for k, r in results.items()}
+    # the longest gap is one scan period, 0.1 s: 0.05 s to spare
+    assert margins['gap'][:2] == ('passed', pytest.approx(0.05)) and margins['gap'][2] == 's'
+    # looks every 100 ms count (t - 1, t]: 36 messages at 0.7 s, 41 at 0.8 s: 41 Hz, 1 Hz above min_hz
+    assert margins['hz'] == ('passed', pytest.approx(1.0), 'Hz')
+    # the largest x is 0.1 x 14.98 + 0.5 = 1.998 m (0.1 x 19.98 after the drift): 1.002 below max; x = 0 is 2 above min
+    assert margins['range'][:2] == ('passed', pytest.approx(1.002))
+    assert margins['finite'] == ('passed', None, '')  # finite or not: no distance
+    assert margins['count'] == ('passed', 50.0, 'messages')  # 200 scans: 50 from either bound
+    assert margins['drift_on'] == ('passed', pytest.approx(1.0), 's')  # active at 5 s, within 6 s
+    assert margins['blind_on'] == ('passed', None, '')  # no `within`: no deadline to measure from
+    assert margins['delta'][0] == 'passed' and 0.001 - 1e-12 < margins['delta'][1] <= 0.001  # exact bias
+    assert margins['order'] == ('passed', pytest.approx(3.0), 's')  # steps at 5 s and 8 s
+
+
+def test_margins_of_failing_assertions(tmp_path):
+    results, _ = run(tmp_path, """
+        - {id: gap, type: topic_gap, topic: /scan, max_gap: 0.5}
+        - {id: range, type: field_range, topic: /odom, field: pose.pose.position.x, max: 1.25}
+        - {id: count, type: message_count, topic: /scan_raw, min: 210}
+        - {id: hz, type: topic_hz, topic: /scan_raw, message_type: sensor_msgs/msg/LaserScan, min_hz: 12, window: 1.0}
+    """, activate=['lidar_dead@8+2'])
+    margins = {k: (r.state, r.margin) for k, r in results.items()}
+    assert margins['gap'] == ('failed', pytest.approx(0.5 - 2.1))  # scans at 7.9 s and 10.0 s
+    assert margins['range'] == ('failed', pytest.approx(1.25 - 1.252))  # first above (7.5 s is 1.25): 0.1 x 7.52 + 0.5
+    assert margins['count'] == ('failed', -10.0)  # 200 of 210
+    assert margins['hz'] == ('failed', pytest.approx(10.0 - 12.0))  # at best 10 scans in a second
+
+
+def test_margins_in_the_json_report(tmp_path):
+    from bagfault.report.model import build
+
+    scenario = parse_scenario("""
+injectors: [{id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}]
+assertions:
+  - {id: gap, type: topic_gap, topic: /scan_raw, max_gap: 0.25}
+""")
+    result = api.run(scenario, [FIXTURES / 'rover_20s.mcap'], tmp_path / 'out.mcap')
+    (entry,) = json.loads(json.dumps(build(result)))['assertions']
+    assert entry['margin'] == pytest.approx(0.15) and entry['margin_unit'] == 's'
+    assert entry['value'] == pytest.approx(0.1) and entry['unit'] == 's'
