@@ -38,6 +38,9 @@ if TYPE_CHECKING:
     from bagfault.campaign.runner import CampaignResult, JobProgress
     from bagfault.engine.offline import Progress
     from bagfault.engine.run import Observer
+    from bagfault.explore import ExploreProgress, ExploreResult
+    from bagfault.explore.draw import Strategy
+    from bagfault.explore.shrink import ShrinkMode
     from bagfault.io.leading_copy import LeadingCopy
     from bagfault.live.recorder import RecordResult
     from bagfault.spec.yamlnodes import PathKey
@@ -46,9 +49,14 @@ DEFAULT_SEED = 0
 SEED_MAX = 2**64 - 1
 
 
-def scenario_of(scenario: Scenario | str | Path) -> Scenario:
-    """A loaded scenario, or the file loaded and validated."""
-    return scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+def scenario_of(scenario: Scenario | str | Path, *, space: bool = False) -> Scenario:
+    """A loaded scenario, or the file loaded and validated; one with an `explore:` section only where `space`
+    (its assertions name faults that only `bagfault explore` draws)."""
+    loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    if loaded.explore is not None and not space:
+        raise UsageError(f'{loaded.source or loaded.name}: has an explore: section, a fault space: '
+                         f'`bagfault explore` searches it (run or test one of the scenarios it writes)')
+    return loaded
 
 
 def seed_of(scenario: Scenario, seed: int | None) -> int:
@@ -378,6 +386,41 @@ def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int
                         force=force)
 
 
+def explore(space: Scenario | str | Path, inputs: Sequence[str | Path] = (), directory: str | Path = 'explore',
+            *, budget: int | None = None, seed: int | None = None, workers: int | None = None,
+            ray: str | None = None, rate: float = 1.0, resume: bool = False, force: bool = False,
+            save_failures: str | Path | None = None, progress: ExploreProgress | None = None,
+            search: Strategy = 'guided', shrink: ShrinkMode = 'full') -> ExploreResult:
+    """Search the scenario's `explore:` fault space for failures, shrink each to its minimal cause, replay it;
+    `bagfault run` offline, `bagfault test` with a `system_under_test` (at `rate`). Runs go to a local pool of
+    `workers` (default one per core) or, with `ray` ('' for a local instance, or an address), to Ray; results in
+    `directory` (explore.json, report.html, failures/). `search='uniform'` and `shrink='faults'` are the
+    benchmark's comparisons (uniform draws without margins; ddmin over the fault set only)."""
+    from bagfault.explore import ExploreOptions  # noqa: PLC0415
+    from bagfault.explore import explore as run_explore  # noqa: PLC0415
+
+    loaded = scenario_of(space, space=True)
+    if loaded.explore is None:
+        raise UsageError(f'{loaded.source or loaded.name}: no explore: section (the fault space to search)')
+    paths = [Path(p) for p in inputs] or list(loaded.bags)
+    if workers is not None and workers < 1:
+        raise UsageError(f'--workers {workers}: must be 1 or more')
+    if budget is not None and (isinstance(budget, bool) or not 1 <= budget <= 100_000):
+        raise UsageError(f'--budget {budget}: must be a whole number from 1 to 100000')
+    if not (math.isfinite(rate) and rate > 0):
+        raise UsageError(f'--rate {rate:g}: must be above 0')
+    options = ExploreOptions(budget=budget, seed=None if seed is None else seed_of(loaded, seed), workers=workers,
+                             ray=ray, rate=rate, resume=resume, force=force,
+                             save_failures=Path(save_failures) if save_failures is not None else None,
+                             search=search, shrink=shrink)
+    if loaded.system is not None:
+        from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
+
+        require_rclpy()
+        system_of(loaded, {})
+    return run_explore(loaded, paths, Path(directory), options, progress)
+
+
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     scenarios, problems = [], []
@@ -397,6 +440,7 @@ __all__ = [
     'StopFlag',
     'campaign',
     'check',
+    'explore',
     'load_scenario',
     'play',
     'proxy',

@@ -187,6 +187,29 @@ def _parser() -> argparse.ArgumentParser:
                           help='keep the results already in DIR; run only what is missing or changed')
     campaign.add_argument('--dry-run', action='store_true', help='print the plan and its size, run nothing')
 
+    explore = sub.add_parser('explore', help='search a fault space for failures, shrink each to its minimal cause',
+                             usage='bagfault explore SPACE.yaml [BAG...] -o DIR [--budget N] [--seed N] '
+                                   '[--workers K] [--engine local|ray] [--rate R] [--resume]')
+    explore.add_argument('scenario', type=Path, metavar='SPACE.yaml',
+                         help='a scenario with an explore: section (the candidate faults and their dimensions)')
+    explore.add_argument('inputs', nargs='*', type=Path, metavar='BAG', help="default: the scenario's `bags:`")
+    explore.add_argument('-o', '--output-dir', type=Path, metavar='DIR', required=True,
+                         help='explore.json, report.html, runs.jsonl, failures/')
+    explore.add_argument('--budget', type=int, metavar='N', help="runs in all (default: the space's `budget`)")
+    explore.add_argument('--seed', type=int, metavar='N', help="the search's and every run's seed (default: the "
+                                                               "scenario's)")
+    explore.add_argument('--workers', type=int, metavar='K', help='runs at a time (default: one per core)')
+    explore.add_argument('--engine', choices=('local', 'ray'), default='local',
+                         help='a local pool of processes, or Ray tasks')
+    explore.add_argument('--ray-address', metavar='ADDRESS', default='',
+                         help='with --engine ray: the cluster (default: a local Ray instance)')
+    explore.add_argument('--rate', type=float, default=1.0, metavar='R', help='closed loop: play at R x bag time')
+    explore.add_argument('--resume', action='store_true', help='continue the exploration in DIR where it stopped')
+    explore.add_argument('--save-failures', type=Path, metavar='DIR',
+                         help='also write each minimal scenario as DIR/test_<name>.bagfault.yaml, a regression '
+                              'suite the pytest plugin runs')
+    _force_option(explore)
+
     recover = sub.add_parser('recover', help='make a recording cut short by a kill a valid MCAP again')
     recover.add_argument('recording', type=Path, metavar='FILE',
                          help='the partial file (.NAME.*.partial), or the name that was requested')
@@ -467,6 +490,38 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     return EXIT_FAILED if result.failed else EXIT_OK
 
 
+def _cmd_explore(args: argparse.Namespace) -> int:
+    from bagfault import api  # noqa: PLC0415
+    from bagfault.explore import ExploreProgress  # noqa: PLC0415
+
+    try:
+        result = api.explore(args.scenario, args.inputs, args.output_dir, budget=args.budget, seed=args.seed,
+                             workers=args.workers, ray=args.ray_address if args.engine == 'ray' else None,
+                             rate=args.rate, resume=args.resume, force=args.force,
+                             save_failures=args.save_failures, progress=ExploreProgress())
+    except KeyboardInterrupt:
+        print(f'bagfault: interrupted; the runs made are kept in {args.output_dir / "runs.jsonl"}, --resume '
+              'continues', file=sys.stderr)
+        return EXIT_ERROR
+    shrunk = [f for f in result.failures if f.state == 'shrunk']
+    print(f'{args.scenario}: {len(result.runs)} of {result.budget} runs ({result.ran} now, on {result.engine}): '
+          f'{len(shrunk)} failure{"s" if len(shrunk) != 1 else ""} found')
+    for failure in result.failures:
+        if failure.minimal is None:
+            print(f'  {failure.name}: {failure.note}')
+            continue
+        replay = failure.replay.status if failure.replay is not None else 'not replayed'
+        print(f'  {failure.name}: fails {", ".join(sorted(failure.assertions))}')
+        print(f'      minimal: {failure.minimal.describe()}')
+        print(f'      found at run {failure.found_at_run}, shrunk in {failure.shrink_runs} runs, replay {replay}: '
+              f'{_under(args.output_dir, f"failures/{failure.name}.min.yaml")}')
+    for path in result.saved:
+        print(f'saved     {path}')
+    print(f'results   {_under(args.output_dir, "explore.json")}')
+    print(f'report    {_under(args.output_dir, "report.html")}')
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
 def _under(folder: Path | str, name: str) -> str:
     """A file of a campaign's folder or bucket prefix, as the user would name it."""
     return f'{folder.rstrip("/")}/{name}' if isinstance(folder, str) else str(folder / name)
@@ -511,8 +566,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     for scenario in api.validate(args.scenarios, strict=args.strict):
         for warning in scenario.warnings:
             print(f'warning: {warning}', file=sys.stderr)
+        space = scenario.explore
+        explore = '' if space is None else (f', an explore space of {len(space.faults)} candidates and '
+                                            f'{sum(len(f.dimensions) for f in space.faults)} dimensions')
         print(f'{scenario.source}: ok ({len(scenario.injectors)} injectors, {len(scenario.faults)} faults, '
-              f'{len(scenario.assertions)} assertions)')
+              f'{len(scenario.assertions)} assertions{explore})')
     return EXIT_OK
 
 
@@ -587,6 +645,7 @@ COMMANDS = {
     'test': _cmd_test,
     'recover': _cmd_recover,
     'campaign': _cmd_campaign,
+    'explore': _cmd_explore,
     'latency': _cmd_latency,
 }
 

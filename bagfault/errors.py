@@ -143,3 +143,7 @@ class ClosedLoopError(BagfaultError):
 
 class CampaignError(BagfaultError):
     """A campaign file or plan cannot be used."""
+
+
+class ExploreError(BagfaultError):
+    """An exploration cannot start or go on (no space, no bag, a folder that holds another)."""

@@ -138,7 +138,8 @@ class AssertionType:
 
     def _measured(self, value: float | None, unit: str, margin: float | None, margin_unit: str | None) -> None:
         result = self.result
-        result.value, result.unit = value, unit
+        result.value = value if value is None or math.isfinite(value) else None  # (nan, inf: said in the message)
+        result.unit = unit
         if margin is not None and math.isfinite(margin):
             result.margin, result.margin_unit = float(margin), unit if margin_unit is None else margin_unit
 
@@ -152,7 +153,10 @@ def fault_reference_problem(
     value: Any = spec.params.get(key)
     if value is None or scenario.fault(str(value)) is not None or str(value) in scenario.skipped_faults:
         return []  # (a skipped fault was named where its injector was: it never activates, as in the anchor)
-    known = ', '.join(dict.fromkeys(f.id for f in scenario.faults)) or 'none'
+    if scenario.explore is not None and str(value) in scenario.explore.ids:
+        return []  # a candidate of the explore space: judged in the runs that draw it
+    ids = [f.id for f in scenario.faults] + ([f.id for f in scenario.explore.faults] if scenario.explore else [])
+    known = ', '.join(dict.fromkeys(ids)) or 'none'
     return [(key, f'unknown fault {value!r} (faults: {known})')]
 
 

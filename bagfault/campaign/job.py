@@ -44,11 +44,12 @@ def run_job(spec: dict[str, Any]) -> dict[str, Any]:
     try:
         scenario = parse_scenario(spec['scenario_text'], source=Path(spec['scenario_source']))
         with _local(spec) as bag:
+            bags = spec.get('bags') or [bag]  # an exploration's run plays every bag given, as `run` and `test` do
             if spec['mode'] == 'test':
-                result = api.test(scenario, [bag], output, seed=spec['seed'])
+                result = api.test(scenario, bags, output, seed=spec['seed'], rate=spec.get('rate', 1.0))
             else:
                 assert output is not None
-                result = api.run(scenario, [bag], output, seed=spec['seed'])
+                result = api.run(scenario, bags, output, seed=spec['seed'])
     except Exception as exc:  # noqa: BLE001 - any failure of a job is its row, never the campaign's end
         message = ' '.join(str(exc).split()) or type(exc).__name__
         return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {}, 'warnings': [],

@@ -143,6 +143,8 @@ KEY_JSON: dict[str, dict[str, Any]] = {
     'boolean': {'type': 'boolean'}, 'seconds': {'type': 'number'}, 'list': {'type': 'array'},
     'mapping': {'type': 'object'}, 'any': {},
     'string_or_list': {'anyOf': [{'type': 'string'}, {'type': 'array', 'items': {'type': 'string'}}]},
+    'dimension': {'anyOf': [{'type': 'number'}, {'type': 'array', 'items': {'type': 'number'}, 'minItems': 2,
+                                                 'maxItems': 2}]},
 }
 OPEN_SECTIONS = ('injector',)  # its keys depend on its type
 
@@ -167,10 +169,15 @@ def _key_json(key: Any, ref: Callable[[str], dict[str, Any]]) -> dict[str, Any]:
         out = {'type': 'array', 'items': item} if key.type == 'list' else item
     text = key.description + (f' ({key.unit})' if key.unit else '')
     out['description'] = text
+    bounds = {}
     if key.minimum is not None:
-        out['exclusiveMinimum' if key.exclusive else 'minimum'] = key.minimum
+        bounds['exclusiveMinimum' if key.exclusive else 'minimum'] = key.minimum
     if key.maximum is not None:
-        out['maximum'] = key.maximum
+        bounds['maximum'] = key.maximum
+    if key.type == 'dimension':  # the number, or each end of [low, high]
+        out['anyOf'] = [{'type': 'number', **bounds}, {**out['anyOf'][1], 'items': {'type': 'number', **bounds}}]
+    else:
+        out.update(bounds)
     if key.choices:
         out['enum'] = list(key.choices)
     if key.default is not None:

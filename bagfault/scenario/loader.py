@@ -15,7 +15,7 @@ from typing import Any
 
 from bagfault.errors import Problem, ScenarioError, one_line
 from bagfault.spec import sections
-from bagfault.spec.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
+from bagfault.spec.model import AssertionSpec, Dimension, Explore, ExploreFault, FaultSpec, InjectorSpec, Scenario
 from bagfault.spec.reader import Reader
 from bagfault.spec.system import parse_system
 from bagfault.spec.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
@@ -142,7 +142,51 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
             scenario.msg_paths = [Path(p) for p in paths]
     if 'fault_manager' in top.given:
         scenario.fault_manager = top.get('fault_manager', {})
+    if 'explore' in top:
+        scenario.explore = _explore(top.get('explore'), ('explore',), scenario, out)
     return scenario
+
+
+def _explore(node: dict[str, Any], path: PathKey, scenario: Scenario, out: _Collector) -> Explore | None:
+    """The fault space: its candidates with their dimensions (their values are checked by the validator)."""
+    read = out.reader().read(sections.EXPLORE, node, path)
+    if read is None:
+        return None
+    faults = [f for i, n in enumerate(read.get('faults', []))
+              if (f := _explore_fault(n, (*path, 'faults', i), scenario, out))]
+    return Explore(faults, read.get('max_faults', min(3, len(faults)) or 1), read.get('budget'), read.get('confirm'),
+                   read.get('resolution'), read.get('batch'))
+
+
+def _explore_fault(node: object, path: PathKey, scenario: Scenario, out: _Collector) -> ExploreFault | None:
+    from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
+
+    if not isinstance(node, dict):
+        out.add(path, 'a candidate fault must be a mapping')
+        return None
+    read = out.reader().read(sections.EXPLORE_FAULT, node, path)
+    assert read is not None
+    fault = ExploreFault(read.get('id', ''), read.get('injector_id', ''), report=read.get('report'), path=path)
+    for name in ('start', 'duration'):
+        value = read.get(name)
+        if isinstance(value, tuple):
+            fault.dimensions.append(Dimension(name, *value))
+            value = None
+        setattr(fault, name, value)
+    injector = scenario.injector(fault.injector_id)
+    cls = get_injector_type(injector.type) if injector is not None else None
+    reader = out.reader()
+    for key, value in read.get('config', {}).items():
+        field = cls.field(str(key)) if cls is not None else None
+        if not isinstance(value, list) or (field is not None and field.type == 'list'):  # (a field's operations)
+            fault.config[key] = value
+            continue
+        declared = sections.Key(str(key), 'dimension', '', minimum=None, maximum=None)
+        ok, ends = reader.dimension(declared, value, (*path, 'config', key))
+        if ok:
+            fault.dimensions.append(Dimension(f'config.{key}', ends[0], ends[1],
+                                              integer=field is not None and field.type == 'int'))
+    return fault
 
 
 def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | None:

@@ -22,7 +22,7 @@ from bagfault.yamlcpp import as_double
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
-    from bagfault.spec.model import FaultSpec, Scenario
+    from bagfault.spec.model import Explore, ExploreFault, FaultSpec, Scenario
 
 
 def validate_scenario(scenario: Scenario, out: _Collector) -> None:
@@ -38,6 +38,8 @@ def validate_scenario(scenario: Scenario, out: _Collector) -> None:
     _check_fault_manager(scenario, out)
     for assertion in scenario.assertions:
         _check_assertion(scenario, assertion, out)
+    if scenario.explore is not None:
+        _check_explore(scenario, scenario.explore, out)
 
 
 def _duplicates(scenario: Scenario, out: _Collector) -> None:
@@ -300,3 +302,73 @@ def _closest(word: str, candidates: list[str]) -> str | None:
 
     match = difflib.get_close_matches(word, candidates, n=1, cutoff=0.6)
     return match[0] if match else None
+
+
+def _check_explore(scenario: Scenario, explore: Explore, out: _Collector) -> None:
+    """The fault space: unique candidates on known injectors, config keys their type has, each dimension numeric
+    and within the key's schema range at both ends, at least one dimension, max_faults within the candidates."""
+    faults = {f.id for f in scenario.faults}
+    seen: set[str] = set()
+    for fault in explore.faults:
+        if fault.id in faults or fault.id in seen:
+            out.add((*fault.path, 'id'), f"fault id {fault.id!r} is taken: candidates and the scenario's faults each "
+                                         'need their own')
+        seen.add(fault.id)
+        _check_candidate(scenario, fault, out)
+    if explore.faults and not any(f.dimensions for f in explore.faults):
+        out.add(('explore', 'faults'), 'no dimension to explore: give at least one [low, high] (a numeric config '
+                                       'key, start or duration)')
+    if explore.faults and explore.max_faults > len(explore.faults):
+        out.add(('explore', 'max_faults'), f'{explore.max_faults} is more than the {len(explore.faults)} candidate '
+                                           'faults')
+
+
+def _check_candidate(scenario: Scenario, fault: ExploreFault, out: _Collector) -> None:
+    if not fault.injector_id:
+        return
+    injector = scenario.injector(fault.injector_id)
+    if injector is None:
+        known = ', '.join(dict.fromkeys(x.id for x in scenario.injectors)) or 'none'
+        out.add((*fault.path, 'injector_id'), f'unknown injector {fault.injector_id!r} (injectors: {known})')
+        return
+    cls = get_injector_type(injector.type)
+    assert cls is not None  # unknown types were left out
+    keys = [f.key for f in cls.fields]
+    corners: list[dict[str, Any]] = [{}, {}]  # the config with every dimension at its low, and at its high end
+    for key, value in fault.config.items():
+        field = cls.field(str(key))
+        if field is None:
+            hint = _closest(str(key), keys)
+            out.add((*fault.path, 'config', key), f'injector type {injector.type!r} has no config key {key!r}'
+                    + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+            continue
+        for corner in corners:
+            corner[key] = _coerce(field, value, (*fault.path, 'config', key), out)
+    for dimension in fault.dimensions:
+        if not dimension.name.startswith('config.'):
+            continue
+        key = dimension.name.removeprefix('config.')
+        path = (*fault.path, 'config', key)
+        field = cls.field(key)
+        if field is None:
+            hint = _closest(key, keys)
+            out.add(path, f'a dimension on {key!r}, a key injector type {injector.type!r} lacks'
+                          + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+            continue
+        if field.type not in ('double', 'int', 'special_float'):
+            out.add(path, f'{key!r} is a {field.type}: only a number can be a dimension')
+            continue
+        for corner, end, which in ((corners[0], dimension.low, 'low'), (corners[1], dimension.high, 'high')):
+            try:
+                corner[key] = field.coerce(round(end) if field.type == 'int' else end)
+            except FieldValueError as exc:
+                out.add(path, f'the {which} end {end:g}: {exc}')
+            if field.type == 'int' and end != round(end):
+                out.add(path, f'the {which} end {end:g} is not whole, and {key!r} takes whole numbers')
+    for corner in corners:
+        if all(v is not None for v in corner.values()):
+            try:
+                cls.check_fault(corner, injector.options)
+            except InjectorConfigError as exc:
+                out.add((*fault.path, 'config'), str(exc))
+                break

@@ -133,6 +133,62 @@ class AssertionSpec(Sealed):
     path: PathKey = ()
 
 
+@dataclass(frozen=True)
+class Dimension:
+    """A number of a candidate fault that `bagfault explore` draws from [low, high]; low is the weakest.
+
+    `name` is `start`, `duration` or `config.<key>`; an `integer` one (an int config key) takes whole values."""
+
+    name: str
+    low: float
+    high: float
+    integer: bool = False
+
+    @property
+    def span(self) -> float:
+        """high - low."""
+        return self.high - self.low
+
+
+@dataclass
+class ExploreFault(Sealed):
+    """A candidate fault of an explore space: fixed values and dimensions."""
+
+    id: str
+    injector_id: str
+    config: dict[str, Any] = field(default_factory=dict)  # the fixed config values, as written
+    dimensions: list[Dimension] = field(default_factory=list)
+    start: float | None = 0.0  # fixed start (None: a dimension)
+    duration: float | None = None  # fixed duration (None: to the end, or a dimension)
+    report: Any = None
+    path: PathKey = ()
+
+    def dimension(self, name: str) -> Dimension | None:
+        """The dimension of this name, if it is one."""
+        return next((d for d in self.dimensions if d.name == name), None)
+
+
+@dataclass
+class Explore(Sealed):
+    """The `explore:` section: candidate faults and how the search spends its runs."""
+
+    faults: list[ExploreFault]
+    max_faults: int
+    budget: int
+    confirm: int | None  # None: 1 offline, 2 in closed loop
+    resolution: float
+    batch: int
+
+    @property
+    def ids(self) -> set[str]:
+        """The candidate faults' ids."""
+        return {f.id for f in self.faults}
+
+    def fault(self, fault_id: str) -> ExploreFault | None:
+        """The candidate of this id."""
+        return next((f for f in self.faults if f.id == fault_id), None)
+
+
 class _Index:
     """A scenario's injectors and faults by id, for the lists they were made from (as they were then)."""
 
@@ -165,6 +221,7 @@ class Scenario(Sealed):
     skipped_faults: list[str] = field(default_factory=list)  # faults of injectors of a type nothing provides
     msg_paths: list[Path] = field(default_factory=list)  # folders of .msg/.idl definitions (relative to the file)
     system: SystemUnderTest | None = None  # `system_under_test:`, what `bagfault test` starts
+    explore: Explore | None = None  # `explore:`, the fault space `bagfault explore` searches
     bags: list[Path] = field(default_factory=list)  # `bags:`, what a scenario file run by pytest plays
     source: Path | None = None
     text: str = ''
@@ -175,6 +232,8 @@ class Scenario(Sealed):
         """The scenario and every record in it, read only from now on."""
         records: list[Sealed] = [*self.injectors, *self.faults, *self.assertions]
         records += [x for f in self.faults for x in (f.repeat, f.after) if x is not None]
+        if self.explore is not None:
+            records += [self.explore, *self.explore.faults]
         for record in records:
             record.seal()
         super().seal()

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from bagfault.yamlcpp import as_bool, as_double, as_int
@@ -132,6 +132,8 @@ class Reader:
             return True, read
         if kind in ('number', 'integer', 'seconds'):
             return self._number(key, value, path, anchor=anchor)
+        if kind == 'dimension':
+            return self.dimension(key, value, path)
         if kind == 'list' and not isinstance(value, list):
             self.problem(path, f'must be {key.what or "a list"}')
             return False, None
@@ -182,6 +184,31 @@ class Reader:
             return False, None
         assert number is not None
         return True, int(number) if integer else float(number)
+
+    def dimension(self, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
+        """A number, or a `[low, high]` pair `bagfault explore` draws from (low the weakest; a tuple): each end
+        a number of the key's range, low below high."""
+        plain = replace(key, type='seconds' if key.unit.startswith('seconds') else 'number')
+        if not isinstance(value, list):
+            if isinstance(value, (dict, str)) or value is None:
+                self.problem(path, f'{value!r} is not a number or a [low, high] range')
+                return False, None
+            return self._number(plain, value, path, anchor=False)
+        if len(value) != 2:
+            self.problem(path, f'{value!r} is not a [low, high] range: give two numbers')
+            return False, None
+        ends = [self._number(plain, end, (*path, i), anchor=False) for i, end in enumerate(value)]
+        if not all(ok for ok, _ in ends):
+            return False, None
+        low, high = (end for _, end in ends)
+        if low == high:
+            self.problem(path, f'[{low:g}, {high:g}] is an empty range: write {low:g} for a fixed value')
+            return False, None
+        if low > high:
+            self.problem(path, f'[{low:g}, {high:g}] is inverted: low, the weakest value, comes first and is the '
+                               'smaller')
+            return False, None
+        return True, (low, high)
 
     def raw_text(self, path: PathKey, value: object) -> str:
         """The scalar as the file writes it."""

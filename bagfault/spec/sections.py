@@ -18,7 +18,8 @@ from bagfault.units import MAX_SECONDS
 
 Reads = Literal['anchor', 'caret', 'medkit', 'yaml']
 Unknown = Literal['warn', 'error', 'ignore']
-KeyType = Literal['string', 'number', 'integer', 'boolean', 'list', 'mapping', 'string_or_list', 'seconds', 'any']
+KeyType = Literal['string', 'number', 'integer', 'boolean', 'list', 'mapping', 'string_or_list', 'seconds', 'any',
+                  'dimension']  # dimension: a number, or [low, high] that `bagfault explore` draws from
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,8 @@ SCENARIO = Section('scenario', '(top level)', 'A scenario file: injectors, fault
     Key('fault_manager', 'mapping', "ros2_medkit's fault manager on bag time.", section='fault_manager'),
     Key('system_under_test', 'mapping', 'What `bagfault test` starts and judges.', section='system_under_test',
         what='a mapping with at least a command'),
+    Key('explore', 'mapping', 'A fault space `bagfault explore` searches for failures (`run` and `test` refuse a '
+        'file with one).', section='explore'),
 ), reads='anchor', unknown='warn', noun='top-level')
 INJECTOR = Section('injector', 'injectors[]', "Which topic (or service), which type; plus its type's options.", (
     Key('id', 'string', 'Unique name; faults refer to it.', required=True),
@@ -284,9 +287,37 @@ SEARCH = Section('search', 'search', 'Bisection of one parameter.', (
         maximum=100),
 ))
 
+EXPLORE = Section('explore', 'explore', 'The fault space of `bagfault explore`: candidate faults whose numbers may '
+                  'be dimensions, and how the search spends its runs.', (
+    Key('faults', 'list', 'Candidate faults; each run draws 1 to max_faults of them.', required=True,
+        section='explore_fault', what='a list of candidate faults'),
+    Key('max_faults', 'integer', 'Most candidates drawn into one run (default: 3, or fewer when there are fewer).',
+        minimum=1, maximum=16),
+    Key('budget', 'integer', 'Runs in all, confirmations, shrinking and replays included (`--budget` overrides).',
+        default=300, minimum=1, maximum=100_000),
+    Key('confirm', 'integer', 'A run counts as failing when it fails this many runs in a row (default: 1 offline, '
+        'where runs are byte-identical; 2 in closed loop).', minimum=1, maximum=20),
+    Key('resolution', 'number', "Shrinking stops this close to a threshold, as a fraction of the dimension's range.",
+        default=0.01, minimum=0, exclusive=True, maximum=0.5),
+    Key('batch', 'integer', 'Runs the search proposes at a time: results depend on it, never on `--workers`.',
+        default=4, minimum=1, maximum=256),
+), noun='explore')
+EXPLORE_FAULT = Section('explore_fault', 'explore.faults[]', 'A candidate fault: a fault whose numbers may be '
+                        'dimensions, `[low, high]` with low the weakest value.', (
+    Key('id', 'string', "Unique name (among the scenario's faults too); assertions may name it.", required=True),
+    Key('injector_id', 'string', 'The injector it acts on.', required=True),
+    Key('config', 'mapping', "Its injector type's config keys: a value, or `[low, high]` for a numeric key.",
+        default={}, what='a mapping of config keys to values or [low, high]'),
+    Key('start', 'dimension', 'Active from this time, or `[low, high]`.', unit=SECONDS, default=0.0, minimum=0,
+        maximum=MAX_SECONDS),
+    Key('duration', 'dimension', 'Active this long, or `[low, high]` (default: to the end of the bag).',
+        unit='seconds', minimum=0, exclusive=True, maximum=MAX_SECONDS),
+    Key('report', 'mapping', 'A fault manager report while it is active.', section='report'),
+), noun='candidate fault')
+
 SCENARIO_SECTIONS = (SCENARIO, INJECTOR, TOPIC, TRIGGER_SERVICE, FAULT, REPEAT, AFTER, REPORT, ASSERTION, SYSTEM,
                      READY, FAULT_MANAGER, OVERRIDE, DIAGNOSTICS, CONDITION, WHEN, SNAPSHOTS, CLEAR, CORRELATION,
-                     RULE)
+                     RULE, EXPLORE, EXPLORE_FAULT)
 UNTIL = Section('until', 'search.until', 'What counts as holding.', (
     Key('assertion', 'string', 'An assertion id of the scenario.', required=True),
     Key('state', 'string', 'The verdict that counts as holding.', default='passed', choices=('passed', 'failed')),

@@ -11,6 +11,7 @@ from support.helpers import FIXTURES, NS, make_bag, run_inline
 from bagfault import api
 from bagfault.demo.synthetic import DEFAULT_START as START
 from bagfault.errors import AssertionSetupError
+from bagfault.report.model import build
 from bagfault.scenario import ScenarioError, parse_scenario
 
 BASE = textwrap.dedent("""
@@ -240,8 +241,6 @@ def test_margins_of_failing_assertions(tmp_path):
 
 
 def test_margins_in_the_json_report(tmp_path):
-    from bagfault.report.model import build
-
     scenario = parse_scenario("""
 injectors: [{id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}]
 assertions:
@@ -251,3 +250,16 @@ assertions:
     (entry,) = json.loads(json.dumps(build(result)))['assertions']
     assert entry['margin'] == pytest.approx(0.15) and entry['margin_unit'] == 's'
     assert entry['value'] == pytest.approx(0.1) and entry['unit'] == 's'
+
+
+def test_a_value_that_is_not_finite_leaves_the_json_report_valid(tmp_path):
+    """A field_range failing on inf (the blind sector) measured a value JSON cannot hold: the report says null (the
+    message keeps inf) and renders as strict JSON, as every report must."""
+    from bagfault.report.json_report import render
+
+    results, out = run(tmp_path, """
+        - {id: finite, type: field_range, topic: /scan, field: 'ranges[*]', min: 0.0, max: 20.0, during: lidar_blind}
+    """)
+    assert results['finite'].state == 'failed' and '= inf' in results['finite'].message
+    (entry,) = json.loads(render(build(out)))['assertions']
+    assert entry['value'] is None and entry['margin'] is None

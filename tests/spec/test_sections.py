@@ -33,6 +33,8 @@ SCENARIO_BASE = {
     'fault_manager': {'overrides': [{'source': '/x'}], 'diagnostics': {'codes': {}},
                       'conditions': [{'topic': '/a', 'when': {'field': 'x', 'above': 1.0}, 'code': 'C'}],
                       'snapshots': {}, 'clear': [{'code': 'C', 'at': 1.0}]},
+    'explore': {'faults': [{'id': 'x', 'injector_id': 'i', 'start': [0.0, 1.0],
+                            'config': {'drop_probability': [0.0, 1.0]}}]},
 }
 PLACES = {  # each section and where it sits in SCENARIO_BASE
     'scenario': (), 'injector': ('injectors', 0), 'trigger_service': ('injectors', 1, 'trigger_service'),
@@ -42,6 +44,7 @@ PLACES = {  # each section and where it sits in SCENARIO_BASE
     'override': ('fault_manager', 'overrides', 0), 'diagnostics': ('fault_manager', 'diagnostics'),
     'condition': ('fault_manager', 'conditions', 0), 'when': ('fault_manager', 'conditions', 0, 'when'),
     'snapshots': ('fault_manager', 'snapshots'), 'clear': ('fault_manager', 'clear', 0),
+    'explore': ('explore',), 'explore_fault': ('explore', 'faults', 0),
 }
 
 
@@ -128,6 +131,10 @@ def test_every_scenario_bagfault_ships_passes_the_json_schema(path: Path) -> Non
      'faults: [{id: f, injector_id: i, config: {drop_probability: 2.0}}]\n', '2.0'),
     ('injector: {id: i, type: imu, input_topic: /a, output_topic: /b, on_malformed: ignore}\nfaults: []\n',
      'ignore'),
+    ('injector: {id: i, type: imu, input_topic: /a, output_topic: /b}\n'
+     'explore: {faults: [{id: x, injector_id: i, start: [0, 1, 2]}]}\n', '[0, 1, 2]'),
+    ('injector: {id: i, type: imu, input_topic: /a, output_topic: /b}\n'
+     'explore: {faults: [{id: x, injector_id: i, duration: [0, 1]}]}\n', '0'),
 ])
 def test_the_json_schema_flags_what_bagfault_warns_about_or_refuses(text: str, where: str, tmp_path: Path) -> None:
     path = tmp_path / 'bad.yaml'

@@ -1,0 +1,450 @@
+"""`bagfault explore`: search a fault space for failures, shrink each to its minimal cause, replay it.
+
+The run loop works in rounds: each active shrink asks for its next run, each
+shrunk failure for its replay, and the search fills the round up to the
+space's `batch`; the round runs on the campaign engines (a local pool or
+Ray, one process and, in closed loop, one leased ROS domain per run) and its
+outcomes are taken in the order of the round. So what is run depends on the
+outcomes alone, never on how many workers ran them: offline, where runs are
+byte-identical, the same seed gives the same runs and the same files for
+any `--workers`. Run 0 is the baseline (no fault). The search stops
+proposing when the budget left is what the shrinks in progress may need.
+
+DIR/runs.jsonl gets each run's record as it finishes; `--resume` takes the
+records whose scenario is still the one the loop asks for, so a stopped
+exploration continues to the same result. At the end: explore.json,
+report.html and failures/ (each failure's original and minimal scenario,
+the faulty bag of the minimal's replay).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, TextIO
+
+from bagfault import __version__
+from bagfault.campaign.engines import make_engine
+from bagfault.errors import ExploreError
+from bagfault.explore.candidate import Candidate, digest, dump, relocated, scenario_data
+from bagfault.explore.draw import Search, Strategy
+from bagfault.explore.records import Failure, Outcome, Purpose, RunRecord
+from bagfault.explore.shrink import Shrinker, ShrinkMode
+from bagfault.io.outputs import Protected, check_output, write_atomic
+from bagfault.progress import _clock
+from bagfault.spec.yamlnodes import load_located
+
+if TYPE_CHECKING:
+    from collections.abc import Generator, Sequence
+
+    from bagfault.spec.model import Explore, Scenario
+
+RESERVE = 30  # runs the search leaves to each shrink in progress
+RUN_TIMEOUT = 1800.0  # seconds one run may take
+FILES = ('explore.json', 'report.html')
+
+
+@dataclass
+class ExploreOptions:
+    """How to explore (the command line's options; `search` and `shrink` are the benchmark's comparisons)."""
+
+    budget: int | None = None  # None: the space's
+    seed: int | None = None  # None: the scenario's, else 0
+    workers: int | None = None
+    ray: str | None = None  # None: the local pool; '': a local Ray instance; else a cluster address
+    rate: float = 1.0
+    resume: bool = False
+    force: bool = False
+    save_failures: Path | None = None
+    search: Strategy = 'guided'
+    shrink: ShrinkMode = 'full'
+
+
+@dataclass
+class ExploreResult:
+    """What an exploration found."""
+
+    directory: Path
+    mode: Literal['run', 'test']
+    budget: int
+    seed: int
+    runs: list[RunRecord]
+    failures: list[Failure]
+    engine: str
+    ran: int  # runs made now (the others came from runs.jsonl)
+    saved: list[Path] = field(default_factory=list)
+
+    @property
+    def failed(self) -> bool:
+        """A failure was found and shrunk: exit code 1."""
+        return any(f.state == 'shrunk' for f in self.failures)
+
+
+@dataclass
+class _Request:
+    candidate: Candidate
+    purpose: Purpose
+    failure: Failure | None = None
+
+
+class ExploreProgress:
+    """A one-line bar on a terminal: runs of the budget, failures, the closest margin so far."""
+
+    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.began = time.monotonic()
+        self.shown = False
+
+    def update(self, used: int, budget: int, failures: int, best: float | None) -> None:
+        """Redraw."""
+        if not self.enabled:
+            return
+        width = 24
+        filled = int(width * used / budget) if budget else width
+        elapsed = time.monotonic() - self.began
+        eta = f'  ETA {_clock(elapsed / used * (budget - used))}' if used and used < budget else ''
+        margin = f'  closest {best:.2f} of the baseline margin' if best is not None else ''
+        self.stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {used}/{budget} runs  {failures} '
+                          f'failure{"s" if failures != 1 else ""}{margin}{eta}\x1b[K')
+        self.stream.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        """End the line."""
+        if self.enabled and self.shown:
+            self.stream.write('\n')
+            self.stream.flush()
+
+
+class _Folder:
+    """DIR: runs.jsonl (each run as it ends), explore.json, report.html, failures/."""
+
+    def __init__(self, directory: Path, scenario: Scenario, bags: Sequence[Path]) -> None:
+        self.directory = directory
+        self.failures = directory / 'failures'
+        self.log = directory / 'runs.jsonl'
+        self.read = [('the scenario', scenario.source)] if scenario.source is not None else []
+        self.read += [('the bag', bag) for bag in bags]
+
+    def check(self, resume: bool, force: bool) -> dict[int, RunRecord]:
+        """A folder that holds no exploration (unless resuming) and whose files replace nothing they must not;
+        the records a resume starts from."""
+        if self.directory.exists() and not self.directory.is_dir():
+            raise ExploreError(f"{self.directory}: not a folder (-o names the exploration's folder)")
+        if self.log.exists() and not resume:
+            raise ExploreError(f'{self.directory}: holds an exploration already (runs.jsonl); --resume continues it, '
+                               'or choose another -o')
+        protected = Protected.of([(name, path) for name, path in self.read])
+        where = self.directory.resolve()
+        for name, path in self.read:
+            if path.is_dir() and (where == path.resolve() or path.resolve() in where.parents):
+                raise ExploreError(f'{self.directory}: would be inside {name} {path}; choose another -o')
+        if self.directory.is_dir():
+            for name in FILES:
+                check_output(self.directory / name, 'an exploration file', protected, force=force or resume)
+        stored: dict[int, RunRecord] = {}
+        if resume and self.log.exists():
+            for line in self.log.read_text(encoding='utf-8').splitlines():
+                with contextlib.suppress(ValueError, KeyError, TypeError):  # a line cut short by a kill
+                    record = RunRecord.from_json(json.loads(line))
+                    stored[record.index] = record
+        return stored
+
+    def open(self) -> None:
+        """Make the folders."""
+        try:
+            self.failures.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ExploreError(f'{self.directory}: cannot make the folder: {exc.strerror}') from None
+
+    def keep(self, records: Sequence[RunRecord]) -> None:
+        """runs.jsonl as these records (rewritten at a resume that diverged, appended otherwise)."""
+        write_atomic(self.log, ''.join(json.dumps(r.to_json(), sort_keys=True) + '\n' for r in records))
+
+    def append(self, record: RunRecord) -> None:
+        """One more finished run."""
+        with self.log.open('a', encoding='utf-8') as stream:
+            stream.write(json.dumps(record.to_json(), sort_keys=True) + '\n')
+
+
+class Explorer:
+    """One exploration: the loop of the module's docstring."""
+
+    def __init__(self, scenario: Scenario, bags: Sequence[Path], directory: Path, options: ExploreOptions,
+                 progress: ExploreProgress | None = None) -> None:
+        if scenario.explore is None:
+            raise ExploreError(f'{scenario.name}: no explore: section (the fault space to search)')
+        if not bags:
+            raise ExploreError(f'{scenario.name}: no bag given, and the scenario names none under `bags:`')
+        self.scenario = scenario
+        self.space: Explore = scenario.explore
+        self.bags = [Path(b) for b in bags]
+        self.options = options
+        self.mode: Literal['run', 'test'] = 'test' if scenario.system is not None else 'run'
+        self.confirm = self.space.confirm or (2 if self.mode == 'test' else 1)
+        self.budget = options.budget or self.space.budget
+        if self.budget < 1:
+            raise ExploreError(f'--budget {self.budget}: must be 1 or more')
+        self.seed = options.seed if options.seed is not None else scenario.seed or 0
+        self.source = (scenario.source or Path('space.yaml')).resolve()
+        self.base: dict[str, Any] = load_located(scenario.text).data
+        self.folder = _Folder(directory, scenario, self.bags)
+        self.progress = progress or ExploreProgress(enabled=False)
+        self.search = Search(self.space, self.seed, options.search)
+        self.runs: list[RunRecord] = []
+        self.failures: list[Failure] = []
+        self.shrinks: dict[int, tuple[Generator[Candidate, tuple[int, Outcome], None], Shrinker]] = {}
+        self.waiting: dict[int, Candidate] = {}  # failure number -> the candidate its shrink asks to run
+        self.replays: list[Failure] = []
+        self.search_runs = 0
+        self.ran = 0
+
+    # -- the loop --------------------------------------------------------------------------------------------
+    def run(self) -> ExploreResult:
+        """Explore until the budget is spent or nothing is left to do; write the results."""
+        stored = self.folder.check(self.options.resume, self.options.force)
+        engine = make_engine(self.options.workers, self.options.ray)
+        description = getattr(engine, 'description', type(engine).__name__)
+        with contextlib.closing(engine), contextlib.closing(self.progress), \
+                tempfile.TemporaryDirectory(prefix='bagfault-explore-') as scratch:
+            self.folder.open()
+            stored = {i: stored[i] for i in range(len(stored)) if i in stored}  # up to the first gap
+            try:
+                while True:
+                    requests = self._round()
+                    if not requests:
+                        break
+                    stored = self._run_round(engine, requests, stored, Path(scratch))
+            finally:
+                self._write(description)
+        return ExploreResult(self.folder.directory, self.mode, self.budget, self.seed, self.runs, self.failures,
+                             description, self.ran, self._save())
+
+    def _round(self) -> list[_Request]:
+        """The next round's runs: the baseline first; then shrink steps, replays, and fresh search."""
+        left = self.budget - len(self.runs)
+        if not self.runs:
+            return [_Request(Candidate(()), 'baseline')]
+        if self.waiting and left <= len(self.waiting):  # what is left replays what each shrink has so far
+            self._cut_short()
+        if left <= 0:
+            return []
+        requests = [_Request(f.minimal, 'replay', f) for f in self.replays[:left] if f.minimal is not None]
+        del self.replays[:left]
+        # the shrinks of the smallest failures first, at most half a round of them; each keeps a run for its replay
+        shrinking = sorted((self.failures[n - 1] for n in self.waiting), key=lambda f: (len(f.assertions), f.number))
+        for failure in shrinking[:max(1, self.space.batch // 2)]:
+            if len(requests) >= left - len(self.waiting):
+                break
+            shrinker = self.shrinks[failure.number][1]
+            requests.append(_Request(self.waiting[failure.number], shrinker.purpose, failure))
+        reserve = RESERVE * len(self.waiting)
+        while len(requests) < self.space.batch and len(self.runs) + len(requests) < self.budget - reserve:
+            candidate, purpose = self.search.propose()
+            requests.append(_Request(candidate, purpose))
+        return requests
+
+    def _run_round(self, engine: Any, requests: list[_Request], stored: dict[int, RunRecord],
+                   scratch: Path) -> dict[int, RunRecord]:
+        first = len(self.runs)
+        specs: dict[int, dict[str, Any]] = {}
+        texts: list[tuple[str, Path]] = []
+        for number, request in enumerate(requests):
+            text, source = self._scenario(request)
+            texts.append((text, source))
+            index = first + number
+            kept = stored.get(index)
+            if kept is not None and (kept.scenario_sha256, kept.purpose) == (digest(text), request.purpose):
+                continue
+            if any(i >= index for i in stored):  # the resumed log diverges here: what follows is run again
+                stored = {i: r for i, r in stored.items() if i < index}
+                self.folder.keep([*self.runs, *(stored[i] for i in range(first, index))])
+            specs[index] = self._spec(text, source, self._output(request, index, scratch))
+        results: dict[int, dict[str, Any]] = {}
+
+        def done(position: int, result: dict[str, Any]) -> None:
+            index = list(specs)[position]
+            results[index] = result
+            request = requests[index - first]
+            record = self._record(index, request, texts[index - first][0], Outcome.of(result), result.get('seconds'))
+            self.folder.append(record)
+
+        if specs:
+            engine.run(list(specs.values()), done)
+            self.ran += len(specs)
+        for number, request in enumerate(requests):
+            index = first + number
+            if index in results:
+                result = results[index]
+                record = self._record(index, request, texts[number][0], Outcome.of(result), result.get('seconds'))
+            else:
+                record = stored[index]
+            self._take(record, request)
+            output = scratch / f'{index}.mcap'
+            output.unlink(missing_ok=True)
+        return stored
+
+    def _record(self, index: int, request: _Request, text: str, outcome: Outcome,
+                seconds: float | None) -> RunRecord:
+        return RunRecord(index, request.purpose, request.candidate, digest(text), self.seed, outcome, seconds,
+                         request.failure.name if request.failure is not None else None)
+
+    # -- what a run tells ------------------------------------------------------------------------------------
+    def _take(self, record: RunRecord, request: _Request) -> None:
+        self.runs.append(record)
+        outcome = record.outcome
+        if request.purpose in ('search', 'refine'):
+            self.search_runs += 1
+        known = {f.assertions: f for f in self.failures}
+        if request.purpose == 'replay':
+            assert request.failure is not None
+            request.failure.replay = outcome
+            request.failure.shrink_runs += 1
+        elif outcome.status == 'failed' and outcome.failing not in known:
+            self._found(record)
+        elif outcome.status == 'failed' and request.purpose in ('search', 'refine'):
+            known[outcome.failing].hits += 1
+        if request.failure is not None and request.purpose != 'replay':
+            self._step(request.failure, record)
+        self.search.observe(record, [f.assertions for f in self.failures])
+        self.progress.update(len(self.runs), self.budget, sum(f.state != 'unconfirmed' for f in self.failures),
+                             self.search.best())
+
+    def _found(self, record: RunRecord) -> None:
+        failure = Failure(len(self.failures) + 1, record.outcome.failing, record.index, self.search_runs,
+                          record.candidate)
+        self.failures.append(failure)
+        self._write_scenario(f'{failure.name}.original.yaml', record.candidate,
+                             f'bagfault explore: {failure.name}, as first found (run {record.index})')
+        shrinker = Shrinker(self.space, failure, record.outcome, confirm=self.confirm, mode=self.options.shrink,
+                            composite=lambda: self._composite(failure))
+        steps = shrinker.steps()
+        self.shrinks[failure.number] = (steps, shrinker)
+        self._advance(failure, lambda: next(steps))
+
+    def _composite(self, failure: Failure) -> str:
+        """'F3 and F4' when the failure's assertions are the union of those of smaller failures found, each
+        confirmed ('' otherwise): two causes at once, each shrunk on its own."""
+        parts = [f for f in self.failures if f is not failure and f.assertions < failure.assertions
+                 and f.state != 'unconfirmed']
+        covered = frozenset().union(*(f.assertions for f in parts)) if parts else frozenset()
+        return ' and '.join(f.name for f in parts) if parts and covered == failure.assertions else ''
+
+    def _step(self, failure: Failure, record: RunRecord) -> None:
+        steps, _ = self.shrinks[failure.number]
+        self._advance(failure, lambda: steps.send((record.index, record.outcome)))
+
+    def _advance(self, failure: Failure, step: Any) -> None:
+        try:
+            self.waiting[failure.number] = step()
+        except StopIteration:
+            self.waiting.pop(failure.number, None)
+            self._shrunk(failure)
+
+    def _shrunk(self, failure: Failure) -> None:
+        if failure.state != 'shrunk' or failure.minimal is None:
+            return
+        self._write_scenario(f'{failure.name}.min.yaml', failure.minimal,
+                             f'bagfault explore: {failure.name}, its minimal cause: fails '
+                             f'{", ".join(sorted(failure.assertions))}\n'
+                             f'faults: {failure.minimal.describe()}')
+        self.replays.append(failure)
+
+    def _cut_short(self) -> None:
+        """The budget is spent: each shrink in progress ends with the smallest candidate confirmed so far."""
+        for number in sorted(self.waiting):
+            failure = self.failures[number - 1]
+            failure.minimal = self.shrinks[number][1].current
+            failure.state = 'shrunk'
+            failure.note = 'the budget was spent before the shrink ended: the smallest candidate confirmed so far'
+            self._write_scenario(f'{failure.name}.min.yaml', failure.minimal,
+                                 f'bagfault explore: {failure.name}, its smallest cause when the budget was spent\n'
+                                 f'faults: {failure.minimal.describe()}')
+            self.replays.append(failure)
+        self.waiting.clear()
+
+    # -- scenarios and job specs -----------------------------------------------------------------------------
+    def _scenario(self, request: _Request) -> tuple[str, Path]:
+        """The scenario text of a request, and the file its relative paths are relative to."""
+        if request.purpose == 'replay':
+            assert request.failure is not None
+            path = self.folder.failures / f'{request.failure.name}.min.yaml'
+            return path.read_text(encoding='utf-8'), path.resolve()
+        data = scenario_data(self.base, self.space, request.candidate)
+        data['seed'] = self.seed
+        return dump(data), self.source
+
+    def _spec(self, text: str, source: Path, output: Path | None) -> dict[str, Any]:
+        return {'mode': self.mode, 'scenario_text': text, 'scenario_source': str(source),
+                'bag': str(self.bags[0].resolve()), 'bags': [str(b.resolve()) for b in self.bags], 'seed': self.seed,
+                'remote': None, 'digests': [], 'output': str(output) if output is not None else None,
+                'timeout': RUN_TIMEOUT, 'rate': self.options.rate}
+
+    def _output(self, request: _Request, index: int, scratch: Path) -> Path | None:
+        if request.purpose == 'replay':
+            assert request.failure is not None
+            return (self.folder.failures / f'{request.failure.name}.mcap').resolve()
+        return scratch / f'{index}.mcap' if self.mode == 'run' else None
+
+    def _write_scenario(self, name: str, candidate: Candidate, header: str) -> None:
+        path = self.folder.failures / name
+        data = relocated(scenario_data(self.base, self.space, candidate), self.source, path)
+        data['seed'] = self.seed
+        write_atomic(path, dump(data, f'{header}\nreplay: bagfault {self.mode} {path.name}'))
+
+    def _save(self) -> list[Path]:
+        """--save-failures: each minimal scenario where pytest runs it (test_<name>.bagfault.yaml)."""
+        target = self.options.save_failures
+        if target is None:
+            return []
+        target.mkdir(parents=True, exist_ok=True)
+        saved = []
+        for failure in self.failures:
+            if failure.minimal is None:
+                continue
+            path = target / f'test_{failure.name}.bagfault.yaml'
+            check_output(path, '--save-failures file', self.folder.read, force=self.options.force)
+            data = relocated(scenario_data(self.base, self.space, failure.minimal), self.source, path)
+            data['seed'] = self.seed
+            write_atomic(path, dump(data, f'bagfault explore: {failure.name}, a regression test (fails until the '
+                                          f'cause is fixed)\nfaults: {failure.minimal.describe()}'))
+            saved.append(path)
+        return saved
+
+    # -- results ---------------------------------------------------------------------------------------------
+    def _write(self, engine: str) -> None:
+        from bagfault.explore.report import render_report  # noqa: PLC0415
+
+        document = self.describe(engine)
+        write_atomic(self.folder.directory / 'explore.json', json.dumps(document, indent=1, sort_keys=True) + '\n')
+        write_atomic(self.folder.directory / 'report.html', render_report(document))
+
+    def describe(self, engine: str) -> dict[str, Any]:
+        """explore.json (keys documented in docs/modes/explore.md)."""
+        space = self.space
+        return {
+            'tool': {'name': 'bagfault', 'version': __version__}, 'command': 'explore',
+            'scenario': str(self.scenario.source or self.scenario.name), 'mode': self.mode,
+            'bags': [str(b) for b in self.bags], 'seed': self.seed, 'budget': self.budget, 'runs_used': len(self.runs),
+            'confirm': self.confirm, 'batch': space.batch, 'resolution': space.resolution,
+            'max_faults': space.max_faults, 'search': self.options.search, 'shrink': self.options.shrink,
+            'rate': self.options.rate if self.mode == 'test' else None, 'engine': engine,
+            'space': [{'id': f.id, 'injector_id': f.injector_id,
+                       'dimensions': [{'name': d.name, 'low': d.low, 'high': d.high, 'integer': d.integer}
+                                      for d in f.dimensions]} for f in space.faults],
+            'assertions': sorted({k for r in self.runs for k in r.outcome.margins}),
+            'failures': [f.to_json() for f in self.failures],
+            'runs': [r.to_json() for r in self.runs],
+        }
+
+
+def explore(scenario: Scenario, bags: Sequence[Path], directory: Path, options: ExploreOptions,
+            progress: ExploreProgress | None = None) -> ExploreResult:
+    """Explore a scenario's fault space (see the module's docstring)."""
+    return Explorer(scenario, bags, directory, options, progress).run()

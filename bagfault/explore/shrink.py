@@ -1,0 +1,157 @@
+"""Shrinking a failure to its minimal cause, one run at a time.
+
+In order: confirm the original (it must fail `confirm` runs in a row); the
+fewest faults (ddmin over the fault set: drop one fault at a time while the
+rest still fails, until no single fault can go); then each config dimension
+toward its weakest value, each duration toward the shortest, each start as
+late as the failure allows, each by trying the end of its range first and
+else bisecting to `resolution` of its range. A step is kept only when its
+candidate fails `confirm` runs in a row with exactly the failure's set of
+assertions; a run that could not run keeps nothing. The search is a
+generator: it yields the candidate to run and is sent (run index, outcome),
+so the driver runs the steps of several failures side by side, in rounds,
+and the result depends only on the outcomes, never on how many workers ran
+them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Generator
+from typing import TYPE_CHECKING, Literal
+
+from bagfault.explore.candidate import Candidate, quantize
+from bagfault.explore.records import ShrinkStep
+
+if TYPE_CHECKING:
+    from bagfault.explore.records import Failure, Outcome, Purpose
+    from bagfault.spec.model import Dimension, Explore
+
+ShrinkMode = Literal['full', 'faults']  # faults: ddmin over the fault set only (the benchmark's comparison)
+Runs = Generator[Candidate, tuple[int, 'Outcome'], bool]
+
+
+class Shrinker:
+    """The shrink of one failure: `steps()` yields candidates to run and takes their outcomes."""
+
+    def __init__(self, space: Explore, failure: Failure, found: Outcome, *, confirm: int, mode: ShrinkMode = 'full',
+                 composite: Callable[[], str] = lambda: '') -> None:
+        self.space = space
+        self.failure = failure
+        self.confirm = confirm
+        self.mode = mode
+        self.composite = composite  # '' or which other failures this one's assertions are all of
+        self.current = failure.original
+        self.latest: Outcome | None = found  # the outcome of the last run
+        self.kept: Outcome | None = found  # the outcome of the last run of `current`
+        self.purpose: Purpose = 'confirm'  # what the candidate it asks for now is run for
+    def steps(self) -> Generator[Candidate, tuple[int, Outcome], None]:
+        """Every run of the shrink; at the end `failure.minimal` holds the smallest candidate that failed."""
+        failure = self.failure
+        if not (yield from self._fails(self.current, 'confirm the original', already=1)):
+            failure.state, failure.note = 'unconfirmed', (f'did not fail {self.confirm} runs in a row the same way: '
+                                                          'not shrunk (flaky, or at the edge of a threshold)')
+            return
+        yield from self._fewest_faults()
+        composite = self.composite()
+        if composite:
+            failure.note = (f'its assertions are those of {composite} together: its faults are shrunk, not its '
+                            'dimensions')
+        if self.mode == 'full' and not composite:
+            for phase in ('config', 'duration', 'start'):
+                for fault_id in self.current.ids:
+                    for dimension in self._dimensions(fault_id, phase):
+                        yield from self._toward(fault_id, dimension)
+        failure.minimal, failure.state = self.current, 'shrunk'
+
+    def _dimensions(self, fault_id: str, phase: str) -> list[Dimension]:
+        fault = self.space.fault(fault_id)
+        assert fault is not None
+        return [d for d in fault.dimensions if (d.name.startswith('config.') if phase == 'config' else d.name == phase)]
+
+    def _fewest_faults(self) -> Generator[Candidate, tuple[int, Outcome], None]:
+        """ddmin at the granularity of single faults: drop each in turn; keep a drop that still fails."""
+        dropped = True
+        while dropped and len(self.current.faults) > 1:
+            dropped = False
+            for fault_id in self.current.ids:
+                trial = self.current.without(fault_id)
+                if (yield from self._fails(trial, f'without {fault_id}')):
+                    self.current, dropped = trial, True
+                    break
+
+    def _toward(self, fault_id: str, dimension: Dimension) -> Generator[Candidate, tuple[int, Outcome], None]:
+        """Move one dimension toward its weakest end (the latest start): the end itself first; else narrow the
+        bracket between the value that fails and the one that passes to `resolution` of the range: a strength (a
+        config key) at the point where the margin, taken as linear between the two, crosses zero (just on either
+        side of it, so a margin that is linear settles in two runs), else halfway (a time, no margins, or a
+        previous guess that did not halve the bracket)."""
+        name = dimension.name
+        target = dimension.high if name == 'start' else dimension.low
+        failing = self.current.drawn(fault_id).value(name)
+        if failing == target:
+            return
+        label = f'{fault_id}.{name.removeprefix("config.")}'
+        at_failing = self.margin(self.kept)
+        if (yield from self._try(fault_id, name, target, f'{label} {failing:g} -> {target:g}')):
+            return
+        passing, at_passing = target, self.margin(self.latest)
+        limit = self.space.resolution * dimension.span
+        side = 1.0 if failing > passing else -1.0  # from passing toward failing
+        guessed = not name.startswith('config.')  # a window's margin rarely follows its time: halve those
+        while abs(failing - passing) > limit:
+            width = abs(failing - passing)
+            point = None
+            if not guessed and at_failing is not None and at_passing is not None and at_failing <= 0 < at_passing:
+                root = passing + (failing - passing) * at_passing / (at_passing - at_failing)
+                nearer_failing = (abs(root - passing) + limit / 2) < width / 2
+                point = root + side * limit / 2 if nearer_failing else root - side * limit / 2
+                point = min(max(point, min(failing, passing) + limit / 2), max(failing, passing) - limit / 2)
+            guessed = point is not None
+            value = quantize(dimension, point if point is not None else (failing + passing) / 2)
+            if value in (failing, passing):
+                value = quantize(dimension, (failing + passing) / 2)
+                if value in (failing, passing):
+                    break
+            if (yield from self._try(fault_id, name, value, f'{label} {failing:g} -> {value:g}')):
+                failing, at_failing = value, self.margin(self.latest)
+            else:
+                passing, at_passing = value, self.margin(self.latest)
+            guessed = ((guessed and abs(failing - passing) > width / 2)  # a guess that did not halve: halve next
+                       or not name.startswith('config.'))
+
+    def margin(self, outcome: Outcome | None) -> float | None:
+        """The failure's margin in a run: the smallest of its assertions' (None when one has none)."""
+        if outcome is None or outcome.status == 'error':
+            return None
+        margins = [outcome.margins.get(a, (None, ''))[0] for a in self.failure.assertions]
+        return None if not margins or any(m is None for m in margins) else min(m for m in margins if m is not None)
+
+    def _try(self, fault_id: str, name: str, value: float, change: str) -> Runs:
+        trial = self.current.replaced(self.current.drawn(fault_id).replaced(name, value))
+        kept = yield from self._fails(trial, change)
+        if kept:
+            self.current = trial
+        return kept
+
+    def _fails(self, candidate: Candidate, change: str, *, already: int = 0) -> Runs:
+        """Run `candidate` until it has failed `confirm` times in a row the failure's way (`already` of them done);
+        a step of the shrink path either way."""
+        failure = self.failure
+        runs, first, kept = 0, -1, True
+        for _ in range(already, self.confirm):
+            self.purpose = 'shrink' if runs == 0 and not already else 'confirm'
+            index, outcome = yield candidate
+            self.latest = outcome
+            runs += 1
+            first = index if first < 0 else first
+            failure.shrink_runs += 1
+            if self.purpose == 'confirm':
+                failure.confirmations += 1
+            if outcome.status == 'error' or outcome.failing != failure.assertions:
+                kept = False
+                break
+        if runs:
+            failure.steps.append(ShrinkStep(first, change, candidate, kept, runs))
+        if kept:
+            self.kept = self.latest
+        return kept
