@@ -83,8 +83,8 @@ class Shrinker:
         """Move one dimension toward its weakest end (the latest start): the end itself first; else narrow the
         bracket between the value that fails and the one that passes to `resolution` of the range: a strength (a
         config key) at the point where the margin, taken as linear between the two, crosses zero (just on either
-        side of it, so a margin that is linear settles in two runs), else halfway (a time, no margins, or a
-        previous guess that did not halve the bracket)."""
+        side of it, so a margin that is linear settles in two runs), as long as the margins measured there keep
+        to that line; else halfway (a time, no margins, a margin that jumps, a guess that did not halve)."""
         name = dimension.name
         target = dimension.high if name == 'start' else dimension.low
         failing = self.current.drawn(fault_id).value(name)
@@ -97,27 +97,41 @@ class Shrinker:
         passing, at_passing = target, self.margin(self.latest)
         limit = self.space.resolution * dimension.span
         side = 1.0 if failing > passing else -1.0  # from passing toward failing
-        guessed = not name.startswith('config.')  # a window's margin rarely follows its time: halve those
+        linear = name.startswith('config.')  # a strength's margin may follow it; a window's time rarely does
+        stale = False  # the last guess did not halve the bracket: halve next
         while abs(failing - passing) > limit:
             width = abs(failing - passing)
             point = None
-            if not guessed and at_failing is not None and at_passing is not None and at_failing <= 0 < at_passing:
+            if linear and not stale and at_failing is not None and at_passing is not None \
+                    and at_failing <= 0 < at_passing:
                 root = passing + (failing - passing) * at_passing / (at_passing - at_failing)
                 nearer_failing = (abs(root - passing) + limit / 2) < width / 2
                 point = root + side * limit / 2 if nearer_failing else root - side * limit / 2
                 point = min(max(point, min(failing, passing) + limit / 2), max(failing, passing) - limit / 2)
-            guessed = point is not None
             value = quantize(dimension, point if point is not None else (failing + passing) / 2)
             if value in (failing, passing):
-                value = quantize(dimension, (failing + passing) / 2)
+                point, value = None, quantize(dimension, (failing + passing) / 2)
                 if value in (failing, passing):
                     break
+            before = (failing, at_failing, passing, at_passing)
             if (yield from self._try(fault_id, name, value, f'{label} {failing:g} -> {value:g}')):
                 failing, at_failing = value, self.margin(self.latest)
             else:
                 passing, at_passing = value, self.margin(self.latest)
-            guessed = ((guessed and abs(failing - passing) > width / 2)  # a guess that did not halve: halve next
-                       or not name.startswith('config.'))
+            if point is not None:  # the guess: did the margin follow the line it was drawn from?
+                linear = self._on_line(before, value, self.margin(self.latest))
+            stale = point is not None and abs(failing - passing) > width / 2
+
+    @staticmethod
+    def _on_line(bracket: tuple[float, float | None, float, float | None], value: float,
+                 observed: float | None) -> bool:
+        """Whether a margin measured at `value` lies near the line through the bracket's two (within a quarter
+        of the smaller of them): else it jumps (a latched bug, a crash) and only halving finds its edge."""
+        failing, at_failing, passing, at_passing = bracket
+        if observed is None or at_failing is None or at_passing is None:
+            return False
+        predicted = at_passing + (at_failing - at_passing) * (value - passing) / (failing - passing)
+        return abs(observed - predicted) <= 0.25 * min(-at_failing, at_passing)
 
     def margin(self, outcome: Outcome | None) -> float | None:
         """The failure's margin in a run: the smallest of its assertions' (None when one has none)."""

@@ -167,3 +167,18 @@ def test_any_planted_threshold_is_reached_within_the_resolution(threshold, short
     assert shortest < v['duration'] <= shortest + 0.039 + 1e-9
     assert latest - 0.1 - 1e-9 <= v['start'] < latest
     assert math.isclose(v['config.linear_acceleration_x_bias'], 0.0)
+
+
+def test_a_margin_that_jumps_costs_one_guess_then_halving():
+    """A latched bug: the margin follows the bias slowly while it passes (8.8 - bias) and jumps to -90 once it
+    fails (bias > 0.3). The first guess along the line misses; from then on the bracket is halved: the end, one
+    guess and the halvings of 0.9 to 1 % (7), no more."""
+    def latched(c: Candidate):
+        bias = dict(c.drawn('bias').values)['config.angular_velocity_z_bias'] if 'bias' in c.ids else 0.0
+        fails = bias > 0.3
+        return (frozenset({'a'}) if fails else frozenset()), {'a': (-90.0 if fails else 8.8 - bias, '')}
+
+    failure, _ = shrink(candidate(bias=full_bias()), latched)
+    v = dict(failure.minimal.drawn('bias').values)
+    assert 0.3 < v['config.angular_velocity_z_bias'] <= 0.31
+    assert len([s for s in failure.steps if 'angular_velocity_z_bias' in s.change]) <= 1 + 1 + 7

@@ -1,0 +1,47 @@
+"""`bagfault explore` in closed loop: the planted-bug system of bench/explore (real rclpy processes, each run on
+its own leased domain) on a 4 s bag; its odometry teleport bug (B8 of bench/explore/bugs.yaml: x jumps by more
+than 1.0 m between consecutive odometry messages, the jump is x_bias + 0.004 m at the fault's start) found and
+shrunk to its threshold, each step confirmed by a second run."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import yaml
+from support.helpers import ROOT, make_bag
+from support.loop import rclpy_available
+
+from bagfault import api
+
+pytestmark = [pytest.mark.live, pytest.mark.closed_loop]
+BENCH = ROOT / 'bench' / 'explore'
+
+
+def test_a_planted_bug_is_found_and_shrunk_in_closed_loop(tmp_path):
+    if not rclpy_available():
+        pytest.skip("rclpy not installed (pip install '.[live]')")
+    make_bag(tmp_path / 'rover.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0),
+                                       ('/odom', 'nav_msgs/msg/Odometry', 25.0)], 4.0)
+    data = yaml.safe_load((BENCH / 'space.yaml').read_text())
+    data['bags'] = ['rover.mcap']
+    data['system_under_test']['cwd'] = str(BENCH)
+    data['injectors'] = [i for i in data['injectors'] if i['id'] != 'scan']
+    data['explore'] = {'faults': [{'id': 'odom_jump', 'injector_id': 'odom', 'start': 1.0, 'duration': 0.5,
+                                   'config': {'x_bias': [0.0, 3.0]}}],
+                       'budget': 20, 'confirm': 2, 'batch': 2, 'resolution': 0.05}  # a short test: 5 % of the range
+    space = tmp_path / 'space.yaml'
+    space.write_text(yaml.safe_dump(data))
+    result = api.explore(space, directory=tmp_path / 'out', workers=2, rate=4.0, seed=2)
+    assert [r.outcome.status for r in result.runs].count('error') == 0, [r.outcome.message for r in result.runs]
+    assert result.runs[0].outcome.status == 'passed'  # no fault: no bug
+    (failure,) = result.failures
+    assert failure.assertions == {'estimate_bounded'} and failure.state == 'shrunk'
+    bias = dict(failure.minimal.drawn('odom_jump').values)['config.x_bias']
+    assert 0.996 < bias <= 0.996 + 0.15 + 0.003  # 5 % of the range, on the grid
+    kept = [s for s in failure.steps if s.kept and s.change != 'confirm the original']
+    assert all(s.runs == 2 for s in kept)  # confirm: 2
+    assert failure.replay is not None and failure.replay.failing == {'estimate_bounded'}
+    document = json.loads((tmp_path / 'out' / 'explore.json').read_text())
+    assert document['mode'] == 'test' and document['rate'] == 4.0
+    assert (tmp_path / 'out' / 'failures' / f'{failure.name}.mcap').stat().st_size > 0  # the replay's recording
