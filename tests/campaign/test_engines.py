@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 from support.corpus import SCENARIO, campaign_file
 from support.hold import hold_plugin
+from support.raycluster import RAY_ENV
 
 pytest.importorskip('ray', reason='campaign extra not installed')
 pq = pytest.importorskip('pyarrow.parquet', reason='campaign extra not installed')
@@ -35,16 +36,6 @@ CAMPAIGN = f"""
 """
 HOLD = '  - {id: hold, type: hold, input_topic: /imu, output_topic: /imu_held}\n'
 HELD = '  - {id: held, injector_id: hold, active_on_startup: true, config: {level: 1.0}}\n'
-
-RAY_ENV = {
-    'RAY_USAGE_STATS_ENABLED': '0',
-    'RAY_AUTH_MODE': 'disabled',
-    'RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER': '0',  # every node on 127.0.0.1, never the machine's address
-    'RAY_health_check_period_ms': '500',  # a dead node is known in about a second, not thirty
-    'RAY_health_check_timeout_ms': '500',
-    'RAY_health_check_failure_threshold': '2',
-}
-
 
 def rows(path: Path) -> list[dict[str, Any]]:
     return [{k: v for k, v in row.items() if k not in ('seconds', 'output', 'key', 'bag')} | {

@@ -225,3 +225,17 @@ def test_validate_and_the_schema_know_the_explore_section(capsys):
     assert {'faults', 'max_faults', 'budget', 'confirm', 'resolution', 'batch'} <= set(
         schema['$defs']['explore']['properties'])
     assert 'anyOf' in schema['$defs']['explore_fault']['properties']['start']
+
+
+def test_on_a_ray_cluster_the_same_runs_as_on_the_local_pool(tmp_path, monkeypatch):
+    """Runs spread over a real two-node Ray cluster: byte for byte what the local pool gives, offline."""
+    pytest.importorskip('ray', reason='campaign extra not installed')
+    from support.raycluster import local_cluster
+
+    space = space_in(tmp_path / 'space')
+    with local_cluster(monkeypatch) as cluster:
+        address = cluster.address
+        result = api.explore(space, directory=tmp_path / 'ray', budget=24, seed=7, ray=address)
+    assert result.engine == f'Ray at {address} (2 CPUs)'
+    api.explore(space, directory=tmp_path / 'local', budget=24, seed=7, workers=2)
+    assert comparable(tmp_path / 'ray') == comparable(tmp_path / 'local')
