@@ -46,6 +46,7 @@ if TYPE_CHECKING:
 
 RESERVE = 30  # runs the search leaves to each shrink in progress
 RUN_TIMEOUT = 1800.0  # seconds one run may take
+ERRORS = 8  # runs in a row that could not run: the exploration stops (exit 2)
 FILES = ('explore.json', 'report.html')
 
 
@@ -299,6 +300,8 @@ class Explorer:
     def _take(self, record: RunRecord, request: _Request) -> None:
         self.runs.append(record)
         outcome = record.outcome
+        if outcome.status == 'error':
+            self._could_not_run(record)
         if request.purpose in ('search', 'refine'):
             self.search_runs += 1
         known = {f.assertions: f for f in self.failures}
@@ -315,6 +318,16 @@ class Explorer:
         self.search.observe(record, [f.assertions for f in self.failures])
         self.progress.update(len(self.runs), self.budget, sum(f.state != 'unconfirmed' for f in self.failures),
                              self.search.best())
+
+    def _could_not_run(self, record: RunRecord) -> None:
+        """A run that could not run decides nothing; the baseline, or ERRORS in a row, end the exploration."""
+        why = record.outcome.message or 'no reason given'
+        if record.purpose == 'baseline':
+            raise ExploreError(f'{self.scenario.name}: the baseline run (no fault) could not run: {why}')
+        streak = self.runs[-ERRORS:]
+        if len(streak) == ERRORS and all(r.outcome.status == 'error' for r in streak):
+            raise ExploreError(f'{self.scenario.name}: {ERRORS} runs in a row could not run (the last, run '
+                               f'{record.index}: {why})')
 
     def _found(self, record: RunRecord) -> None:
         failure = Failure(len(self.failures) + 1, record.outcome.failing, record.index, self.search_runs,

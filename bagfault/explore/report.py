@@ -105,7 +105,8 @@ def _shrink_figure(page: Page, document: dict[str, Any], failure: dict[str, Any]
         return
     traces = [{'type': 'scatter', 'mode': 'lines+markers', 'name': f'{fault}.{name.removeprefix("config.")}',
                'x': xs, 'y': ys, 'line': {'shape': 'hv'}} for (fault, name), (xs, ys) in series.items()]
-    page.figure(traces, {'title': title(f'{failure["name"]}: each dimension along the kept steps'), 'height': 300,
-                         'legend': LEGEND, 'xaxis': {'title': {'text': 'run'}},
+    below = {'orientation': 'h', 'x': 0, 'xanchor': 'left', 'y': -0.3, 'yanchor': 'top'}  # many: under the plot
+    page.figure(traces, {'title': title(f'{failure["name"]}: each dimension along the kept steps'),
+                         'height': 320 + 20 * (len(traces) // 4), 'legend': below, 'xaxis': {'title': {'text': 'run'}},
                          'yaxis': {'title': {'text': 'share of its range'}, 'range': [-0.05, 1.05]}},
                 name=f'shrink:{failure["name"]}')

@@ -239,3 +239,14 @@ def test_on_a_ray_cluster_the_same_runs_as_on_the_local_pool(tmp_path, monkeypat
     assert result.engine == f'Ray at {address} (2 CPUs)'
     api.explore(space, directory=tmp_path / 'local', budget=24, seed=7, workers=2)
     assert comparable(tmp_path / 'ray') == comparable(tmp_path / 'local')
+
+
+def test_a_baseline_that_cannot_run_ends_the_exploration_with_exit_2(tmp_path, capsys):
+    """The field path is checked against the bag's type when the run starts: every run would fail to run, so the
+    baseline's reason is said in one line and nothing more is run."""
+    text = SPACE.read_text().replace('field: angular_velocity.z, max: 0.5', 'field: angular_velocity.w, max: 0.5')
+    space = space_in(tmp_path / 'space', text)
+    assert main(['explore', str(space), '-o', str(tmp_path / 'out'), '--budget', '20']) == 2
+    err = capsys.readouterr().err
+    assert 'the baseline run (no fault) could not run' in err and 'angular_velocity.w' in err
+    assert len((tmp_path / 'out' / 'runs.jsonl').read_text().splitlines()) == 1
