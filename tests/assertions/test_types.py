@@ -127,15 +127,74 @@ def test_sequence(tmp_path):
     assert results['too_slow'].state == 'failed' and seconds(results['too_slow'], out) == 10.0
 
 
-def test_topic_hz_type_mismatch_fails_at_time_zero(tmp_path):
+def test_topic_hz_of_another_type_counts_nothing_as_the_anchor_does(tmp_path):
+    """The anchor subscribes with message_type: a topic of another type brings it no message, so it fails at its
+    first look after `within` (at the end without one), as for a silent topic; the message says why."""
     results, out = run(tmp_path, """
         - {id: wrong, type: topic_hz, topic: /odom, message_type: sensor_msgs/msg/Imu, min_hz: 1.0, window: 1.0}
+        - {id: wrong_within, type: topic_hz, topic: /odom, message_type: sensor_msgs/msg/Imu, min_hz: 1.0, window: 1.0,
+           within: 2.0}
         - {id: missing, type: topic_hz, topic: /nothing, message_type: sensor_msgs/msg/Imu, min_hz: 1.0, window: 1.0}
     """)
-    assert results['wrong'].state == 'failed' and seconds(results['wrong'], out) == 0.0
-    assert results['wrong'].message == 'topic /odom carries nav_msgs/msg/Odometry, not sensor_msgs/msg/Imu'
+    assert results['wrong'].state == 'failed' and seconds(results['wrong'], out) == 19.99  # the last message
+    assert results['wrong'].message == ('/odom did not reach 1 Hz (best 0.00 Hz over 1 s, none of type '
+                                        'sensor_msgs/msg/Imu (it carries nav_msgs/msg/Odometry)): not observed before '
+                                        'the end of the bag')
+    assert results['wrong_within'].state == 'failed' and seconds(results['wrong_within'], out) == 2.1
     assert results['missing'].message == ('/nothing did not reach 1 Hz (best 0.00 Hz over 1 s): '
                                           'not observed before the end of the bag')
+
+
+def odometry_at(path, seconds):
+    """A bag of /odom (nav_msgs/Odometry) messages at these seconds of bag time."""
+    from bagfault.demo import synthetic
+
+    stream = synthetic.Stream('/odom', 'nav_msgs/msg/Odometry', 1.0)
+    ts = synthetic.store()
+    synthetic.write_mcap(path, [(stream, START + round(t * NS), synthetic.odometry(ts, START + round(t * NS), t))
+                                for t in seconds], ts)
+    return path
+
+
+def hz_verdict(tmp_path, seconds, min_hz, window, within=None):
+    bag = odometry_at(tmp_path / 'odom.mcap', seconds)
+    deadline = '' if within is None else f', within: {within}'
+    _, result = run_inline(tmp_path, f"""
+        injectors: []
+        assertions:
+          - {{id: hz, type: topic_hz, topic: /odom, message_type: nav_msgs/msg/Odometry, min_hz: {min_hz},
+             window: {window}{deadline}}}
+    """, bag)
+    [hz] = result.assertions
+    return hz.state, round((hz.time - START) / NS, 3)
+
+
+def test_topic_hz_keeps_a_message_exactly_window_old(tmp_path):
+    """topic_hz_assertion.cpp drops a message only when its age is *more* than window: messages at 0.1 s and 1.05 s
+    make 2 Hz over 1 s at the 1.1 s look (0.1 s is exactly 1 s old there)."""
+    assert hz_verdict(tmp_path, [0.1, 1.05, 4.0], min_hz=2.0, window=1.0) == ('passed', 1.1)
+
+
+# ros2_fault_injection's own tests of topic_hz (test/assertions/test_topic_hz_assertion.cpp), by name: their
+# update(elapsed, now) calls are bagfault's looks every 100 ms of bag time
+def test_anchor_PassesWhenObservedRateMeetsMinimum(tmp_path):
+    """12 messages 80 ms apart; min 10 Hz over 1 s: 9 by the 0.7 s look, 11 by 0.8 s (the 11th at exactly 0.8 s)."""
+    assert hz_verdict(tmp_path, [i * 0.08 for i in range(12)] + [3.0], 10.0, 1.0, within=2.0) == ('passed', 0.8)
+
+
+def test_anchor_StaysPendingBeforeDeadlineWhenRateTooLow(tmp_path):
+    """Messages at 0 and 0.5 s, min 20 Hz, within 5 s: still pending at 2 s (decided only at 5.1 s, failed)."""
+    assert hz_verdict(tmp_path, [0.0, 0.5, 6.0], 20.0, 1.0, within=5.0) == ('failed', 5.1)
+
+
+def test_anchor_FailsAfterDeadlineWhenRateTooLow(tmp_path):
+    """Messages at 0 and 1 s, min 10 Hz, within 2 s: failed at the first look after 2 s."""
+    assert hz_verdict(tmp_path, [0.0, 1.0, 3.0], 10.0, 1.0, within=2.0) == ('failed', 2.1)
+
+
+def test_anchor_IgnoresOldMessagesOutsideWindow(tmp_path):
+    """Messages at 0, 0.1 and 3 s, min 3 Hz over 1 s: at 3 s the first two are 3 and 2.9 s old, gone; 1 Hz."""
+    assert hz_verdict(tmp_path, [0.0, 0.1, 3.0, 3.05], 3.0, 1.0, within=5.0) == ('failed', 3.05)
 
 
 @pytest.mark.parametrize(('assertion', 'problem'), [
@@ -162,9 +221,10 @@ def test_bad_field_path_stops_the_run_naming_the_closest_path(tmp_path):
     assert not (tmp_path / 'out.mcap').exists()
 
 
-@pytest.mark.parametrize(('min_hz', 'state', 'at'), [(50.0, 'passed', 3.0), (50.2, 'failed', 8.1)])
+@pytest.mark.parametrize(('min_hz', 'state', 'at'), [(50.3, 'passed', 3.0), (50.4, 'failed', 8.1)])
 def test_topic_hz_looks_every_100_ms_as_the_anchor_does(tmp_path, min_hz, state, at):
-    """A 50 Hz topic holds 150 messages in any 3 s (t - 3, t]: 50 Hz exactly, never 50.2 (anchor runner, 100 ms timer)."""
+    """At a look (every 100 ms, on the 20 ms grid) a 50 Hz topic holds 151 messages in [t - 3, t] (both ends kept,
+    as the anchor keeps an age of exactly window): 50.33 Hz, never 50.4 (anchor runner, 100 ms timer)."""
     bag = make_bag(tmp_path / 'odom.mcap', [('/odom', 'nav_msgs/msg/Odometry', 50.0)], 20.0)
     text = (f'injectors: []\nassertions:\n  - {{id: hz, type: topic_hz, topic: /odom, message_type: nav_msgs/msg/Odometry, '
             f'min_hz: {min_hz}, window: 3.0, within: 8.0}}\n')
@@ -237,7 +297,7 @@ def test_margins_of_failing_assertions(tmp_path):
     assert margins['gap'] == ('failed', pytest.approx(0.5 - 2.1))  # scans at 7.9 s and 10.0 s
     assert margins['range'] == ('failed', pytest.approx(1.25 - 1.252))  # first above (7.5 s is 1.25): 0.1 x 7.52 + 0.5
     assert margins['count'] == ('failed', -10.0)  # 200 of 210
-    assert margins['hz'] == ('failed', pytest.approx(10.0 - 12.0))  # at best 10 scans in a second
+    assert margins['hz'] == ('failed', pytest.approx(11.0 - 12.0))  # at best 11 scans in [t - 1, t]
 
 
 def test_margins_in_the_json_report(tmp_path):
