@@ -205,9 +205,16 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
     assert read is not None
     config.thresholds = _thresholds(read, Thresholds())
     for number, node in enumerate(read.get('overrides', [])):
-        override = reader.read(sections.OVERRIDE, node, (*PREFIX, 'overrides', number))
+        where = (*PREFIX, 'overrides', number)
+        override = reader.read(sections.OVERRIDE, node, where)
+        if override is not None and 'auto_confirm_after_sec' in override.given:
+            (warn or problem)((*where, 'auto_confirm_after_sec'), 'ignored, as medkit ignores it: a per-source '
+                              "override carries the debounce thresholds and healing_enabled only (medkit's "
+                              'EntityThresholdResolver); timed confirmation uses the global auto_confirm_after_sec')
         if override is not None and 'source' in override:
-            config.overrides.append((override.get('source'), _thresholds(override, config.thresholds)))
+            thresholds = _thresholds(override, config.thresholds)
+            thresholds = replace(thresholds, auto_confirm_after_sec=config.thresholds.auto_confirm_after_sec)
+            config.overrides.append((override.get('source'), thresholds))
     diagnostics = read.get('diagnostics')
     if diagnostics is True:
         config.diagnostics_topic = '/diagnostics'

@@ -8,7 +8,6 @@ only `*` as wildcard and match the whole code.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,9 +26,47 @@ REPRESENTATIVE_ALIASES = {'first': 'first', 'most_recent': 'most_recent', 'mostr
                           'highestseverity': 'highest_severity', 'severity': 'highest_severity'}
 
 
-def wildcard(pattern: str) -> re.Pattern[str]:
-    """'MOTOR_*' -> ^MOTOR_.*$ (only * is special)."""
-    return re.compile('^' + '.*'.join(re.escape(part) for part in pattern.split('*')) + '$')
+@dataclass(frozen=True)
+class Wildcard:
+    """A code pattern where only * is special (any run of characters), matched whole as medkit's
+    pattern_matcher.cpp does (regex_match of the pattern with * as .*), in linear time: the parts between the
+    stars are found left to right, so no pattern (`A*A*A*...*B`) makes the match backtrack."""
+
+    text: str
+
+    def match(self, code: str) -> bool:
+        """Whether the whole code matches."""
+        if '\n' in code:  # a star never spans a newline (regex's `.`): the table below, still no backtracking
+            return _stars_within_lines(self.text, code)
+        first, *middle, last = self.text.split('*') if '*' in self.text else (self.text, None)
+        if last is None:
+            return code == first
+        if len(code) < len(first) + len(last) or not code.startswith(first) or not code.endswith(last):
+            return False
+        at, end = len(first), len(code) - len(last)
+        for part in middle:
+            found = code.find(part, at, end)
+            if found < 0:
+                return False
+            at = found + len(part)
+        return True
+
+
+def _stars_within_lines(pattern: str, code: str) -> bool:
+    """The whole-match table, row by row over the pattern: len(pattern) x len(code) steps at most."""
+    row = [True] + [False] * len(code)  # the empty pattern matches the empty start of the code
+    for char in pattern:
+        if char == '*':
+            for j in range(1, len(code) + 1):
+                row[j] = row[j] or (row[j - 1] and code[j - 1] != '\n')
+        else:
+            row = [False] + [row[j - 1] and code[j - 1] == char for j in range(1, len(code) + 1)]
+    return row[-1]
+
+
+def wildcard(pattern: str) -> Wildcard:
+    """'MOTOR_*' (only * is special)."""
+    return Wildcard(pattern)
 
 
 @dataclass
@@ -40,11 +77,11 @@ class Rule:
     name: str
     mode: str
     window_ms: int
-    root_codes: list[re.Pattern[str]] = field(default_factory=list)
-    symptom_codes: list[re.Pattern[str]] = field(default_factory=list)
+    root_codes: list[Wildcard] = field(default_factory=list)
+    symptom_codes: list[Wildcard] = field(default_factory=list)
     mute_symptoms: bool = True
     auto_clear_with_root: bool = True
-    match_codes: list[re.Pattern[str]] = field(default_factory=list)
+    match_codes: list[Wildcard] = field(default_factory=list)
     min_count: int = 3
     show_as_single: bool = True
     representative: str = 'highest_severity'
@@ -64,7 +101,7 @@ def no_warning(path: tuple[Any, ...], message: str) -> None:
 
 
 def _codes(value: object, path: tuple[Any, ...], problem: Problem, empty: Problem | None = None,
-           ) -> list[re.Pattern[str]]:
+           ) -> list[Wildcard]:
     """A list of codes as patterns; an empty list goes to `empty` when given (a warning in medkit)."""
     if empty is not None and value == []:
         empty(path, 'has no codes defined: it matches nothing')
@@ -108,9 +145,9 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem, war
 
 
 def _patterns(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem,
-              ) -> dict[str, list[re.Pattern[str]]]:
+              ) -> dict[str, list[Wildcard]]:
     """Named code patterns that rules refer to."""
-    patterns: dict[str, list[re.Pattern[str]]] = {}
+    patterns: dict[str, list[Wildcard]] = {}
     if not isinstance(node, dict):
         problem(path, 'must be a mapping of pattern ids to {codes: [...]}')
         return patterns
@@ -127,15 +164,15 @@ def _patterns(node: object, path: tuple[Any, ...], problem: Problem, warn: Probl
 class _References:
     """Resolves a rule's `symptoms` / `match` list of {pattern: ID} or {codes: [...]}."""
 
-    patterns: dict[str, list[re.Pattern[str]]]
+    patterns: dict[str, list[Wildcard]]
     problem: Problem
     warn: Problem
 
     def __call__(self, items: object, where: tuple[Any, ...], what: str, *,
-                 inline: bool = True) -> list[re.Pattern[str]]:
+                 inline: bool = True) -> list[Wildcard]:
         """The patterns of a symptoms or match list; `inline`: `{codes: [...]}` items count (symptoms), or are
         read as medkit's parse_match_refs reads them in an auto_cluster match: not at all."""
-        out: list[re.Pattern[str]] = []
+        out: list[Wildcard] = []
         if items is None or items == []:
             self.warn(where, f'the rule has no {what} defined: it correlates nothing')
             return out
@@ -211,7 +248,7 @@ class _Cluster:
     active: bool = False
 
 
-def _matches(code: str, patterns: list[re.Pattern[str]]) -> bool:
+def _matches(code: str, patterns: list[Wildcard]) -> bool:
     return any(p.match(code) for p in patterns)
 
 

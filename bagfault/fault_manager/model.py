@@ -18,12 +18,12 @@ PREFAILED, PREPASSED, CONFIRMED, HEALED, CLEARED = 'PREFAILED', 'PREPASSED', 'CO
 STATUSES = (PREFAILED, PREPASSED, CONFIRMED, HEALED, CLEARED)
 EVENT_CONFIRMED, EVENT_UPDATED, EVENT_CLEARED = 'fault_confirmed', 'fault_updated', 'fault_cleared'
 
-CODE_PATTERN = re.compile(r'^[A-Za-z0-9_.\-]{1,128}$')
+CODE_PATTERN = re.compile(r'[A-Za-z0-9_.\-]{1,128}')  # whole: fullmatch (a $ would let a final newline in)
 
 
 def valid_code(code: str) -> bool:
     """1-128 characters of [A-Za-z0-9_.-], no '..'."""
-    return bool(CODE_PATTERN.match(code)) and '..' not in code
+    return bool(CODE_PATTERN.fullmatch(code)) and '..' not in code
 
 
 def severity_value(value: object) -> int | None:

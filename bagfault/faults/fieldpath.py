@@ -26,7 +26,7 @@ NUMERIC = {
     'float32', 'float64', 'octet',
 }
 FLOATS = {'float32', 'float64'}
-_SEGMENT = re.compile(r'^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\*|\d+)\])?$')
+_SEGMENT = re.compile(r'([A-Za-z_][A-Za-z0-9_]*)(?:\[(\*|\d+)\])?')
 BASE, NAME, ARRAY, SEQUENCE = 1, 2, 3, 4
 
 
@@ -54,7 +54,7 @@ class FieldPath:
             raise FieldPathError('empty field path')
         segments = []
         for part in text.strip().split('.'):
-            match = _SEGMENT.match(part)
+            match = _SEGMENT.fullmatch(part)
             if not match:
                 raise FieldPathError(f'{text!r}: {part!r} is not a field name (use name, name[3] or name[*])')
             index = match.group(2)

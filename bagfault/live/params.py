@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from bagfault.schema import ConfigField
     from bagfault.spec.model import FaultSpec, Scenario
 
-NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
 TYPES = {'double': ParameterType.PARAMETER_DOUBLE, 'special_float': ParameterType.PARAMETER_DOUBLE,
          'int': ParameterType.PARAMETER_INTEGER, 'bool': ParameterType.PARAMETER_BOOL,
          'string': ParameterType.PARAMETER_STRING, 'non_empty_string': ParameterType.PARAMETER_STRING,
@@ -95,7 +95,7 @@ def fault_parameters(scenario: Scenario) -> tuple[list[FaultParameter], list[str
     """Parameters of every fault, and notes on faults whose ids cannot be parameter names."""
     declared, notes = [], []
     for fault in scenario.faults:
-        if not NAME.match(fault.id):
+        if not NAME.fullmatch(fault.id):
             notes.append(f'fault {fault.id!r}: id is not a valid parameter name; no parameters for it')
             continue
         injector = scenario.injector(fault.injector_id)

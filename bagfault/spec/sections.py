@@ -187,7 +187,10 @@ FAULT_MANAGER = Section('fault_manager', 'fault_manager', "ros2_medkit's fault m
 ), noun='fault_manager')
 OVERRIDE = Section('override', 'fault_manager.overrides[]', 'Thresholds of the sources under one prefix.', (
     Key('source', 'string', 'A reporting-source prefix (`/powertrain` matches `/powertrain/motor`).', required=True),
-    *(Key(k.name, k.type, k.description, unit=k.unit, minimum=k.minimum, maximum=k.maximum) for k in THRESHOLDS),
+    *(Key(k.name, k.type, k.description, unit=k.unit, minimum=k.minimum, maximum=k.maximum) for k in THRESHOLDS
+      if k.name != 'auto_confirm_after_sec'),
+    Key('auto_confirm_after_sec', 'seconds', 'Accepted and ignored with a warning, as medkit ignores it here (timed '
+        'confirmation uses the global value).', unit='seconds', minimum=0, maximum=MAX_SECONDS),
 ), noun='override')
 DIAGNOSTICS = Section('diagnostics', 'fault_manager.diagnostics', 'Fault codes from diagnostic statuses.', (
     Key('topic', 'string', 'The DiagnosticArray topic.', default='/diagnostics'),

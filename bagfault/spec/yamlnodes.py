@@ -57,8 +57,8 @@ MAX_DEPTH = 64  # nesting of mappings and lists
 MAX_NODES = 100_000  # values after alias expansion: stops "billion laughs" files
 STANDARD_TAGS = {f'tag:yaml.org,2002:{name}' for name in
                  ('str', 'int', 'float', 'bool', 'null', 'map', 'seq', 'timestamp', 'binary', 'merge', 'value')}
-FLOAT_12 = re.compile(r'^[-+]?(\d+(\.\d*)?|\.\d+)([eE][-+]?\d+)$')  # YAML 1.2 floats PyYAML (1.1) reads as text
-SEXAGESIMAL = re.compile(r'^[-+]?\d+(:[0-5]?\d)+(\.\d*)?$')  # YAML 1.1 base 60 (1:30 = 90); text in YAML 1.2
+FLOAT_12 = re.compile(r'[-+]?(\d+(\.\d*)?|\.\d+)([eE][-+]?\d+)')  # YAML 1.2 floats PyYAML (1.1) reads as text
+SEXAGESIMAL = re.compile(r'[-+]?\d+(:[0-5]?\d)+(\.\d*)?')  # YAML 1.1 base 60 (1:30 = 90); text in YAML 1.2
 
 
 def load_located(text: str) -> LocatedYaml:
@@ -122,9 +122,9 @@ class _Converter:
 
     def scalar(self, node: yaml.ScalarNode, path: PathKey) -> Any:
         self.out.raw[path] = node.value
-        if node.style is None and node.tag == 'tag:yaml.org,2002:str' and FLOAT_12.match(node.value):
+        if node.style is None and node.tag == 'tag:yaml.org,2002:str' and FLOAT_12.fullmatch(node.value):
             return float(node.value)
-        if node.style is None and SEXAGESIMAL.match(node.value):
+        if node.style is None and SEXAGESIMAL.fullmatch(node.value):
             return node.value
         try:
             return self.ctor.construct_object(node, deep=True)

@@ -239,6 +239,26 @@ def test_correlation_is_off_unless_enabled():
         'ESTOP_001', 'MOTOR_A']
 
 
+def test_an_override_carries_no_timed_confirmation_as_in_medkit():
+    """medkit's EntityDebounceOverride has confirmation_threshold, healing_enabled and healing_threshold only; the
+    resolver copies the global config and overrides those: an override's auto_confirm_after_sec is ignored (a
+    warning here) and a source under it confirms after the global time."""
+    warnings: list[tuple[object, str]] = []
+    config = parse_fault_manager({'confirmation_threshold': -3, 'auto_confirm_after_sec': 10.0, 'overrides': [
+        {'source': '/powertrain', 'confirmation_threshold': -2, 'auto_confirm_after_sec': 1.0}]},
+        lambda p, m: pytest.fail(m), lambda p, m: warnings.append((p, m)))
+    [(path, message)] = warnings
+    assert path == ('fault_manager', 'overrides', 0, 'auto_confirm_after_sec') and 'ignored, as medkit' in message
+    thresholds = config.thresholds_for('/powertrain/motor')
+    assert (thresholds.confirmation_threshold, thresholds.auto_confirm_after_sec) == (-2, 10.0)
+    fm = FaultManager(config)
+    failed(fm, 'M', 0, source='/powertrain/motor')
+    fm.advance(5 * NS)
+    assert fm.faults['M'].status == 'PREFAILED'  # not confirmed after the override's 1 s
+    fm.advance(11 * NS)
+    assert fm.faults['M'].status == 'CONFIRMED'  # after the global 10 s
+
+
 def test_per_source_overrides_longest_prefix_wins():
     config = parse_fault_manager({'confirmation_threshold': -3, 'overrides': [
         {'source': '/powertrain', 'confirmation_threshold': -1},
