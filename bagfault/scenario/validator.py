@@ -78,16 +78,14 @@ def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:
     if not unknown:
         return
     known_types = ', '.join(sorted(injector_types()))
-    for injector in unknown:
-        out.warn((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
-                 f'installed plugin provides it, so injector {injector.id!r} and its faults are skipped and '
-                 f'the others run, as the anchor does ("assuming external plugin"; known: {known_types})')
     kept = [i for i in scenario.injectors if all(i is not u for u in unknown)]
     gone = {u.id for u in unknown} - {i.id for i in kept}  # (a duplicate id of a known type keeps its faults)
-    for fault in scenario.faults:
-        if fault.injector_id in gone:
-            out.warn((*fault.path, 'injector_id'), f'fault {fault.id!r} targets injector {fault.injector_id!r} '
-                     'of an unknown type: skipped (it never activates)')
+    for injector in unknown:  # one warning, as the anchor's validator gives one (its faults named in it)
+        faults = [f.id for f in scenario.faults if f.injector_id == injector.id and injector.id in gone]
+        which = f' ({", ".join(dict.fromkeys(faults))})' if faults else ''
+        out.warn((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
+                 f'installed plugin provides it, so injector {injector.id!r} and its faults{which} are skipped '
+                 f'and the others run, as the anchor does ("assuming external plugin"; known: {known_types})')
     scenario.skipped_faults = [f.id for f in scenario.faults if f.injector_id in gone]
     scenario.injectors = kept
     scenario.faults = [f for f in scenario.faults if f.injector_id not in gone]
