@@ -248,7 +248,11 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--report', type=output_file, metavar='R.md', help='markdown report')
     parser.add_argument('--json', type=output_file, metavar='R.json',
                         help='machine-readable report (docs/reference/report.md)')
-    parser.add_argument('--junit', type=output_file, metavar='R.xml', help='JUnit XML, one testcase per assertion')
+    parser.add_argument('--junit', type=output_file, metavar='R.xml',
+                        help="JUnit XML, one testcase per assertion (valid under Jenkins' junit-10 schema)")
+    parser.add_argument('--junit-file-line', action='store_true',
+                        help="also put the scenario's file and line on each testcase, which GitHub's and GitLab's "
+                             "readers link (Jenkins' junit-10 schema refuses them)")
     parser.add_argument('--html', type=output_file, metavar='R.html', help='self-contained HTML report with plots')
 
 
@@ -271,6 +275,7 @@ def _reports(args: argparse.Namespace) -> ReportPaths:
 
     return ReportPaths(markdown=getattr(args, 'report', None), json=getattr(args, 'json', None),
                        junit=getattr(args, 'junit', None), html=getattr(args, 'html', None),
+                       junit_file_line=getattr(args, 'junit_file_line', False),
                        force=getattr(args, 'force', False))
 
 
@@ -767,7 +772,8 @@ def _junit_error(args: argparse.Namespace, reason: str, began: float) -> None:
     scenario = getattr(args, 'scenario', None)
     try:
         check_output(path, '--junit report', named)
-        write_atomic(path, render_error(str(scenario or args.command), reason, time.monotonic() - began))
+        write_atomic(path, render_error(str(scenario or args.command), reason, time.monotonic() - began,
+                                        extended=getattr(args, 'junit_file_line', False)))
     except BagfaultError:
         return
 

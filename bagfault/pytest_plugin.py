@@ -199,8 +199,7 @@ class ScenarioItem(pytest.Item):
     def __init__(self, *, assertion_id: str, line: int, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.assertion_id = assertion_id
-        self.line = line
-        self.user_properties += [('scenario_file', str(self.path)), ('scenario_line', str(line))]
+        self.line = line  # (no user_properties: pytest writes them inside the testcase, which junit-10 refuses)
         self.add_marker('bagfault')
         scenario = getattr(self.parent, 'scenario', None)
         if scenario is not None:
@@ -227,10 +226,11 @@ class ScenarioItem(pytest.Item):
                 raise ScenarioAssertionError(failure_text(result))
             return
         found = next((a for a in result.assertions if a.id == self.assertion_id), None)
+        where = f'{self.path.name}:{self.line}'  # the failure's text in the terminal and in --junitxml
         if found is None:
-            raise ScenarioAssertionError(f'{self.assertion_id}: no verdict')
+            raise ScenarioAssertionError(f'{where}: {self.assertion_id}: no verdict')
         if found.state != 'passed':
-            raise ScenarioAssertionError(f'{found.id} {found.state}: {found.message}')
+            raise ScenarioAssertionError(f'{where}: {found.id} {found.state}: {found.message}')
 
     def repr_failure(self, excinfo: ExceptionInfo[BaseException],
                      style: Any = None) -> str | TerminalRepr:

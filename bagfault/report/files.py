@@ -25,6 +25,7 @@ class ReportPaths:
     junit: Path | None = None
     html: Path | None = None
     force: bool = False  # replace existing files bagfault did not write
+    junit_file_line: bool = False  # file and line attributes on each testcase (beyond Jenkins' junit-10 schema)
 
     def named(self) -> list[tuple[str, Path]]:
         """(option, path) of every report asked for."""
@@ -56,7 +57,7 @@ class ReportPaths:
         if self.json is not None:
             write_atomic(self.json, json_report.render(report))
         if self.junit is not None:
-            write_atomic(self.junit, junit.render(report))
+            write_atomic(self.junit, junit.render(report, extended=self.junit_file_line))
         if self.html is not None:
             rates: RateTracker | None = next((c for c in collectors if isinstance(c, RateTracker)), None)
             plots, media = collect(result)

@@ -96,43 +96,68 @@ def test_json_report_has_stable_documented_keys(reports):
     assert data['assertion_counts'] == {'passed': 6, 'failed': 0, 'pending': 0}
 
 
+SCHEMAS = ('junit.xsd', 'junit-10.xsd')  # the common one the tests ship, and Jenkins' (the xunit plugin's)
+
+
+def valid_everywhere(path):
+    for name in SCHEMAS:
+        xmlschema.XMLSchema(str(FIXTURES / name)).validate(str(path))
+
+
 def test_junit_validates_and_lists_every_assertion(reports, tmp_path, scenarios):
     _, folder = reports
-    schema = xmlschema.XMLSchema(str(FIXTURES / 'junit.xsd'))
-    schema.validate(str(folder / 'r.xml'))
+    valid_everywhere(folder / 'r.xml')
     text = (folder / 'r.xml').read_text()
     assert text.count('<testcase ') == 6 and '<failure' not in text
     root = ElementTree.fromstring(text)
     suite_time = float(root.find('testsuite').get('time'))
     report = json.loads((folder / 'r.json').read_text())
     assert 0 < suite_time < 60 and suite_time == report['time']['wall_s']   # wall time, not the 20 s of bag time
+    properties = {p.get('name'): p.get('value') for p in root.find('testsuite').iter('property')}
+    assert properties['scenario'] == str(scenarios / 'rover_multi.yaml')
     source = (scenarios / 'rover_multi.yaml').read_text().splitlines()
     for case in root.iter('testcase'):
-        assert case.get('file') == str(scenarios / 'rover_multi.yaml')
-        assert f"id: {case.get('name')}" in source[int(case.get('line')) - 1]  # the line that names it
+        assert set(case.keys()) == {'name', 'classname', 'time'}  # all junit-10 allows
+        where, line, _ = case.find('system-out').text.split(':', 2)  # 'file:line: message'
+        assert where == str(scenarios / 'rover_multi.yaml')
+        assert f"id: {case.get('name')}" in source[int(line) - 1]  # the line that names it
         assert 0 <= float(case.get('time')) <= suite_time
     scenario = tmp_path / 'late.yaml'
     scenario.write_text((scenarios / 'rover_multi.yaml').read_text().replace('min_hz: 10.0', 'min_hz: 60.0'))
     assert main(['run', str(scenario), str(FIXTURES / 'rover_20s.mcap'), '-o', str(tmp_path / 'o.mcap'),
                  '--junit', str(tmp_path / 'r.xml')]) == 1
-    schema.validate(str(tmp_path / 'r.xml'))
+    valid_everywhere(tmp_path / 'r.xml')
     failed = (tmp_path / 'r.xml').read_text()
     assert failed.count('<failure ') == 1 and 'failures="1"' in failed
-    assert 'did not reach 60 Hz (best 50.00 Hz over 3 s)' in failed  # 150 messages in any 3 s at 50 Hz
+    assert 'did not reach 60 Hz (best 50.33 Hz over 3 s)' in failed  # 151 messages in [t - 3, t] at 50 Hz
+    assert f'{scenario}:' in failed  # the failure's text says where
+
+
+def test_junit_with_file_and_line_on_each_testcase(tmp_path, scenarios):
+    """--junit-file-line: the attributes GitHub's and GitLab's readers link; valid under the common schema, refused
+    by Jenkins' junit-10 (so they are not the default)."""
+    out = tmp_path / 'r.xml'
+    assert main(['run', str(scenarios / 'rover_multi.yaml'), str(FIXTURES / 'rover_20s.mcap'), '-o',
+                 str(tmp_path / 'o.mcap'), '--junit', str(out), '--junit-file-line']) == 0
+    xmlschema.XMLSchema(str(FIXTURES / 'junit.xsd')).validate(str(out))
+    assert not xmlschema.XMLSchema(str(FIXTURES / 'junit-10.xsd')).is_valid(str(out))
+    source = (scenarios / 'rover_multi.yaml').read_text().splitlines()
+    for case in ElementTree.parse(out).getroot().iter('testcase'):
+        assert case.get('file') == str(scenarios / 'rover_multi.yaml')
+        assert f"id: {case.get('name')}" in source[int(case.get('line')) - 1]
 
 
 def test_junit_of_a_run_that_cannot_start(tmp_path, scenarios, capsys):
     """Exit 2 still writes the JUnit file: one testcase with an error saying why, in the same schema."""
-    schema = xmlschema.XMLSchema(str(FIXTURES / 'junit.xsd'))
     scenario = scenarios / 'rover_multi.yaml'
     missing = tmp_path / 'missing.mcap'
     assert main(['run', str(scenario), str(missing), '-o', str(tmp_path / 'o.mcap'),
                  '--junit', str(tmp_path / 'r.xml')]) == 2
     reason = capsys.readouterr().err.strip().removeprefix('bagfault: error: ')
-    schema.validate(str(tmp_path / 'r.xml'))
+    valid_everywhere(tmp_path / 'r.xml')
     [case] = ElementTree.parse(tmp_path / 'r.xml').getroot().iter('testcase')
     error = case.find('error')
-    assert (case.get('file'), error.get('message')) == (str(scenario), reason) and str(missing) in reason
+    assert (error.text, error.get('message')) == (f'{scenario}: {reason}', reason) and str(missing) in reason
     assert sorted(p.name for p in tmp_path.iterdir()) == ['r.xml']   # nothing else written
     # --junit naming the scenario itself is the problem: it is reported and the scenario is left as it was
     before = scenario.read_bytes()
