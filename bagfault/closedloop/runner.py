@@ -152,6 +152,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         result.notes.append('the input holds no messages: nothing was played to the system under test')
     if link.alive_result is not None:
         result.assertions.insert(0, link.alive_result)
+    _said_in_the_tail(result, run.stats.last_time, system.tail)
     report.ready_seconds = link.ready_seconds
     report.played = dict(link.published_per_topic)
     report.heard = dict(link.heard)
@@ -166,6 +167,17 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
     for topic, why in sorted(link.skipped.items()):
         result.notes.append(f'{topic} not published: {why} (recorded only)')
     return result
+
+
+def _said_in_the_tail(result: RunResult, last: int | None, tail: float) -> None:
+    """A failure decided after the bag's last message, in the tail while the clock runs on, says so: the system
+    may rightly be reacting to the end of the data (a watchdog shorter than the tail)."""
+    if last is None or tail <= 0:
+        return
+    for assertion in result.assertions:
+        if assertion.state == 'failed' and assertion.time is not None and assertion.time > last:
+            assertion.message += (f' (after the bag ended: the system reacting to the end of the data? `tail` is '
+                                  f'{tail:g} s)')
 
 
 def _stopped(process: SystemProcess, system: SystemUnderTest, report: SystemReport) -> None:

@@ -161,6 +161,28 @@ def test_a_crash_during_the_run_fails_system_alive(tester: LoopRunner, example_b
     assert running_with(token) == []
 
 
+def test_a_failure_in_the_tail_says_the_bag_had_ended(tester: LoopRunner, example_bag: Path, tmp_path: Path) -> None:
+    """No fault: the example's odometry watchdog (0.3 s, reported at 5 Hz) can only time out once the bag's last
+    odometry message (11.98 s) is past, in the 1 s tail: the failure says so, where a mid-bag one would not."""
+    token = tester.token()
+    scenario = tmp_path / 'tail.yaml'
+    text = SCENARIO.read_text().replace('tail: 0.4 ', 'tail: 1.0 ')
+    text = text.split('faults:')[0] + '''fault_manager:
+  diagnostics: {codes: {'odom_watchdog: timeout': ODOM_TIMEOUT}}
+assertions:
+  - {id: odom_never_times_out, type: fault_status, code: ODOM_TIMEOUT, status: CONFIRMED, never: true}
+'''
+    scenario.write_text(text.replace('bags: [rover.mcap]', f'bags: [{example_bag}]').replace(
+        'cwd: .', f'cwd: {EXAMPLE}'))
+    result = tester.run(str(scenario), '--rate', '2', '--command', command(token))
+    assert result.code == 1, result.stdout + result.stderr
+    [timeout] = [a for a in result.report['assertions'] if a['id'] == 'odom_never_times_out']
+    assert 11.98 + 0.3 < timeout['t_s'] <= 11.98 + 1.0  # in the tail
+    assert timeout['message'].endswith('(after the bag ended: the system reacting to the end of the data? `tail` is '
+                                       '1 s)')
+    assert running_with(token) == []
+
+
 def test_two_runs_at_once_are_isolated(tester: LoopRunner, example_bag: Path, tmp_path: Path) -> None:
     tokens = [tester.token(), tester.token()]
     started = [tester.start(str(SCENARIO), str(example_bag), '-o', str(tmp_path / f'{n}.mcap'),
