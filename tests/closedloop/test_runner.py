@@ -167,11 +167,11 @@ def test_a_failure_in_the_tail_says_the_bag_had_ended(tester: LoopRunner, exampl
     token = tester.token()
     scenario = tmp_path / 'tail.yaml'
     text = SCENARIO.read_text().replace('tail: 0.4 ', 'tail: 1.0 ')
-    text = text.split('faults:')[0] + '''fault_manager:
+    text = text.split('faults:')[0] + """fault_manager:
   diagnostics: {codes: {'odom_watchdog: timeout': ODOM_TIMEOUT}}
 assertions:
   - {id: odom_never_times_out, type: fault_status, code: ODOM_TIMEOUT, status: CONFIRMED, never: true}
-'''
+"""
     scenario.write_text(text.replace('bags: [rover.mcap]', f'bags: [{example_bag}]').replace(
         'cwd: .', f'cwd: {EXAMPLE}'))
     result = tester.run(str(scenario), '--rate', '2', '--command', command(token))
