@@ -12,7 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / 'bagfault'
 CORE = ('scenario', 'spec', 'injectors', 'faults', 'engine', 'io', 'assertions', 'fault_manager', 'latency')
 CORE_MODULES = ('events', 'schema', 'errors')
 OUTSIDE = ('bagfault.live', 'bagfault.api', 'bagfault.cli', 'bagfault.report', 'bagfault.closedloop',
-           'bagfault.campaign', 'bagfault.view', 'bagfault.pytest_plugin')
+           'bagfault.campaign', 'bagfault.explore', 'bagfault.view', 'bagfault.pytest_plugin')
 
 
 def _core_files() -> list[Path]:
@@ -88,3 +88,14 @@ def test_a_library_user_sees_bagfaults_records_through_logging(caplog) -> None:
         log.info('system under test started on ROS domain 42')
     assert [(r.name, r.levelname, r.getMessage()) for r in caplog.records] == [
         ('bagfault', 'INFO', 'system under test started on ROS domain 42')]
+
+
+def test_third_party_data_is_found_through_bagfault_shared_only() -> None:
+    """Every test reaches ../shared through support/helpers.py (BAGFAULT_SHARED, default ../shared): a path built
+    to 'shared' anywhere else ignores the variable (test_fuzz.py did: its third-party cases skipped with it set)."""
+    tests = Path(__file__).resolve().parent
+    found = [f'{path.relative_to(tests)}:{number}' for path in sorted(tests.rglob('*.py'))
+             if path not in (tests / 'support' / 'helpers.py', Path(__file__).resolve())
+             for number, line in enumerate(path.read_text().splitlines(), 1)
+             if "'shared'" in line or '"shared"' in line]
+    assert found == []

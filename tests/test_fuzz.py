@@ -21,12 +21,11 @@ from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 from support import mutations
-from support.helpers import FIXTURES
+from support.helpers import EXTERNAL, FIXTURES
 
 from bagfault.cli import main
 from bagfault.demo import synthetic
 
-SHARED = Path(__file__).resolve().parents[2] / 'shared' / 'external_bags'
 SCENARIO = 'injectors: []\nfaults: []\n'  # every message passes through as it is
 VARIANT_SECONDS = 20
 
@@ -213,7 +212,7 @@ THIRD_PARTY = [
 
 @pytest.mark.parametrize(('name', 'mutate', 'modes'), THIRD_PARTY, ids=[n for n, _, _ in THIRD_PARTY])
 def test_fuzz_third_party_bags(tmp_path, capsys, name, mutate, modes):
-    source = SHARED / name
+    source = EXTERNAL / name  # $BAGFAULT_SHARED/external_bags, as every test of third-party data
     if not source.exists():
-        pytest.skip(f'{source} is not on this machine (../shared)')
+        pytest.skip(f'{source} is not on this machine (set BAGFAULT_SHARED)')
     fuzz(source, mutate, f'shared-{name}', 12, tmp_path, capsys, modes)
