@@ -424,13 +424,15 @@ def explore(space: Scenario | str | Path, inputs: Sequence[str | Path] = (), dir
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     scenarios, problems = [], []
+    warnings: list[Problem | str] = []
     for path in paths:
         try:
             scenarios.append(load_scenario(path, strict=strict))
         except ScenarioError as exc:
             problems.extend(exc.problems)
-    if problems:
-        raise ScenarioError(problems)
+            warnings.extend(exc.warnings)
+    if problems:  # every error and every warning of every file, together
+        raise ScenarioError(problems, [*warnings, *(w for s in scenarios for w in s.warnings)])
     return scenarios
 
 

@@ -706,6 +706,8 @@ def _main(argv: Sequence[str] | None) -> int:
             traceback.print_exc()
         for line in str(exc).splitlines() or [type(exc).__name__]:
             print(f'bagfault: error: {line}', file=sys.stderr)
+        for warning in getattr(exc, 'warnings', ()):  # a scenario's warnings, with its errors
+            print(f'bagfault: warning: {warning}', file=sys.stderr)
         _junit_error(args, str(exc).splitlines()[0] if str(exc) else type(exc).__name__, began)
         tail = getattr(exc, 'tail', None)
         if tail:

@@ -61,12 +61,14 @@ class Problem:
 
 
 class ScenarioError(BagfaultError):
-    """A scenario cannot be used; carries every problem found."""
+    """A scenario cannot be used; carries every problem found, and the warnings found beside them (told with
+    the errors: a misspelt key that made a fault do nothing is often why)."""
 
-    def __init__(self, problems: list[Problem] | str) -> None:
+    def __init__(self, problems: list[Problem] | str, warnings: Sequence[Problem | str] = ()) -> None:
         if isinstance(problems, str):  # about no place in particular
             problems = [Problem('', '', '', problems)]
         self.problems = problems
+        self.warnings = list(warnings)
         super().__init__('\n'.join(str(p) for p in problems))
 
 

@@ -54,7 +54,12 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
         print(f'note: {note}', file=out)
     for warning in result.warnings:
         print(f'warning: {warning}', file=err)
+    inert = result.scenario.inert_warnings
+    doing_nothing = f'{inert} warning{"s" if inert != 1 else ""} of something in the scenario that does nothing ' \
+                    '(above)' if inert else ''
     if not result.assertions:
+        if doing_nothing:
+            print(f'note: {doing_nothing}', file=out)
         return
     width = max(len(r.id) for r in result.assertions)
     print('assertions:', file=out)
@@ -63,7 +68,8 @@ def print_run_summary(result: RunResult, stream: TextIO | None = None) -> None:
         print(f'  {mark:<4}  {r.id:<{width}}  {_seconds(r.time, stats.origin)}  {_short(r.message, 100)}', file=out)
     failed = sum(r.state == 'failed' for r in result.assertions)
     passed = sum(r.state == 'passed' for r in result.assertions)
-    print(f'{"FAILED" if failed else "PASSED"}: {passed} passed, {failed} failed', file=out)
+    print(f'{"FAILED" if failed else "PASSED"}: {passed} passed, {failed} failed'
+          + (f'; {doing_nothing}' if doing_nothing else ''), file=out)
 
 
 def _print_system(result: RunResult, out: TextIO) -> None:

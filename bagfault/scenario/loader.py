@@ -33,6 +33,7 @@ class _Collector:
         self.problems: list[Problem] = []
         self.warnings: list[Problem] = [Problem(file, where, format_path(path), message)
                                         for where, path, message in located.warnings]
+        self.inert: set[Problem] = set()  # the warnings of things that do nothing
 
     def add(self, path: PathKey, message: str) -> None:
         """An error: the scenario cannot be used."""
@@ -42,9 +43,16 @@ class _Collector:
         """Something ros2_fault_injection accepts (and ignores or reads its own way); an error with --strict."""
         self.warnings.append(Problem(self.file, self.located.where(path), format_path(path), message))
 
+    def ignored(self, path: PathKey, message: str) -> None:
+        """A warning about something that does nothing (a key ignored, a fault skipped): `run` and `test` count
+        these at the end of their summary."""
+        self.warn(path, message)
+        self.inert.add(self.warnings[-1])
+
     def reader(self) -> Reader:
-        """The section reader reporting here, with the scalars as the file writes them."""
-        return Reader(self.add, self.warn, self.located.raw_text)
+        """The section reader reporting here, with the scalars as the file writes them (the only warning it
+        gives is an unknown key, which is ignored)."""
+        return Reader(self.add, self.ignored, self.located.raw_text)
 
 
 def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = False) -> Scenario:
@@ -97,10 +105,11 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
         validate_scenario(scenario, out)
     warnings = sorted(out.warnings, key=_position)
     scenario.warnings = [str(w) for w in warnings]
+    scenario.inert_warnings = sum(w in out.inert for w in warnings)
     problems = out.problems + ([Problem(w.file, w.where, w.path, f'{w.message} (a warning, an error with --strict)')
                                 for w in warnings] if strict else [])
     if problems:
-        raise ScenarioError(sorted(problems, key=_position))
+        raise ScenarioError(sorted(problems, key=_position), [] if strict else warnings)
     scenario.seal()
     return scenario
 

@@ -83,7 +83,7 @@ def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:
     for injector in unknown:  # one warning, as the anchor's validator gives one (its faults named in it)
         faults = [f.id for f in scenario.faults if f.injector_id == injector.id and injector.id in gone]
         which = f' ({", ".join(dict.fromkeys(faults))})' if faults else ''
-        out.warn((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
+        out.ignored((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
                  f'installed plugin provides it, so injector {injector.id!r} and its faults{which} are skipped '
                  f'and the others run, as the anchor does ("assuming external plugin"; known: {known_types})')
     scenario.skipped_faults = [f.id for f in scenario.faults if f.injector_id in gone]
@@ -160,10 +160,10 @@ def _check_outputs(scenario: Scenario, out: _Collector) -> None:
 
 def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
     if fault.active_on_startup and fault.start is not None:
-        out.warn((*fault.path, 'start'), f'fault {fault.id!r} has active_on_startup and start; start is ignored')
+        out.ignored((*fault.path, 'start'), f'fault {fault.id!r} has active_on_startup and start; start is ignored')
     if (not fault.active_on_startup and fault.duration is not None and fault.start is None
             and fault.after is None and fault.repeat is None and fault.probability_per_second is None):
-        out.warn((*fault.path, 'duration'), f'fault {fault.id!r} has duration but no start; duration is ignored')
+        out.ignored((*fault.path, 'duration'), f'fault {fault.id!r} has duration but no start; duration is ignored')
     if not fault.injector_id:
         return
     injector = scenario.injector(fault.injector_id)
@@ -180,7 +180,7 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
         field = cls.field(str(key))
         if field is None:
             hint = _closest(str(key), keys)
-            out.warn(path, f'unknown config key {key!r} for injector type {injector.type!r} is ignored'
+            out.ignored(path, f'unknown config key {key!r} for injector type {injector.type!r} is ignored'
                            + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             del fault.config[key]  # still shown in the fault's event details, as the anchor shows it
             continue
@@ -192,7 +192,7 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
             out.warn(path, f"{fault.config_text.get(key, value)!r} is read here, but ros2_fault_injection's "
                            f'validator refuses it ({refusal}): the file would not load in the anchor')
         if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
-            out.warn(path, "nan has no effect: a level is the largest of the active faults' values, and "
+            out.ignored(path, "nan has no effect: a level is the largest of the active faults' values, and "
                            'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
         elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double' and refusal is None:
             out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '
@@ -243,7 +243,7 @@ def _check_fault_manager(scenario: Scenario, out: _Collector) -> None:
     """Parse the fault_manager section and the faults' report blocks into scenario.fault_manager_config."""
     from bagfault.fault_manager.config import parse_fault_manager, parse_report  # noqa: PLC0415
 
-    config = parse_fault_manager(scenario.fault_manager, out.add, out.warn)
+    config = parse_fault_manager(scenario.fault_manager, out.add, out.ignored)  # (its warnings: what does nothing)
     for fault in scenario.faults:
         if fault.report is not None:
             report = parse_report(fault.id, fault.injector_id, fault.report, (*fault.path, 'report'), out.add)

@@ -218,6 +218,7 @@ class Scenario(Sealed):
     fault_manager: dict[str, Any] | None = None
     fault_manager_config: Any = None
     warnings: list[str] = field(default_factory=list)
+    inert_warnings: int = 0  # of the warnings, those of something that does nothing (a key ignored, a fault skipped)
     skipped_faults: list[str] = field(default_factory=list)  # faults of injectors of a type nothing provides
     msg_paths: list[Path] = field(default_factory=list)  # folders of .msg/.idl definitions (relative to the file)
     system: SystemUnderTest | None = None  # `system_under_test:`, what `bagfault test` starts

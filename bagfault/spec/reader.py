@@ -26,6 +26,7 @@ schedule's `on` within its `period`) stays in the parser.
 from __future__ import annotations
 
 import copy
+import difflib
 import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
@@ -151,10 +152,13 @@ class Reader:
         for name in node:
             if name in names:
                 continue
+            close = difflib.get_close_matches(str(name), sorted(names), n=1, cutoff=0.6)
+            hint = f'did you mean {close[0]!r}? ' if close else ''
             if section.unknown == 'warn':
-                (self.warn or self.problem)((*path, name), f'unknown {noun}key {name!r} is ignored (known: {known})')
+                (self.warn or self.problem)((*path, name), f'unknown {noun}key {name!r} is ignored ({hint}known: '
+                                                           f'{known})')
             else:
-                self.problem((*path, name), f'unknown {noun}key {name!r} (known: {known})')
+                self.problem((*path, name), f'unknown {noun}key {name!r} ({hint}known: {known})')
 
     def _string(self, key: Key, value: object, path: PathKey, *, anchor: bool) -> tuple[bool, Any]:
         if isinstance(value, (dict, list)) or (not anchor and not isinstance(value, str)):

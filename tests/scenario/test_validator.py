@@ -52,7 +52,7 @@ def test_AcceptsValidOdomScenario() -> None:
 
 def test_WarnsForExternalPluginInjectorType() -> None:
     scenario = parse_scenario(odom().replace('type: odom', 'type: camera'))
-    assert len(scenario.warnings) == 2  # the type, then its fault skipped (the anchor: one, and no injector)
+    assert len(scenario.warnings) == 1  # the type, its fault named in it (as the anchor: one)
     assert 'assuming external plugin' in scenario.warnings[0]
 
 
@@ -175,3 +175,40 @@ def test_AcceptsScenarioWithValidFaultEventAssertion() -> None:
 def test_RejectsScenarioWithInvalidFaultEventAssertion() -> None:
     (error,) = errors_of(FAULT_EVENT % ('invalid_assertion', 'nonexistent_fault'))
     assert error[0] == 'assertions[0].fault_id'
+
+
+def test_every_warning_is_shown_with_the_errors_and_a_misspelt_key_names_the_right_one(tmp_path, capsys):
+    """A misspelt `confg:` makes the fault do nothing: a warning naming `config`, shown even when the file also has
+    an error (which exits 2), and beside the errors of another file given to the same `validate`."""
+    from bagfault.cli import main
+
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('injectors: [{id: imu, type: imu, input_topic: /imu, output_topic: /imu}]\n'
+                      'faults: [{id: f, injector_id: imu, start: 1.0, confg: {angular_velocity_z_bias: 0.2}}]\n'
+                      'assertions: [{id: a, type: topic_gap, topic: /imu, max_gap: -1}]\n')
+    warned = tmp_path / 'warned.yaml'
+    warned.write_text('injectors: [{id: imu, type: imu, input_topic: /imu, output_topic: /imu}]\n'
+                      'faults: [{id: g, injector_id: imu, start: 1.0, config: {x_bais: 0.2}}]\n')
+    assert main(['validate', str(broken), str(warned)]) == 2
+    err = capsys.readouterr().err
+    assert 'max_gap: -1.0 must be greater than 0' in err
+    assert "unknown fault key 'confg' is ignored (did you mean 'config'?" in err
+    assert f'bagfault: warning: {warned}' in err and "unknown config key 'x_bais'" in err
+    assert err.index('bagfault: error:') < err.index('bagfault: warning:')
+
+
+def test_run_ends_its_summary_with_the_warnings_of_what_does_nothing(tmp_path, capsys):
+    from support.helpers import FIXTURES
+
+    from bagfault.cli import main
+
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text('injectors: [{id: imu, type: imu, input_topic: /sensors/imu_raw, output_topic: /imu}]\n'
+                        'faults:\n'
+                        '  - {id: f, injector_id: imu, start: 1.0, confg: {angular_velocity_z_bias: 0.2}}\n'
+                        '  - {id: g, injector_id: imu, duration: 2.0, config: {angular_velocity_z_bias: 0.1}}\n'
+                        'assertions: [{id: a, type: topic_gap, topic: /imu, max_gap: 1.0}]\n')
+    assert main(['run', str(scenario), str(FIXTURES / 'rover_20s.mcap'), '-o', str(tmp_path / 'o.mcap')]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    # the misspelt key and a duration without start: two; the fault defined twice is no such warning (none here)
+    assert out[-1] == 'PASSED: 1 passed, 0 failed; 2 warnings of something in the scenario that does nothing (above)'

@@ -85,9 +85,12 @@ def test_each_value_outside_its_declaration_is_one_problem_at_its_key(text: str,
 def test_unknown_keys_are_errors_in_bagfaults_sections_and_warnings_in_the_anchors() -> None:
     _, problems, warnings = read(OWN, 'name: n\nrat: 1\n')
     known = 'block, count, mode, name, on, period, rate, seed, start, topics'
-    assert problems == [('rat', f"unknown key 'rat' (known: {known})")] and warnings == []
+    assert problems == [('rat', f"unknown key 'rat' (did you mean 'rate'? known: {known})")] and warnings == []
     _, problems, warnings = read(ANCHOR, 'name: n\nrat: 1\n')
-    assert warnings == [('rat', f"unknown test key 'rat' is ignored (known: {known})")] and problems == []
+    assert warnings == [('rat', f"unknown test key 'rat' is ignored (did you mean 'rate'? known: {known})")]
+    assert problems == []
+    _, problems, _ = read(OWN, 'name: n\nzzz: 1\n')  # nothing close: no guess
+    assert problems == [('zzz', f"unknown key 'zzz' (known: {known})")]
 
 
 def test_a_section_that_is_not_a_mapping_names_its_required_keys() -> None:
