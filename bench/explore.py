@@ -2,7 +2,7 @@
 
     python bench/explore.py [--space bench/explore/space.yaml] [--bugs bench/explore/bugs.yaml]
                             [--budget 700] [--rate 4] [--workers 2] [--replays 20]
-                            [--compare] [--json bench/results/explore-DATE.json]
+                            [--compare] [--resume] [--json bench/results/explore-DATE.json]
 
 Runs `bagfault explore` (Python API) on the space, then compares each planted bug of the bugs file (its
 failing assertions, its minimal faults and the threshold of each dimension listed) with the failures found:
@@ -46,7 +46,7 @@ def explore(space: Path, out: Path, args: argparse.Namespace, **options: Any) ->
     began = time.monotonic()
     result = api.explore(space, directory=out, budget=args.budget, workers=args.workers, rate=args.rate,
                          seed=args.seed, force=True, progress=ExploreProgress(enabled=sys.stderr.isatty()),
-                         **options)
+                         resume=args.resume and (out / 'runs.jsonl').exists(), **options)
     return result, time.monotonic() - began
 
 
@@ -158,6 +158,7 @@ def main() -> int:
     parser.add_argument('--seed', type=int, default=None)
     parser.add_argument('--replays', type=int, default=20)
     parser.add_argument('--compare', action='store_true', help='also uniform draws and ddmin only')
+    parser.add_argument('--resume', action='store_true', help='continue the explorations found in --out')
     parser.add_argument('--out', type=Path, default=HERE / 'data' / 'explore')
     parser.add_argument('--json', type=Path, default=HERE / 'results' / f'explore-{date.today()}.json')
     args = parser.parse_args()
