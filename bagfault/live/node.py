@@ -34,7 +34,7 @@ from bagfault.live.events import LiveEvents
 from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
 from bagfault.live.params import FaultParameters
 from bagfault.live.recording import start_recording
-from bagfault.live.ros import adapted_qos, interface_class, make_node, qos, unacknowledged
+from bagfault.live.ros import adapted_qos, interface_class, make_node, offered_metadata, qos, unacknowledged
 from bagfault.live.session import LiveSession, LiveTopic
 from bagfault.live.trigger import ServiceHost, TriggerProxy
 from bagfault.scenario import load_scenario
@@ -128,7 +128,7 @@ class ProxyNode:
             sink = ViewSink(self.view, self.recording if self.recording is not None else NullSink())
             self.logger.info(f'Foxglove view on {self.view.url}')
         self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, sink=sink,
-                                   blackbox_base=self.record_path, observed=watched)
+                                   blackbox_base=self.record_path, observed=watched, offers=self._offers)
         if self.view is not None:
             self.view.controls = self
             self.view.attach(self.session.run)
@@ -214,6 +214,10 @@ class ProxyNode:
                 self.logger.error(f'{topic.output_topic}: publish failed: {exc}')
             return
         self.session.sent(topic, payload)
+
+    def _offers(self, topic: str) -> dict[str, str]:
+        """What the publishers of a topic offer now (the proxy's own, for an output topic), as recorded."""
+        return offered_metadata(self.node.get_publishers_info_by_topic(topic))
 
     def _profile(self, topic: LiveTopic) -> Any:
         """The injector's QoS when it sets reliability or durability; else one every current publisher of its
@@ -383,6 +387,7 @@ class ProxyNode:
             for topic, message in self.session.flush():
                 self._publish(topic, message.data)
             self.unacknowledged = unacknowledged(self.publishers.values(), DRAIN)
+            self.session.register_channels()
             self.session.finish()
             with self.session.run:  # black boxes dropped unless the recording is complete
                 if self.recording is not None:

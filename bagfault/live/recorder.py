@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from bagfault import __version__
 from bagfault.io.types import TypeCatalog
 from bagfault.live.recording import start_recording
-from bagfault.live.ros import adapted_qos, has_interface, interface_class, make_node, offered_yaml
+from bagfault.live.ros import adapted_qos, has_interface, interface_class, make_node, offered_metadata
 from bagfault.live.runtime import make_executor, ros_context
 
 if TYPE_CHECKING:
@@ -100,9 +100,7 @@ class Recorder:
         """Subscribe raw to one topic now (QoS from its current publishers, whose profiles are recorded)."""
         infos = self.node.get_publishers_info_by_topic(topic)
         profile = adapted_qos(DEPTH, infos)
-        hashes = {str(info.topic_type_hash) for info in infos if str(info.topic_type_hash).startswith('RIHS')}
-        self.on_topic(topic, msgtype, {'offered_qos_profiles': offered_yaml([info.qos_profile for info in infos]),
-                                       'topic_type_hash': hashes.pop() if len(hashes) == 1 else ''})
+        self.on_topic(topic, msgtype, offered_metadata(infos))
         self.counts.setdefault(topic, 0)
         self.subscriptions[topic] = self.node.create_subscription(
             interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)

@@ -107,6 +107,15 @@ def offered_yaml(profiles: list[QoSProfile]) -> str:
         avoid_ros_namespace_conventions=bool(p.avoid_ros_namespace_conventions)) for p in profiles])
 
 
+def offered_metadata(endpoints: Iterable[Any]) -> dict[str, str]:
+    """A recorded channel's metadata as `ros2 bag record` writes it, from the publishers the graph shows: their
+    `offered_qos_profiles` and their `topic_type_hash` (empty unless they agree on one RIHS hash)."""
+    infos = list(endpoints)
+    hashes = {str(info.topic_type_hash) for info in infos if str(info.topic_type_hash).startswith('RIHS')}
+    return {'offered_qos_profiles': offered_yaml([info.qos_profile for info in infos]),
+            'topic_type_hash': hashes.pop() if len(hashes) == 1 else ''}
+
+
 def sleep_duration(seconds: float) -> Duration:
     """An rclpy Duration."""
     return Duration(nanoseconds=round(seconds * NS))

@@ -102,6 +102,7 @@ class LiveSession:
         sink: Sink | None = None,
         blackbox_base: Path | None = None,
         observed: dict[str, str] | None = None,
+        offers: Callable[[str], dict[str, str] | None] | None = None,
     ) -> None:
         self.state = FaultState(scenario)  # the loaded scenario stays as the file says (reloads compare with it)
         self.catalog = catalog
@@ -126,14 +127,24 @@ class LiveSession:
         self.run = Run(scenario, sink if sink is not None else NullSink(), catalog, schemas,
                        blackbox_base=blackbox_base)
         self.run.event_channel(FaultEvent)
-        self._inputs: dict[int, OutputChannel] = {}
-        self._outputs: dict[int, OutputChannel] = {}
-        for topic in self.topics:
-            self._inputs[id(topic)] = self.run.channel(topic.input_topic, topic.msgtype)
-            self._outputs[id(topic)] = self.run.channel(topic.output_topic, topic.msgtype)
-        self._watched = {name: self.run.channel(name, msgtype) for name, msgtype in self.observed.items()}
+        # a topic's channel is registered with its first message, when its publishers are known: the recording
+        # keeps the QoS they offer and their type hash (`offers`), as `bagfault record` does
+        self.offers = offers if offers is not None else lambda topic: None
         self._calls: OutputChannel | None = None
         self._string: Any = None
+
+    def _channel(self, topic: str, msgtype: str) -> OutputChannel:
+        """The run's channel of a topic, registered at its first use with what its publishers offer."""
+        return self.run.channel(topic, msgtype, self.offers(topic))
+
+    def register_channels(self) -> None:
+        """Every topic's channel, those without a message too (before the recording is finished)."""
+        with self.lock:
+            for topic in self.topics:
+                self._channel(topic.input_topic, topic.msgtype)
+                self._channel(topic.output_topic, topic.msgtype)
+            for name, msgtype in self.observed.items():
+                self._channel(name, msgtype)
 
     @property
     def scenario(self) -> Scenario:
@@ -204,7 +215,7 @@ class LiveSession:
                     self._publish_events(self.scheduler.advance(now))
             topic.received += 1
             self.run.read(1, now)
-            self.run.message(self._inputs[id(topic)], now, now, data)
+            self.run.message(self._channel(topic.input_topic, topic.msgtype), now, now, data)
             message = RawMessage(now, now, data, topic.received)
 
             def malformed(_message: RawMessage, reason: str) -> str:
@@ -221,7 +232,7 @@ class LiveSession:
         with self.lock:
             now = self.clock()
             topic.forwarded += 1
-            self.run.message(self._outputs[id(topic)], now, now, data)
+            self.run.message(self._channel(topic.output_topic, topic.msgtype), now, now, data)
             return now
 
     def observe(self, name: str, data: bytes) -> None:
@@ -229,7 +240,7 @@ class LiveSession:
         with self.lock:
             now = self.clock()
             self.run.read(1, now)
-            self.run.message(self._watched[name], now, now, data)
+            self.run.message(self._channel(name, self.observed[name]), now, now, data)
 
     def service_call(self, service: str, target: str, outcome: str, success: bool, message: str,
                      delay_ms: int) -> None:

@@ -175,6 +175,29 @@ def test_record_keeps_the_qos_the_publisher_offered(graph, tmp_path: Path) -> No
     assert offered['depth'] != 100  # not the recorder's own subscription depth
 
 
+def test_proxy_record_keeps_what_each_topics_publishers_offer(graph, scenarios: Path, tmp_path: Path) -> None:
+    """A best-effort sensor into `proxy --record`: its input channel is recorded best-effort with the type hash the
+    publisher reports, as `record --all` records it; the output channel with what the proxy itself offers."""
+    import yaml
+    from mcap.reader import make_reader
+
+    out = tmp_path / 'proxy.mcap'
+    proxy = graph.bagfault('proxy', str(scenarios / 'imu.yaml'), '--record', str(out), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '50', '--seconds', '3', '--best-effort',
+               name='imu').wait(timeout=30)
+    assert graph.stop(proxy) == 0
+    with out.open('rb') as stream:
+        channels = {c.topic: c for c in make_reader(stream).get_summary().channels.values()}
+    raw, faulty = channels['/sensors/imu_raw'], channels['/sensors/imu']
+    [offered] = yaml.safe_load(raw.metadata['offered_qos_profiles'])
+    assert offered['reliability'] == 2  # RMW_QOS_POLICY_RELIABILITY_BEST_EFFORT: what the sensor offered
+    assert raw.metadata['topic_type_hash'].startswith('RIHS01_')
+    [own] = yaml.safe_load(faulty.metadata['offered_qos_profiles'])
+    assert own['reliability'] == 1  # the proxy offers reliable (it reaches both kinds of subscriber)
+    assert faulty.metadata['topic_type_hash'] == raw.metadata['topic_type_hash']
+
+
 def test_a_killed_recording_is_recovered_up_to_its_last_second(graph, scenarios: Path, tmp_path: Path) -> None:
     record = tmp_path / 'killed.mcap'
     proxy = graph.bagfault('proxy', str(scenarios / 'imu.yaml'), '--record', str(record), name='proxy')
