@@ -20,7 +20,6 @@ not part of this tree.
     ├── AssertionSetupError   assertions/: an assertion cannot judge these topics
     ├── FaultManagerError     fault_manager/
     ├── LatencyError          latency/
-    ├── ReportError           report/
     ├── LiveError             live/
     │   └── ReloadError           a reloaded scenario is refused; the running one stays
     ├── ClosedLoopError       closedloop/
@@ -118,10 +117,6 @@ class FaultManagerError(BagfaultError):
 
 class LatencyError(BagfaultError):
     """An architecture file or a path latency measurement cannot be used."""
-
-
-class ReportError(BagfaultError):
-    """A report cannot be written."""
 
 
 class LiveError(BagfaultError):

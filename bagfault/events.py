@@ -154,7 +154,6 @@ def to_message(event: FaultEvent | AssertionEvent | ScenarioStatus, store: Any) 
 
 
 EVENTS_JSON_TOPIC = '/bagfault/events'
-EVENTS_JSON_TYPE = 'std_msgs/msg/String'
 
 
 def event_json(event: Event, origin: int | None) -> str:

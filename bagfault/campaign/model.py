@@ -11,7 +11,6 @@ Keep = Literal['all', 'failed', 'none']
 # An offline run is byte-identical for its seed, so a second sample says nothing new; a closed loop depends on the
 # system's scheduling: 3 samples per value catch a value that fails one run in three 70 % of the time, and cost 3x.
 REPEAT: dict[str, int] = {'run': 1, 'test': 3}
-JobStatus = Literal['passed', 'failed', 'error']  # error: the job could not run (crash, timeout, bad bag)
 
 
 @dataclass(frozen=True)

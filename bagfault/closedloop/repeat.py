@@ -53,13 +53,3 @@ def fold(results: Sequence[RunResult]) -> RunResult:
         folded.append(replace(base, state=state, message=text))
     notes = [*last.notes, f'{len(results)} runs, each on its own ROS domain; verdicts are pass rates']
     return replace(last, assertions=folded, notes=notes, repeats=list(results), assertion_events=[])
-
-
-def pass_rates(result: RunResult) -> dict[str, float]:
-    """Assertion id -> share of the repeated runs it passed (1.0 or 0.0 for a single run)."""
-    runs = result.repeats or [result]
-    rates = {}
-    for assertion in runs[0].assertions:
-        states = [next((a.state for a in r.assertions if a.id == assertion.id), 'pending') for r in runs]
-        rates[assertion.id] = states.count('passed') / len(runs)
-    return rates

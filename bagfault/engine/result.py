@@ -103,3 +103,9 @@ class RunResult:
     def failed(self) -> bool:
         """True when an assertion failed (in any repeated run): exit code 1."""
         return any(r.state == 'failed' for r in self.assertions) or any(r.failed for r in self.repeats)
+
+    def pass_rates(self) -> dict[str, float]:
+        """Assertion id -> share of the runs it passed: of each repeated run (`test --repeat`), else 1.0 or 0.0."""
+        runs = self.repeats or [self]
+        return {a.id: [next((b.state for b in r.assertions if b.id == a.id), 'pending') for r in runs].count('passed')
+                / len(runs) for a in runs[0].assertions}

@@ -46,10 +46,6 @@ class Routing:
     replaced: list[str] = field(default_factory=list)
     schemas: dict[str, tuple[str, str, str]] = field(default_factory=dict)
 
-    def output_types(self) -> dict[str, str]:
-        """Type of every topic the output will hold (before event topics)."""
-        return {topic: entry[0] for topic, entry in self.schemas.items()}
-
 
 def _topics_listing(inputs: InputSet) -> str:
     topics = inputs.topics()

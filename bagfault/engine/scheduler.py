@@ -210,10 +210,6 @@ class FaultScheduler:
             details=fault.describe_fault() if source == 'manual' else fault.describe_config(),
         )
 
-    def is_active(self, fault_id: str) -> bool:
-        """True while the fault is active."""
-        return fault_id in self.active
-
     def active_of(self, faults: Sequence[FaultSpec]) -> list[ActiveFault]:
         """Those of `faults` active now, with their start time and random streams, in the given order."""
         return [ActiveFault(f, self.active[f.id], self.random[f.id]) for f in faults if f.id in self.active]

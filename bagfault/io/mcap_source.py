@@ -30,7 +30,7 @@ import lz4.frame
 import numpy as np
 import zstandard
 from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader, SeekingReader
+from mcap.reader import SeekingReader
 from mcap.records import Channel as McapChannel
 from mcap.records import Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -706,8 +706,3 @@ class McapSource:
         """Release the file."""
         self._file.close()
 
-
-def read_attachments(path: Path) -> list[tuple[str, bytes]]:
-    """(name, data) of every attachment; used by `info` and tests."""
-    with path.open('rb') as stream:
-        return [(a.name, a.data) for a in NonSeekingReader(stream).iter_attachments()]

@@ -116,11 +116,6 @@ def offered_metadata(endpoints: Iterable[Any]) -> dict[str, str]:
             'topic_type_hash': hashes.pop() if len(hashes) == 1 else ''}
 
 
-def sleep_duration(seconds: float) -> Duration:
-    """An rclpy Duration."""
-    return Duration(nanoseconds=round(seconds * NS))
-
-
 def make_node(name: str, context: Any, ros_args: list[str] | None = None, **options: Any) -> Any:
     """A node; `ros_args` (what follows --ros-args on the command line: -r remaps, __node, __ns, -p, params
     files) apply to it alone. LiveError naming the argument rcl refuses."""

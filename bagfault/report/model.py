@@ -122,12 +122,13 @@ def system_section(result: RunResult) -> dict[str, Any]:
 def repeats_section(result: RunResult) -> dict[str, Any]:
     """`test --repeat`: per assertion its pass rate and each run's state and decision time."""
     runs = result.repeats
+    rates = result.pass_rates()
     section: dict[str, Any] = {'runs': len(runs), 'assertions': {}}
     for assertion in runs[0].assertions:
         per_run = [next((a for a in r.assertions if a.id == assertion.id), None) for r in runs]
         states = [a.state if a is not None else 'pending' for a in per_run]
         section['assertions'][assertion.id] = {
-            'pass_rate': states.count('passed') / len(runs),
+            'pass_rate': rates[assertion.id],
             'states': states,
             't_s': [seconds(a.time, r.stats.origin) if a is not None else None
                     for r, a in zip(runs, per_run, strict=True)],

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from bagfault.assertions.base import AssertionResult
-from bagfault.closedloop.repeat import fold, pass_rates
+from bagfault.closedloop.repeat import fold
 from bagfault.engine.result import RunResult, RunStats
 from bagfault.report.model import build
 from bagfault.scenario import parse_scenario
@@ -34,7 +34,7 @@ def test_pass_rates_and_spread() -> None:
                                 'stdev 0.872 s); run 3: IMU_DRIFT did not reach CONFIRMED')
     assert alive.state == 'passed'
     assert alive.message.startswith('passed 3 of 3 runs (100%); decided at 13.000 to 13.000 s')
-    assert pass_rates(folded) == {'detected': 2 / 3, 'alive': 1.0}
+    assert folded.pass_rates() == {'detected': 2 / 3, 'alive': 1.0}
     report = build(folded)['repeats']
     assert report['runs'] == 3
     assert report['assertions']['detected'] == {'pass_rate': 2 / 3, 'states': ['passed', 'passed', 'failed'],
@@ -45,4 +45,4 @@ def test_all_passed_is_a_pass() -> None:
     folded = fold([run(0, ('a', 'passed', 1.0, 'ok')), run(NS, ('a', 'passed', 2.0, 'ok'))])
     assert not folded.failed
     assert folded.assertions[0].state == 'passed'
-    assert pass_rates(run(0, ('a', 'failed', 1.0, 'no'))) == {'a': 0.0}
+    assert run(0, ('a', 'failed', 1.0, 'no')).pass_rates() == {'a': 0.0}

@@ -9,6 +9,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from support.caret import caret_target_messages
 from support.helpers import CARET, FIXTURES, NS, SHARED, need
 from support.html_check import figures
 
@@ -37,7 +38,7 @@ def caret_sample():
 
 
 def write_target_bag(path, **kw):
-    records, truth = synthetic.caret_target_messages(**kw)
+    records, truth = caret_target_messages(**kw)
     synthetic.write_mcap(path, records)
     return path, truth
 
