@@ -14,7 +14,7 @@ from support.loop import rclpy_available
 
 from bagfault import api
 
-pytestmark = [pytest.mark.live, pytest.mark.closed_loop]
+pytestmark = [pytest.mark.live, pytest.mark.closed_loop, pytest.mark.slow]
 BENCH = ROOT / 'bench' / 'explore'
 
 
