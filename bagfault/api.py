@@ -394,8 +394,8 @@ def explore(space: Scenario | str | Path, inputs: Sequence[str | Path] = (), dir
     """Search the scenario's `explore:` fault space for failures, shrink each to its minimal cause, replay it;
     `bagfault run` offline, `bagfault test` with a `system_under_test` (at `rate`). Runs go to a local pool of
     `workers` (default one per core) or, with `ray` ('' for a local instance, or an address), to Ray; results in
-    `directory` (explore.json, report.html, failures/). `search='uniform'` and `shrink='faults'` are the
-    benchmark's comparisons (uniform draws without margins; ddmin over the fault set only)."""
+    `directory` (explore.json, report.html, failures/). `search='uniform'` with `shrink='halving'`, and
+    `shrink='faults'`, are the benchmark's comparisons (uniform draws and no margins; ddmin over the faults only)."""
     from bagfault.explore import ExploreOptions  # noqa: PLC0415
     from bagfault.explore import explore as run_explore  # noqa: PLC0415
 

@@ -2,7 +2,7 @@
 
     python bench/explore.py [--space bench/explore/space.yaml] [--bugs bench/explore/bugs.yaml]
                             [--budget 700] [--rate 4] [--workers 2] [--replays 20]
-                            [--compare] [--resume] [--json bench/results/explore-DATE.json]
+                            [--compare | --only 0 1 2] [--resume] [--json bench/results/explore-DATE.json]
 
 Runs `bagfault explore` (Python API) on the space, then compares each planted bug of the bugs file (its
 failing assertions, its minimal faults and the threshold of each dimension listed) with the failures found:
@@ -15,9 +15,10 @@ failing assertions, its minimal faults and the threshold of each dimension liste
 - replays: the minimal scenario, as written, run --replays times with `bagfault test`: how many fail the same
   way (target: all).
 
---compare runs the same budget again twice: uniform draws without margins (search='uniform'), and ddmin over
-the fault set without shrinking dimensions (shrink='faults'). Another space and bugs file (another system)
-run the same way. Prints a table and writes JSON with the date, the command and the load.
+--compare runs the same budget again twice: uniform draws and no margins (search='uniform', shrink='halving':
+no refinement of near misses, no guesses from margins while shrinking), and ddmin over the fault set without
+shrinking dimensions (shrink='faults'); --only picks some of the three. Another space and bugs file (another
+system) run the same way. Prints a table and writes JSON with the date, the command and the load.
 """
 
 from __future__ import annotations
@@ -159,6 +160,8 @@ def main() -> int:
     parser.add_argument('--replays', type=int, default=20)
     parser.add_argument('--compare', action='store_true', help='also uniform draws and ddmin only')
     parser.add_argument('--resume', action='store_true', help='continue the explorations found in --out')
+    parser.add_argument('--only', type=int, nargs='+', choices=(0, 1, 2),
+                        help='0 guided (with the replays), 1 uniform without margins, 2 ddmin only')
     parser.add_argument('--out', type=Path, default=HERE / 'data' / 'explore')
     parser.add_argument('--json', type=Path, default=HERE / 'results' / f'explore-{date.today()}.json')
     args = parser.parse_args()
@@ -173,10 +176,13 @@ def main() -> int:
     report: dict[str, Any] = {'date': str(date.today()), 'command': ' '.join(sys.argv), 'space': str(args.space),
                               'budget': args.budget, 'rate': args.rate, 'workers': args.workers,
                               'load_before': round(os.getloadavg()[0], 2), 'strategies': []}
-    runs = [('guided search, margins, full shrink', {})]
-    if args.compare:
-        runs += [('uniform draws, no margins', {'search': 'uniform'}), ('ddmin only', {'shrink': 'faults'})]
-    for number, (name, options) in enumerate(runs):
+    strategies = [('guided search, margins, full shrink', {}),
+                  ('uniform draws, no margins', {'search': 'uniform', 'shrink': 'halving'}),
+                  ('ddmin only', {'shrink': 'faults'})]
+    chosen = args.only if args.only else [0, 1, 2] if args.compare else [0]
+    for number, (name, options) in enumerate(strategies):
+        if number not in chosen:
+            continue
         result, seconds = explore(args.space, args.out / f'run{number}', args, **options)
         rows = judge(result, bugs, ranges, resolution)
         if number == 0 and args.replays:

@@ -26,7 +26,9 @@ if TYPE_CHECKING:
     from bagfault.explore.records import Failure, Outcome, Purpose
     from bagfault.spec.model import Dimension, Explore
 
-ShrinkMode = Literal['full', 'faults']  # faults: ddmin over the fault set only (the benchmark's comparison)
+# the benchmark's comparisons: `halving` shrinks every dimension without the margins' guesses, `faults` is ddmin over
+# the fault set only
+ShrinkMode = Literal['full', 'halving', 'faults']
 Runs = Generator[Candidate, tuple[int, 'Outcome'], bool]
 
 
@@ -56,7 +58,7 @@ class Shrinker:
         if composite:
             failure.note = (f'its assertions are those of {composite} together: its faults are shrunk, not its '
                             'dimensions')
-        if self.mode == 'full' and not composite:
+        if self.mode != 'faults' and not composite:
             for phase in ('config', 'duration', 'start'):
                 for fault_id in self.current.ids:
                     for dimension in self._dimensions(fault_id, phase):
@@ -97,7 +99,8 @@ class Shrinker:
         passing, at_passing = target, self.margin(self.latest)
         limit = self.space.resolution * dimension.span
         side = 1.0 if failing > passing else -1.0  # from passing toward failing
-        linear = name.startswith('config.')  # a strength's margin may follow it; a window's time rarely does
+        linear = name.startswith('config.') and self.mode == 'full'  # a strength's margin may follow it; a time's
+        # rarely does
         stale = False  # the last guess did not halve the bracket: halve next
         while abs(failing - passing) > limit:
             width = abs(failing - passing)

@@ -67,11 +67,11 @@ def drive(shrinker: Shrinker, system, flaky=lambda n: False) -> list[Candidate]:
         return asked
 
 
-def shrink(found: Candidate, system, *, confirm: int = 1, text: str = SPACE, flaky=lambda n: False):
+def shrink(found: Candidate, system, *, confirm: int = 1, text: str = SPACE, flaky=lambda n: False, mode='full'):
     explore = space(text)
     failing, margins = system(found)
     failure = Failure(1, frozenset(failing), 0, 1, found)
-    shrinker = Shrinker(explore, failure, Outcome('failed', frozenset(failing), margins), confirm=confirm)
+    shrinker = Shrinker(explore, failure, Outcome('failed', frozenset(failing), margins), confirm=confirm, mode=mode)
     asked = drive(shrinker, system, flaky)
     return failure, asked
 
@@ -101,6 +101,19 @@ def test_strength_and_duration_shrink_to_their_thresholds_and_the_decoy_to_its_w
     bias_runs = [s for s in failure.steps if 'angular_velocity_z_bias' in s.change]
     assert len(bias_runs) <= 4
     assert len(asked) == failure.shrink_runs <= 20
+
+
+def test_without_margins_each_strength_is_halved_and_ddmin_alone_keeps_the_values():
+    """The benchmark's comparisons: `halving` reaches the same thresholds, the bias by seven halvings of 0.9 to
+    1 % (plus its end) instead of the margin's two or three; `faults` drops the faults that do not matter and
+    leaves every value as found."""
+    found = candidate(bias=full_bias(), drop={'start': 4.0, 'duration': 2.0})
+    halved, _ = shrink(found, strength_and_duration, mode='halving')
+    values = dict(halved.minimal.drawn('bias').values)
+    assert 0.4 < values['config.angular_velocity_z_bias'] <= 0.41
+    assert len([s for s in halved.steps if 'angular_velocity_z_bias' in s.change]) == 1 + 7  # 0.9 / 2**7 < 0.01
+    ddmin, _ = shrink(found, strength_and_duration, mode='faults')
+    assert ddmin.minimal == found.without('drop')
 
 
 def overlap(c: Candidate):
