@@ -31,7 +31,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_typestore
-from support.helpers import counts, raw_messages, run_inline, tree_digest
+from support.helpers import FIXTURES, counts, raw_messages, run_inline, tree_digest
 from support.hold import hold_plugin
 
 from bagfault import api
@@ -588,3 +588,37 @@ def test_a_ros1_bag_whose_header_claims_fewer_connections_than_its_index_holds(t
     # rosbags finds the extra connection record itself (a record of an unexpected type after the chunk infos)
     assert 'index looks damaged' in err or f'its header says conn_count={connections - 1}' in err
     assert not (tmp_path / 'out.mcap').exists()
+
+
+BOMB = ''.join(f'l{n}: &l{n} [' + ', '.join([f'*l{n - 1}'] * 9 if n else ['x'] * 9) + ']\n' for n in range(9))
+HOSTILE_YAML = {'alias bomb': ('injectors: []\n' + BOMB, 'an alias bomb'),
+                'recursive alias': ('injectors: []\nfaults: &a [*a]\n', 'recursive alias')}
+
+
+@pytest.mark.parametrize('case', sorted(HOSTILE_YAML))
+@pytest.mark.parametrize('command', ['validate', 'run', 'run-no-chunk-copy', 'check', 'explore', 'campaign'])
+def test_every_command_that_reads_a_scenario_refuses_hostile_yaml_at_once(tmp_path, command, case):
+    """Nine levels of nine aliases (9**9 values once expanded) and a recursive alias: every command refuses them
+    with the loader's line, in bounded time, whichever path reads the scenario first (`run`'s leading copy
+    parsed it with plain PyYAML and walked the expansion: it hung where validate refused in 1 s)."""
+    text, said = HOSTILE_YAML[case]
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text(text)
+    bag = FIXTURES / 'rover_20s.mcap'
+    out = tmp_path / 'out.mcap'
+    arguments = {
+        'validate': ['validate', str(scenario)],
+        'run': ['run', str(scenario), str(bag), '-o', str(out)],
+        'run-no-chunk-copy': ['run', str(scenario), str(bag), '-o', str(out), '--no-chunk-copy'],
+        'check': ['check', str(scenario), str(bag)],
+        'explore': ['explore', str(scenario), str(bag), '-o', str(tmp_path / 'explored')],
+        'campaign': ['campaign', str(tmp_path / 'c.yaml'), '-o', str(tmp_path / 'campaign')],
+    }[command]
+    (tmp_path / 'c.yaml').write_text(f'scenario: s.yaml\nbags: [{bag}]\n')
+    began = time.monotonic()
+    done = subprocess.run([sys.executable, '-m', 'bagfault', *arguments], capture_output=True, text=True,
+                          timeout=60, check=False)
+    assert done.returncode == 2, done.stderr
+    assert said in done.stderr and 'Traceback' not in done.stderr
+    assert time.monotonic() - began < 20
+    assert not out.exists() and not (tmp_path / 'explored').exists()

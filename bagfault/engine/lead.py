@@ -20,7 +20,6 @@ import struct
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
-import yaml
 from mcap.records import Channel, Header, Schema
 
 from bagfault.errors import BagfaultError
@@ -28,6 +27,7 @@ from bagfault.io.channel import bag_name
 from bagfault.io.leading_copy import LeadingCopy, Piece
 from bagfault.io.mcap_layout import MAGIC, header_library, padding_length, record_bytes
 from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, read_summary
+from bagfault.spec.yamlnodes import load_located
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -55,12 +55,12 @@ def start_lead(scenario_text: str, source: Path, output: Path, *, start_offset: 
             _, summary = read_summary(stream, size)
             if summary is None:
                 return None
-        document = yaml.load(scenario_text, Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))
+        document = load_located(scenario_text).data  # the loader's own parse and limits: no alias bomb gets by
         pieces = leading_pieces(summary, document, start_offset, activations, observed)
         if not pieces:
             return None
         return LeadingCopy(source, pieces, output)
-    except (OSError, ValueError, struct.error, yaml.YAMLError, SummaryError, BagfaultError, RecursionError):
+    except (OSError, ValueError, struct.error, SummaryError, BagfaultError, RecursionError):
         return None
 
 
