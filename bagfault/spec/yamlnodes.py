@@ -54,7 +54,10 @@ class YamlSyntaxError(ValueError):
 
 
 MAX_DEPTH = 64  # nesting of mappings and lists
-MAX_NODES = 100_000  # values after alias expansion: stops "billion laughs" files
+MAX_NODES = 1_000_000  # values a file writes out: a scenario is at most this big
+MAX_EXPANDED = 100_000  # values reached again through aliases: stops "billion laughs" files
+# libyaml's where there is one: 7x faster, the same nodes (but a plain scalar's style is '' there, None in Python's)
+COMPOSER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
 STANDARD_TAGS = {f'tag:yaml.org,2002:{name}' for name in
                  ('str', 'int', 'float', 'bool', 'null', 'map', 'seq', 'timestamp', 'binary', 'merge', 'value')}
 FLOAT_12 = re.compile(r'[-+]?(\d+(\.\d*)?|\.\d+)([eE][-+]?\d+)')  # YAML 1.2 floats PyYAML (1.1) reads as text
@@ -66,12 +69,12 @@ def load_located(text: str) -> LocatedYaml:
 
     Numbers follow YAML 1.2 (`1e3` is 1000.0, `1:30` is text) as yaml-cpp reads
     them; merge keys (`<<:`) are applied; a key given twice keeps its first value
-    (yaml-cpp's lookup) with a warning; aliases that expand past MAX_NODES,
-    recursive aliases, nesting deeper than MAX_DEPTH and non-standard tags are
-    errors.
+    (yaml-cpp's lookup) with a warning; a file of more than MAX_NODES values, aliases
+    that reach more than MAX_EXPANDED values again, recursive aliases, nesting
+    deeper than MAX_DEPTH and non-standard tags are errors.
     """
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        node = yaml.compose(text, Loader=COMPOSER)
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         problem = getattr(exc, 'problem', None) or str(exc)
@@ -92,16 +95,23 @@ class _Converter:
     def __init__(self, out: LocatedYaml) -> None:
         self.out = out
         self.ctor = yaml.SafeLoader('')
-        self.count = 0
+        self.seen: set[int] = set()  # the nodes the file writes (an alias's target counts once here)
+        self.expanded = 0
         self.active: set[int] = set()
 
     def fail(self, node: yaml.Node, message: str) -> YamlSyntaxError:
         return YamlSyntaxError(f'{node.start_mark.line + 1}:{node.start_mark.column + 1}: {message}')
 
     def convert(self, node: yaml.Node, path: PathKey) -> Any:
-        self.count += 1
-        if self.count > MAX_NODES:
-            raise self.fail(node, f'more than {MAX_NODES} values once aliases are expanded (an alias bomb?)')
+        if id(node) in self.seen:  # reached again through an alias
+            self.expanded += 1
+            if self.expanded > MAX_EXPANDED:
+                raise self.fail(node, f'more than {MAX_EXPANDED} values reached again through aliases (an alias '
+                                      'bomb?)')
+        else:
+            self.seen.add(id(node))
+            if len(self.seen) > MAX_NODES:
+                raise self.fail(node, f'more than {MAX_NODES} values: a scenario file holds at most that many')
         if len(path) > MAX_DEPTH:
             raise self.fail(node, f'nested more than {MAX_DEPTH} levels deep')
         if node.tag not in STANDARD_TAGS:
@@ -122,9 +132,9 @@ class _Converter:
 
     def scalar(self, node: yaml.ScalarNode, path: PathKey) -> Any:
         self.out.raw[path] = node.value
-        if node.style is None and node.tag == 'tag:yaml.org,2002:str' and FLOAT_12.fullmatch(node.value):
+        if not node.style and node.tag == 'tag:yaml.org,2002:str' and FLOAT_12.fullmatch(node.value):
             return float(node.value)
-        if node.style is None and SEXAGESIMAL.fullmatch(node.value):
+        if not node.style and SEXAGESIMAL.fullmatch(node.value):
             return node.value
         try:
             return self.ctor.construct_object(node, deep=True)
@@ -137,7 +147,7 @@ class _Converter:
         merged: list[yaml.MappingNode] = []
         for key_node, value_node in node.value:
             if key_node.tag == 'tag:yaml.org,2002:merge' or (isinstance(key_node, yaml.ScalarNode)
-                                                              and key_node.value == '<<' and key_node.style is None):
+                                                              and key_node.value == '<<' and not key_node.style):
                 merged += self.merge_sources(value_node)
                 continue
             # Keys stay as written: YAML 1.1 would turn `on:` (repeat: {period, on}) into True.

@@ -43,7 +43,7 @@ def test_every_problem_is_named_with_its_line(corpus: Path) -> None:
         f'{name}:9:18: design.random: needs samples (1 to 100000) and an integer seed',
         f"{name}:10:7: keep: 'some' is not all, failed or none",
         f"{name}:11:7: mode: 'live' is not run or test",
-        f"{name}:12:8: speed: unknown key 'speed' (known: bags, campaign, design, keep, mode, scenario, search, "
+        f"{name}:12:8: speed: unknown key 'speed' (did you mean 'seeds'? known: bags, campaign, design, keep, mode, scenario, search, "
         'seeds, sweep, timeout)',
     ]  # in file order; the swept paths are checked against the scenario once the file itself is sound: nope is not named
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import textwrap
+import time
 
 import numpy as np
 import pytest
@@ -337,3 +338,27 @@ def test_one_fault_id_on_two_injectors_is_refused():
     """)
     with pytest.raises(ScenarioError, match="also a fault of injector 'a'"):
         parse_scenario(text)
+
+
+def test_a_big_file_and_an_alias_bomb_are_told_apart(monkeypatch):
+    """Values the file writes count against MAX_NODES, values reached again through aliases against
+    MAX_EXPANDED: a scenario of many plain faults is no alias bomb (30 000 fault windows were refused as one)."""
+    from bagfault.spec import yamlnodes
+
+    monkeypatch.setattr(yamlnodes, 'MAX_NODES', 1000)
+    monkeypatch.setattr(yamlnodes, 'MAX_EXPANDED', 1000)
+    plain = 'faults:\n' + ''.join(f'  - {{id: f{n}, start: {n}}}\n' for n in range(400))  # 400 x 3 values (keys uncounted)
+    with pytest.raises(yamlnodes.YamlSyntaxError, match='more than 1000 values: a scenario file holds at most'):
+        yamlnodes.load_located(plain)
+    aliases = 'a: &a [1, 2, 3, 4, 5, 6, 7, 8, 9, 10]\nb: [' + ', '.join(['*a'] * 120) + ']\n'  # 12 written, 1320 again
+    with pytest.raises(yamlnodes.YamlSyntaxError, match='reached again through aliases'):
+        yamlnodes.load_located(aliases)
+
+
+def test_thirty_thousand_fault_windows_load_in_linear_time(tmp_path):
+    lines = ['injectors: [{id: imu, type: imu, input_topic: /imu, output_topic: /imu}]', 'faults:']
+    lines += [f'  - {{id: f{n}, injector_id: imu, start: {n / 1000:.3f}, duration: 0.0005, '
+              'config: {angular_velocity_z_bias: 0.1}}' for n in range(30_000)]
+    began = time.monotonic()
+    scenario = parse_scenario('\n'.join(lines) + '\n')
+    assert len(scenario.faults) == 30_000 and time.monotonic() - began < 30  # about 4 s here
