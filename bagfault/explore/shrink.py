@@ -5,9 +5,11 @@ fewest faults (ddmin over the fault set: drop one fault at a time while the
 rest still fails, until no single fault can go); then each config dimension
 toward its weakest value, each duration toward the shortest, each start as
 late as the failure allows, each by trying the end of its range first and
-else bisecting to `resolution` of its range. A step is kept only when its
-candidate fails `confirm` runs in a row with exactly the failure's set of
-assertions; a run that could not run keeps nothing. The search is a
+else bisecting to `resolution` of its range; then again, one step of
+`resolution` per dimension first, while a pass still moves something (up to
+PASSES): a start moved later may allow a shorter window. A step is kept
+only when its candidate fails `confirm` runs in a row with exactly the
+failure's set of assertions; a run that could not run keeps nothing. The search is a
 generator: it yields the candidate to run and is sent (run index, outcome),
 so the driver runs the steps of several failures side by side, in rounds,
 and the result depends only on the outcomes, never on how many workers ran
@@ -30,6 +32,8 @@ if TYPE_CHECKING:
 # the fault set only
 ShrinkMode = Literal['full', 'halving', 'faults']
 Runs = Generator[Candidate, tuple[int, 'Outcome'], bool]
+PASSES = 3  # passes over every dimension: one more whenever a pass moved something (a later start may allow a
+            # shorter window, a shorter window of one fault a shorter one of the other)
 
 
 class Shrinker:
@@ -58,11 +62,14 @@ class Shrinker:
         if composite:
             failure.note = (f'its assertions are those of {composite} together: its faults are shrunk, not its '
                             'dimensions')
-        if self.mode != 'faults' and not composite:
+        for sweep in range(PASSES if self.mode != 'faults' and not composite else 0):
+            before = self.current
             for phase in ('config', 'duration', 'start'):
                 for fault_id in self.current.ids:
                     for dimension in self._dimensions(fault_id, phase):
-                        yield from self._toward(fault_id, dimension)
+                        yield from self._toward(fault_id, dimension, again=sweep > 0)
+            if self.current == before:
+                break
         failure.minimal, failure.state = self.current, 'shrunk'
 
     def _dimensions(self, fault_id: str, phase: str) -> list[Dimension]:
@@ -81,7 +88,8 @@ class Shrinker:
                     self.current, dropped = trial, True
                     break
 
-    def _toward(self, fault_id: str, dimension: Dimension) -> Generator[Candidate, tuple[int, Outcome], None]:
+    def _toward(self, fault_id: str, dimension: Dimension, *,
+                again: bool = False) -> Generator[Candidate, tuple[int, Outcome], None]:
         """Move one dimension toward its weakest end (the latest start): the end itself first; else narrow the
         bracket between the value that fails and the one that passes to `resolution` of the range: a strength (a
         config key) at the point where the margin, taken as linear between the two, crosses zero (just on either
@@ -93,11 +101,19 @@ class Shrinker:
         if failing == target:
             return
         label = f'{fault_id}.{name.removeprefix("config.")}'
+        limit = self.space.resolution * dimension.span
+        if again:  # a later pass: one step toward the end says whether another value moved its threshold
+            step = quantize(dimension, failing + (limit if target > failing else -limit))
+            if step == failing or not (yield from self._try(fault_id, name, step, f'{label} {failing:g} -> '
+                                                                                   f'{step:g}')):
+                return
+            failing = step
+            if failing == target:
+                return
         at_failing = self.margin(self.kept)
         if (yield from self._try(fault_id, name, target, f'{label} {failing:g} -> {target:g}')):
             return
         passing, at_passing = target, self.margin(self.latest)
-        limit = self.space.resolution * dimension.span
         side = 1.0 if failing > passing else -1.0  # from passing toward failing
         linear = name.startswith('config.') and self.mode == 'full'  # a strength's margin may follow it; a time's
         # rarely does
