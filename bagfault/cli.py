@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from bagfault.report.files import ReportPaths
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+INTERRUPTED: list[str] = []  # how the command was stopped, once a signal stopped it (bagfault.__main__ reads it)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -475,6 +476,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         result = api.campaign(campaign, args.output_dir, workers=args.workers, ray=args.ray, resume=args.resume,
                               progress=JobProgress(), force=args.force)
     except KeyboardInterrupt:
+        INTERRUPTED.append('SIGINT')
         print(f'bagfault: interrupted; finished jobs are kept in {_under(args.output_dir, "jobs")}, --resume '
               'continues', file=sys.stderr)
         return EXIT_ERROR
@@ -505,6 +507,7 @@ def _cmd_explore(args: argparse.Namespace) -> int:
                              rate=args.rate, resume=args.resume, force=args.force,
                              save_failures=args.save_failures, progress=ExploreProgress())
     except KeyboardInterrupt:
+        INTERRUPTED.append('SIGINT')
         print(f'bagfault: interrupted; the runs made are kept in {args.output_dir / "runs.jsonl"}, --resume '
               'continues', file=sys.stderr)
         return EXIT_ERROR
@@ -665,11 +668,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     whose reasons were lost is not a verdict.
     """
     try:
-        code = _main(argv)
+        with _terminating_signals():  # SIGTERM and SIGHUP as Ctrl-C from the first instant, parsing included
+            code = _main(argv)
         sys.stdout.flush()
         sys.stderr.flush()
         if argv is None:  # the process's command, about to exit: the interpreter's last collection skips what is
             gc.freeze()   # left (0.023 s of a `run`'s 0.07 s teardown; everything is still closed as usual)
+    except KeyboardInterrupt as exc:  # before the command's own handling (arguments, imports)
+        with contextlib.suppress(OSError):
+            print(f'bagfault: {_stopped_by(exc)}; {_written()}', file=sys.stderr)
+        return EXIT_ERROR
     except OSError:  # stderr itself failed while saying why
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -748,6 +756,7 @@ TERMINAL = (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG)
 def _stopped_by(exc: KeyboardInterrupt) -> str:
     """'interrupted' (Ctrl-C) or 'stopped by SIGTERM' (the name _terminating_signals gives)."""
     name = str(exc)
+    INTERRUPTED.append(name or 'SIGINT')
     return f'stopped by {name}' if name.startswith('SIG') else 'interrupted'
 
 

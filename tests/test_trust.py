@@ -622,3 +622,35 @@ def test_every_command_that_reads_a_scenario_refuses_hostile_yaml_at_once(tmp_pa
     assert said in done.stderr and 'Traceback' not in done.stderr
     assert time.monotonic() - began < 20
     assert not out.exists() and not (tmp_path / 'explored').exists()
+
+
+@pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_while_the_command_loads_is_one_line_never_a_traceback(tmp_path, signal_number):
+    """Once the command line loads (-X importtime says when its first module is done), a signal at any later
+    instant of the imports, the parsing or the run ends with one line and exit 2 (SIGINT in the first 0.4 s
+    printed a KeyboardInterrupt traceback in 2 of 20 tries). Before that runs only the interpreter's start."""
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text('injectors: [{id: imu, type: imu, input_topic: /sensors/imu_raw, output_topic: /imu}]\n')
+    name = signal.Signals(signal_number).name
+    for delay in (0.0, 0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.45):
+        process = subprocess.Popen([sys.executable, '-X', 'importtime', '-m', 'bagfault', 'run', str(scenario),
+                                    str(FIXTURES / 'rover_20s.mcap'), '-o', str(tmp_path / 'out.mcap')],
+                                   stderr=subprocess.PIPE, text=True)
+        assert process.stderr is not None
+        seen = ''
+        while 'bagfault.io.outputs' not in seen:  # the command line loading (importtime: a line per module done)
+            line = process.stderr.readline()
+            assert line, seen
+            seen += line
+        time.sleep(delay)
+        process.send_signal(signal_number)
+        err = seen + process.stderr.read()
+        process.wait(timeout=60)
+        said = [line for line in err.splitlines() if not line.startswith('import time:')]
+        if process.returncode == 0:  # the run ended before the signal came
+            continue
+        assert process.returncode == 2 and 'Traceback' not in err, (delay, err[-2000:])
+        assert said[-1].startswith(('bagfault: interrupted;', f'bagfault: stopped by {name};')), said
+        written = said[-1].endswith(f'written before that: {tmp_path / "out.mcap"}')  # (stopped while reporting)
+        assert (tmp_path / 'out.mcap').exists() == written
+        (tmp_path / 'out.mcap').unlink(missing_ok=True)
