@@ -73,23 +73,29 @@ def judge(result: Any, bugs: list[dict[str, Any]], ranges: dict[tuple[str, str],
         row.update(failure=failure.name, search_runs=failure.search_runs, found_at_run=failure.found_at_run,
                    shrink_runs=failure.shrink_runs, state=failure.state, note=failure.note,
                    minimal=failure.minimal.describe() if failure.minimal else None)
-        off = []
         minimal = failure.minimal
-        if minimal is None or set(minimal.ids) != set(bug['minimum']):
-            off.append(f'faults {list(minimal.ids) if minimal else None}, not {sorted(bug["minimum"])}')
-        else:
-            for fault, dims in bug['minimum'].items():
-                values = dict(minimal.drawn(fault).values)
-                for name, expected in dims.items():
-                    low, high = ranges[(fault, name)]
-                    tolerance = resolution * (high - low) + bug.get('slack', {}).get(name, 0.0) + 1e-9
-                    if abs(values[name] - expected) > tolerance:
-                        off.append(f'{fault}.{name} = {values[name]:g}, the threshold is {expected:g} '
-                                   f'(+- {tolerance:.3g})')
-        row['shrunk_to_known'] = not off
-        row['off'] = off
+        offs = [_off(minimal, known, bug.get('slack', {}), ranges, resolution)
+                for known in [bug['minimum'], *bug.get('alternatives', [])]]
+        row['shrunk_to_known'] = any(not off for off in offs)
+        row['off'] = [] if row['shrunk_to_known'] else min(offs, key=len)
         rows.append(row)
     return rows
+
+
+def _off(minimal: Any, known: dict[str, dict[str, float]], slack: dict[str, float],
+         ranges: dict[tuple[str, str], tuple[float, float]], resolution: float) -> list[str]:
+    """What of a minimal candidate differs from one known minimal cause (nothing: it is that cause)."""
+    if minimal is None or set(minimal.ids) != set(known):
+        return [f'faults {list(minimal.ids) if minimal else None}, not {sorted(known)}']
+    off = []
+    for fault, dims in known.items():
+        values = dict(minimal.drawn(fault).values)
+        for name, expected in dims.items():
+            low, high = ranges[(fault, name)]
+            tolerance = resolution * (high - low) + slack.get(name, 0.0) + 1e-9
+            if abs(values[name] - expected) > tolerance:
+                off.append(f'{fault}.{name} = {values[name]:g}, the threshold is {expected:g} (+- {tolerance:.3g})')
+    return off
 
 
 def replay(result: Any, rows: list[dict[str, Any]], times: int, args: argparse.Namespace) -> None:

@@ -3,8 +3,9 @@
 In order: confirm the original (it must fail `confirm` runs in a row); the
 fewest faults (ddmin over the fault set: drop one fault at a time while the
 rest still fails, until no single fault can go); then each config dimension
-toward its weakest value, each duration toward the shortest, each start as
-late as the failure allows, each by trying the end of its range first and
+toward its weakest value, each duration toward the shortest (from its end,
+then from its start: the end kept, the start later), each start as late as
+the failure allows, each by trying the end of its range first and
 else bisecting to `resolution` of its range; then again, one step of
 `resolution` per dimension first, while a pass still moves something (up to
 PASSES): a start moved later may allow a shorter window. A step is kept
@@ -58,24 +59,80 @@ class Shrinker:
                                                           'not shrunk (flaky, or at the edge of a threshold)')
             return
         yield from self._fewest_faults()
-        composite = self.composite()
-        if composite:
-            failure.note = (f'its assertions are those of {composite} together: its faults are shrunk, not its '
-                            'dimensions')
-        for sweep in range(PASSES if self.mode != 'faults' and not composite else 0):
+        for sweep in range(PASSES if self.mode != 'faults' else 0):
             before = self.current
-            for phase in ('config', 'duration', 'start'):
+            for phase in ('config', 'duration', 'window', 'start'):
                 for fault_id in self.current.ids:
                     for dimension in self._dimensions(fault_id, phase):
-                        yield from self._toward(fault_id, dimension, again=sweep > 0)
-            if self.current == before:
+                        if self._composite():
+                            break
+                        if phase == 'window':
+                            yield from self._window(fault_id)
+                        else:
+                            yield from self._toward(fault_id, dimension, again=sweep > 0)
+            if self.current == before or failure.note:
                 break
         failure.minimal, failure.state = self.current, 'shrunk'
+
+    def _composite(self) -> bool:
+        """Whether the failure turned out to be smaller ones together (found meanwhile): then its dimensions
+        are left as they are."""
+        composite = self.composite()
+        if composite and not self.failure.note:
+            self.failure.note = (f'its assertions are those of {composite} together: its faults are shrunk, not '
+                                 'its dimensions')
+        return bool(composite)
 
     def _dimensions(self, fault_id: str, phase: str) -> list[Dimension]:
         fault = self.space.fault(fault_id)
         assert fault is not None
+        if phase == 'window':  # a window with both ends free: its duration, shrunk from the start side
+            return [d for d in fault.dimensions if d.name == 'duration'] if fault.dimension('start') else []
         return [d for d in fault.dimensions if (d.name.startswith('config.') if phase == 'config' else d.name == phase)]
+
+    def _window(self, fault_id: str) -> Generator[Candidate, tuple[int, Outcome], None]:
+        """Shorten the window from its start, its end kept (the start later by as much as the duration is
+        shorter): what two overlapping faults need when neither end alone can move, or the latest part of a
+        window is what fails. One step first (a window whose length is its threshold stops there), then the
+        shortest, else halving the shift."""
+        fault = self.space.fault(fault_id)
+        assert fault is not None
+        duration, start = fault.dimension('duration'), fault.dimension('start')
+        assert duration is not None and start is not None
+        values = dict(self.current.drawn(fault_id).values)
+        room = min(values['duration'] - duration.low, start.high - values['start'])
+        limit = self.space.resolution * duration.span
+        if room <= 0:
+            return
+        failing, passing = 0.0, None
+        for shift in dict.fromkeys((min(limit, room), room)):  # one step first: a window at its threshold stops
+            if (yield from self._shift(fault_id, values, shift, duration, start)):
+                failing = shift
+            else:
+                passing = shift
+                break
+        if passing is None or failing == 0.0:
+            return
+        while passing - failing > limit:
+            middle = (failing + passing) / 2
+            if (yield from self._shift(fault_id, values, middle, duration, start)):
+                failing = middle
+            else:
+                passing = middle
+
+    def _shift(self, fault_id: str, values: dict[str, float], shift: float, duration: Dimension,
+               start: Dimension) -> Runs:
+        drawn = self.current.drawn(fault_id)
+        moved = drawn.replaced('duration', quantize(duration, values['duration'] - shift)).replaced(
+            'start', quantize(start, values['start'] + shift))
+        if moved == drawn:
+            return False
+        trial = self.current.replaced(moved)
+        kept = yield from self._fails(trial, f'{fault_id}.window from {values["start"]:g}+{values["duration"]:g} to '
+                                             f'{moved.value("start"):g}+{moved.value("duration"):g}')
+        if kept:
+            self.current = trial
+        return kept
 
     def _fewest_faults(self) -> Generator[Candidate, tuple[int, Outcome], None]:
         """ddmin at the granularity of single faults: drop each in turn; keep a drop that still fails."""
