@@ -276,8 +276,12 @@ class McapSource:
             reads.close()
 
     def _walk_layout(self, reads: _ScatteredReads) -> None:
+        """Every record of the data section, to its end: a chunk the index lacks, a message outside any chunk
+        and what follows an early DataEnd are found too (readers that follow the index skip them)."""
         indexed = {c.offset: c for c in self._chunks}
         position, end = 8, self._data_end
+        loose: list[int] = []  # message records outside any chunk
+        ended: int | None = None  # where a DataEnd record stood before the end of the data section
         while position + 9 <= end:
             chunk = indexed.get(position)
             if chunk is not None:
@@ -290,8 +294,8 @@ class McapSource:
             if len(head) < 9:
                 break
             opcode, length = _REC.unpack_from(head)
-            if opcode == OP_DATA_END:
-                break
+            if opcode == OP_DATA_END and ended is None:
+                ended = position  # records may follow it: every one is looked at
             if position + 9 + length > end:
                 self._lost(f'record at offset {position}', f'claims {length} bytes, past the data section; the '
                                                            'file is not read beyond it')
@@ -301,7 +305,15 @@ class McapSource:
                 self._lost(f'chunk at offset {position}', 'not in the chunk index, which readers follow (its '
                                                           'messages would be skipped); read as well')
                 self._chunks.append(_Chunk(start, stop, position, 9 + length))
+            elif opcode == OP_MESSAGE:
+                loose.append(position)
             position += 9 + length
+        if loose:
+            self._lost(f'{len(loose)} message record{"s" if len(loose) > 1 else ""} outside any chunk (the first at '
+                       f'offset {loose[0]})', 'readers that follow the chunk index skip them; not read')
+        if ended is not None and any(c.offset > ended for c in self._chunks):
+            self.warnings.append(f'{self.path}: chunks follow the DataEnd record at offset {ended}, which should '
+                                 'end the data section; they are read')
         self._chunks.sort(key=lambda c: (c.start, c.offset))
         self._by_offset = {c.offset: c for c in self._chunks}
 

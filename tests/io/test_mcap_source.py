@@ -239,3 +239,86 @@ def test_the_layout_walk_reads_what_plain_reads_read(tmp_path: Path) -> None:
         assert plain.read(10, 0) == b''
         reads.close()
         plain.close()
+
+
+def crafted(path: Path, between: str) -> Path:
+    """Two chunks of 10 /imu messages each (an index for both, Statistics counting those 20), and between them a
+    top-level Message record or a DataEnd record, as a hand-made file holds them; the mcap writer's own records."""
+    from mcap.records import DataEnd, Message
+
+    from bagfault.demo import synthetic
+
+    ts = synthetic.store()
+    with path.open('wb') as stream:
+        writer = Writer(stream, compression=CompressionType.NONE, chunk_size=1 << 20)
+        writer.start(profile='ros2', library='test')
+        text, _ = ts.generate_msgdef('sensor_msgs/msg/Imu', ros_version=2)
+        channel = writer.register_channel('/imu', 'cdr', writer.register_schema('sensor_msgs/msg/Imu', 'ros2msg',
+                                                                                 text.encode()), {})
+        times = synthetic.sample_times(100.0, 0.2)
+        data = [bytes(ts.serialize_cdr(synthetic.imu(ts, t, 0.0), 'sensor_msgs/msg/Imu')) for t in times]
+        for t, payload in zip(times[:10], data[:10], strict=True):
+            writer.add_message(channel, t, payload, t)
+        writer._Writer__finalize_chunk()  # noqa: SLF001 - a record between two chunks, as no writer API puts it
+        builder = writer._Writer__record_builder  # noqa: SLF001
+        if between == 'message':
+            Message(channel_id=channel, log_time=times[9] + 1, data=data[0], publish_time=times[9] + 1,
+                    sequence=0).write(builder)
+        else:
+            DataEnd(0).write(builder)
+        for t, payload in zip(times[10:], data[10:], strict=True):
+            writer.add_message(channel, t, payload, t)
+        writer.finish()
+    return path
+
+
+def streamed_messages(path: Path) -> int:
+    """Every message record the file holds, wherever it sits: the mcap library's streamed reader."""
+    from mcap.records import Chunk, Message
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    count = 0
+    with path.open('rb') as stream:
+        for record in StreamReader(stream).records:
+            parts = breakup_chunk(record) if isinstance(record, Chunk) else [record]
+            count += sum(isinstance(part, Message) for part in parts)
+    return count
+
+
+@pytest.mark.parametrize('options', [[], ['--no-chunk-copy'], ['--verify']], ids=['default', 'no-chunk-copy', 'verify'])
+def test_a_message_outside_any_chunk_is_refused_or_said_lost(tmp_path, capsys, options):
+    """The specification allows a Message record at top level between chunks; readers that follow the index
+    skip it (every run path dropped it at exit 0). Refused in one line naming it, or with --salvage a loss."""
+    bag = crafted(tmp_path / 'loose.mcap', 'message')
+    assert streamed_messages(bag) == 21 and make_reader(bag.open('rb')).get_summary().statistics.message_count == 20
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text('injectors: []\n')
+    out = tmp_path / 'out.mcap'
+    assert main(['run', str(scenario), str(bag), '-o', str(out), *options]) == 2
+    err = capsys.readouterr().err
+    assert '1 message record outside any chunk (the first at offset' in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    assert main(['run', str(scenario), str(bag), '-o', str(out), '--salvage', *options]) == 0
+    captured = capsys.readouterr()
+    assert '1 message record outside any chunk' in captured.out + captured.err and 'not read' in captured.out + \
+        captured.err
+    assert streamed_messages(out) >= 20
+
+
+def test_chunks_after_an_early_data_end_are_read(tmp_path, capsys):
+    """A DataEnd record before the last chunk: the walk goes on to the summary, the chunk after it is read (its
+    messages were lost at exit 0 on two paths) and a warning says where the data section should have ended."""
+    bag = crafted(tmp_path / 'early_end.mcap', 'data_end')
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text('injectors: []\n')
+    for options in ([], ['--no-chunk-copy'], ['--salvage']):
+        out = tmp_path / 'out.mcap'
+        out.unlink(missing_ok=True)
+        assert main(['run', str(scenario), str(bag), '-o', str(out), *options]) == 0
+        assert 'chunks follow the DataEnd record at offset' in capsys.readouterr().err
+        assert streamed_messages(out) - streamed_messages(bag) >= 0
+        counts = {}
+        with out.open('rb') as stream:
+            for _, channel, _ in make_reader(stream).iter_messages():
+                counts[channel.topic] = counts.get(channel.topic, 0) + 1
+        assert counts['/imu'] == 20, options
