@@ -259,8 +259,8 @@ def crafted(path: Path, between: str) -> Path:
         data = [bytes(ts.serialize_cdr(synthetic.imu(ts, t, 0.0), 'sensor_msgs/msg/Imu')) for t in times]
         for t, payload in zip(times[:10], data[:10], strict=True):
             writer.add_message(channel, t, payload, t)
-        writer._Writer__finalize_chunk()  # noqa: SLF001 - a record between two chunks, as no writer API puts it
-        builder = writer._Writer__record_builder  # noqa: SLF001
+        writer._Writer__finalize_chunk()
+        builder = writer._Writer__record_builder
         if between == 'message':
             Message(channel_id=channel, log_time=times[9] + 1, data=data[0], publish_time=times[9] + 1,
                     sequence=0).write(builder)
