@@ -31,7 +31,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_typestore
-from support.helpers import FIXTURES, counts, raw_messages, run_inline, tree_digest
+from support.helpers import FIXTURES, counts, raw_messages, rosbags_counts, run_inline, tree_digest
 from support.hold import hold_plugin
 
 from bagfault import api
@@ -534,7 +534,9 @@ def test_the_output_never_replaces_an_input_given_twice(tmp_path):
     assert struct.unpack('<B', before[8:9]) == (1,)  # still an MCAP header record after the magic
 
 
-def test_a_ros1_bag_whose_header_claims_fewer_chunks_than_it_holds(tmp_path, capsys):
+@pytest.mark.parametrize('trailing', [b'', b'\x00\x01\x02\x03', b'\xff\xff\xff\xff\x00\x00\x00\x00'],
+                         ids=['none', '4-bytes', 'a-4-GiB-length'])
+def test_a_ros1_bag_whose_header_claims_fewer_chunks_than_it_holds(tmp_path, capsys, trailing):
     """The bag header's chunk_count says how many chunk infos the index holds; a reader that trusts a smaller
     one reads only the first chunks, and the counts it gives come from those chunk infos too. So the chunk
     records in the file are walked and counted: more than the index lists is an error, never an exit 0 with a
@@ -552,14 +554,20 @@ def test_a_ros1_bag_whose_header_claims_fewer_chunks_than_it_holds(tmp_path, cap
         ros1_bag(bag, None)
     finally:
         Ros1Writer.__init__ = original
+    expected = rosbags_counts(bag)['/imu']  # rosbags on the bag as written, before anything is changed
     data = bytearray(bag.read_bytes())
     at = data.index(b'chunk_count=') + len(b'chunk_count=')
     chunks = struct.unpack_from('<I', data, at)[0]
     assert chunks > 1
+    intact = tmp_path / 'intact.bag'
+    intact.write_bytes(bytes(data) + trailing)  # trailing bytes after the index: the walk still counts
     struct.pack_into('<I', data, at, 1)
-    bag.write_bytes(bytes(data))
+    bag.write_bytes(bytes(data) + trailing)
     scenario = tmp_path / 'scenario.yaml'
     scenario.write_text('injector: {id: i, type: imu, input_topic: /imu, output_topic: /imu_out}\nfaults: []\n')
+    assert main(['run', str(scenario), str(intact), '-o', str(tmp_path / 'intact.mcap')]) == 0  # (was MemoryError)
+    assert counts(tmp_path / 'intact.mcap')['/imu'] == expected > 0
+    capsys.readouterr()
     code = main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap')])
     err = capsys.readouterr().err
     assert code == 2 and err.count('\n') == 1

@@ -8,6 +8,7 @@ ROS 2 data and the output MCAP is ROS 2.
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 from functools import partial
@@ -37,9 +38,11 @@ READ_ERRORS = (AnyReaderError, ReaderError, TypesysError, SerdeError, AssertionE
 def count_chunk_records(path: Path) -> tuple[int, int] | None:
     """(chunk records between the bag header and the index, connection records in the index section), each
     record's header read and its data skipped; None when the walk does not find the layout (the reader
-    reports that file on its own)."""
+    reports that file on its own). Bytes after the index section that make no whole record (trailing garbage)
+    end the walk there; no read is ever larger than what the file has left."""
     try:
         with path.open('rb') as stream:
+            left = os.fstat(stream.fileno()).st_size
             if stream.read(13) != b'#ROSBAG V2.0\n':
                 return None
             index_pos: int | None = None
@@ -47,11 +50,15 @@ def count_chunk_records(path: Path) -> tuple[int, int] | None:
             first = True
             while True:
                 raw = stream.read(4)
-                if len(raw) < 4:
-                    return (chunks, connections) if index_pos is not None else None
-                header = stream.read(struct.unpack('<I', raw)[0])
+                length = struct.unpack('<I', raw)[0] if len(raw) == 4 else None
+                if length is None or stream.tell() + length + 4 > left:  # no whole record header here
+                    past_index = index_pos is not None and stream.tell() - len(raw) >= index_pos
+                    return (chunks, connections) if past_index else None
+                header = stream.read(length)
                 fields = _fields(header)
                 size = struct.unpack('<I', stream.read(4))[0]
+                if stream.tell() + size > left:  # a record's data past the end: not a record
+                    return (chunks, connections) if index_pos is not None and stream.tell() > index_pos else None
                 op = fields.get(b'op', b'')
                 if first:
                     first = False
