@@ -48,8 +48,10 @@ class Protected:
                         break
                     out._add(name, path, inner)
             elif path.is_file():
-                for suffix in SIDECARS:
-                    out._add(f"{name}'s SQLite sidecar", path, path.with_name(path.name + suffix))
+                real = path.resolve()  # a symlinked database keeps its sidecars beside the real file
+                for base in dict.fromkeys((path, real)):
+                    for suffix in SIDECARS:
+                        out._add(f"{name}'s SQLite sidecar", path, base.with_name(base.name + suffix))
         return out
 
     def _add(self, name: str, top: Path, path: Path) -> None:

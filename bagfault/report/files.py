@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import fnmatch
+import glob
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from bagfault.errors import OutputError
 from bagfault.io.outputs import check_output, write_atomic
 
 if TYPE_CHECKING:
@@ -33,11 +36,18 @@ class ReportPaths:
         return [(name, path) for name, path in pairs if path is not None]
 
     def check(self, protected: Sequence[tuple[str, Path]]) -> None:
-        """Before the run: every report path is writable and replaces nothing the run reads or writes."""
+        """Before the run: every report path is writable and replaces nothing the run reads or writes, its
+        black boxes included (named after the output: OUT.blackbox.CODE.N.mcap, written during the run)."""
         named = self.named()
+        outputs = [path for name, path in protected if name in ('the output', 'the recording')]
         for number, (option, path) in enumerate(named):
             others = [(f'the {name} report', other) for name, other in named[:number]]
             check_output(path, f'{option} report', [*protected, *others], force=self.force)
+            for output in outputs:
+                same_folder = path.resolve().parent == output.resolve().parent
+                if same_folder and fnmatch.fnmatchcase(path.name, f'{glob.escape(output.stem)}.blackbox.*.mcap'):
+                    raise OutputError(f'{path}: {option} report has the name of a black box of {output} (the run '
+                                      'writes those); choose another name')
 
     def collectors(self) -> list[Observer]:
         """Observers the reports need during the run (topic rates for the HTML report)."""

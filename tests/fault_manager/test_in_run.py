@@ -295,3 +295,18 @@ def test_a_black_box_never_replaces_a_file_bagfault_did_not_write(tmp_path, caps
     for _ in range(2):  # the second run replaces the first run's black box, which bagfault wrote
         assert main(['run', str(scenario), str(moved), '-o', str(tmp_path / 'out.mcap')]) == 0
     assert (tmp_path / 'out.blackbox.IMU_SPIKE.1.mcap').exists()
+
+
+def test_a_report_named_like_a_black_box_is_refused_before_the_run(tmp_path, capsys):
+    """`--json out.blackbox.IMU_SPIKE.1.mcap` would be overwritten by (or overwrite) the black box the run writes:
+    refused in one line before anything is written."""
+    bag = make_bag(tmp_path / 'in.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 3.0)
+    scenario = _write(tmp_path, BLACK_BOX_SCENARIO)
+    report = tmp_path / 'out.blackbox.OTHER.7.mcap'
+    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--json', str(report)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and 'black box' in error and str(report) in error
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['in.mcap', 'scenario.yaml']
+    fine = tmp_path / 'out.blackbox.json'
+    assert main(['run', str(scenario), str(bag), '-o', str(tmp_path / 'out.mcap'), '--json', str(fine)]) == 0
+    assert fine.exists()

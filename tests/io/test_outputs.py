@@ -87,6 +87,22 @@ def test_an_sqlite_inputs_sidecars_are_never_written(tmp_path, scenario, capsys)
     assert source.exists()
 
 
+def test_a_symlinked_databases_sidecars_beside_the_real_file_are_never_written(tmp_path, scenario, capsys):
+    """SQLite writes `-wal` beside the file it opened, not beside the link: both names are protected."""
+    real_folder = tmp_path / 'real'
+    real_folder.mkdir()
+    database = real_folder / 'bag.db3'
+    with sqlite3.connect(database) as connection:
+        connection.execute('CREATE TABLE t (x)')
+    link = tmp_path / 'link.db3'
+    link.symlink_to(database)
+    before = database.read_bytes()
+    for target in (real_folder / 'bag.db3-wal', tmp_path / 'link.db3-journal'):
+        _refused(capsys, ['run', str(scenario), str(link), '-o', str(target)], 'SQLite sidecar')
+        assert not target.exists()
+    assert database.read_bytes() == before
+
+
 def test_a_file_inside_an_input_folder_by_identity(tmp_path, scenario, capsys):
     """A rosbag2 folder's storage file, hard-linked elsewhere, is still the input."""
     folder = tmp_path / 'rosbag'
