@@ -149,8 +149,9 @@ class ChunkCopy:
                 self.relevant[channel_id] = _with_leaders(scenario, {f.id for f in runtimes[0].faults})
 
     def candidate(self, ref: ChunkRef) -> bool:
-        """Every channel of the chunk passes through (the question that needs no fault state)."""
-        return all(cid in self.passthrough for cid in ref.channel_ids)
+        """Every channel of the chunk passes through (the question that needs no fault state); a chunk without
+        message indexes (an empty map: the writer indexed nothing) is read, as what it holds is not known."""
+        return bool(ref.index_offsets) and all(cid in self.passthrough for cid in ref.channel_ids)
 
     def copy_of(self, ref: ChunkRef) -> CopiedChunk:
         """The chunk to write as it is, with its message indexes: where they are, what they hold."""

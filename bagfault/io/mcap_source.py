@@ -32,8 +32,7 @@ import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel as McapChannel
-from mcap.records import Chunk, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Metadata, Schema
 
 from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel, normalize_msgtype
@@ -48,6 +47,7 @@ if TYPE_CHECKING:
 
 MAGIC = b'\x89MCAP0\r\n'
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x07, 0x0F
+OP_FOOTER, OP_METADATA = 0x02, 0x0C
 _INDEX_HEAD = struct.Struct('<BQHI')  # message index: opcode, length, channel id, entries length
 _U16 = struct.Struct('<H')
 _U32 = struct.Struct('<I')
@@ -122,6 +122,18 @@ def _string(buf: memoryview, pos: int, end: int) -> tuple[str, int]:
     return bytes(buf[pos : pos + length]).decode(), pos + length
 
 
+def _string_map(buf: memoryview, pos: int, end: int) -> dict[str, str]:
+    (length,) = _U32.unpack_from(buf, pos)
+    pos += 4
+    stop, out = pos + length, {}
+    if stop > end:
+        raise Corrupt(f'a map of {length} bytes runs past its record')
+    while pos < stop:
+        key, pos = _string(buf, pos, stop)
+        out[key], pos = _string(buf, pos, stop)
+    return out
+
+
 class _ScatteredReads:
     """Small reads at scattered offsets of a file, through a map of it advised MADV_RANDOM: the kernel reads
     the pages asked for and nothing around them, even where another reader's read-ahead marks are (a read()
@@ -175,6 +187,7 @@ class McapSource:
         self._chunks: list[_Chunk] = []
         self._by_offset: dict[int, _Chunk] = {}
         self._memory: list[Split] = []
+        self._loose: list[Split] = []  # message records outside any chunk of an indexed file (the spec allows them)
         self._indexed = False
         self._data_end = 0  # where the data section ends (the summary's start, else the footer's)
         self.schema_records: dict[int, Schema] = {}  # as the summary holds them (indexed files)
@@ -220,7 +233,7 @@ class McapSource:
             elif record.name == 'bagfault.origin' and record.metadata.get('origin_ns', '').isdigit():
                 self.recorded_origin = int(record.metadata['origin_ns'])
         if summary is None or not summary.chunk_indexes:
-            self._scan_unindexed()
+            self._scan_unindexed(summary)
             return
         self._indexed = True
         for schema in summary.schemas.values():
@@ -251,7 +264,8 @@ class McapSource:
             self._scan_definitions()  # a valid layout may keep schemas (or channels) in the data section only
         if summary.statistics is not None:
             self.message_count = summary.statistics.message_count
-            self._check_channel_counts(dict(summary.statistics.channel_message_counts))
+            self._check_channel_counts(summary.statistics.message_count,
+                                       dict(summary.statistics.channel_message_counts))
             if summary.statistics.message_count:
                 self.start_time = summary.statistics.message_start_time
                 self.end_time = summary.statistics.message_end_time
@@ -280,7 +294,7 @@ class McapSource:
         and what follows an early DataEnd are found too (readers that follow the index skip them)."""
         indexed = {c.offset: c for c in self._chunks}
         position, end = 8, self._data_end
-        loose: list[int] = []  # message records outside any chunk
+        loose: list[tuple[int, int]] = []  # (offset, length) of message records outside any chunk
         ended: int | None = None  # where a DataEnd record stood before the end of the data section
         while position + 9 <= end:
             chunk = indexed.get(position)
@@ -306,27 +320,48 @@ class McapSource:
                                                           'messages would be skipped); read as well')
                 self._chunks.append(_Chunk(start, stop, position, 9 + length))
             elif opcode == OP_MESSAGE:
-                loose.append(position)
+                loose.append((position, length))
             position += 9 + length
-        if loose:
-            self._lost(f'{len(loose)} message record{"s" if len(loose) > 1 else ""} outside any chunk (the first at '
-                       f'offset {loose[0]})', 'readers that follow the chunk index skip them; not read')
+        self._read_loose(reads, loose)
         if ended is not None and any(c.offset > ended for c in self._chunks):
             self.warnings.append(f'{self.path}: chunks follow the DataEnd record at offset {ended}, which should '
                                  'end the data section; they are read')
         self._chunks.sort(key=lambda c: (c.start, c.offset))
         self._by_offset = {c.offset: c for c in self._chunks}
 
-    def _check_channel_counts(self, declared: dict[int, int]) -> None:
-        """The Statistics record's messages per channel against the message indexes of every chunk (each of
-        which is checked against its chunk's records when that chunk is decompressed, or under --verify)."""
-        if not declared or any(c.counts is None and c.index_offsets is not None for c in self._chunks):
+    def _read_loose(self, reads: _ScatteredReads, loose: list[tuple[int, int]]) -> None:
+        """Message records outside any chunk: the specification allows them and readers that follow the chunk
+        index skip them; bagfault reads them (into memory, as they are few) and merges them in time order."""
+        for position, length in loose:
+            if length < MESSAGE_HEAD:
+                self._lost(f'message record at offset {position}', f'{length} bytes, shorter than its header')
+                continue
+            data = memoryview(bytes(reads.read(9 + length, position)))
+            if len(data) != 9 + length:
+                self._lost(f'message record at offset {position}', 'runs past the end of the file')
+                continue
+            channel_id, _seq, log_time, publish_time = _MSG.unpack_from(data, 9)
+            self._loose.append((log_time, publish_time, channel_id, position, data[9 + MESSAGE_HEAD:]))
+        self._loose.sort(key=lambda m: (m[0], m[3]))
+
+    def _check_channel_counts(self, total: int, declared: dict[int, int]) -> None:
+        """The Statistics record's messages (per channel, or in total where a writer left the map empty) against
+        the message indexes of every chunk and the messages outside chunks (each chunk's indexes are checked
+        against its records when it is decompressed, or under --verify)."""
+        if any(c.counts is None and c.index_offsets is not None for c in self._chunks):
             return
+        if any(c.index_offsets is None or not c.index_offsets for c in self._chunks):
+            return  # unindexed chunks (salvage) or chunks without message indexes: not countable here
         indexed: dict[int, int] = {}
+        for _, _, channel_id, _, _ in self._loose:
+            indexed[channel_id] = indexed.get(channel_id, 0) + 1
         for chunk in self._chunks:
             for channel_id, count in (chunk.counts or {}).items():
                 indexed[channel_id] = indexed.get(channel_id, 0) + count
-        if any(c.index_offsets is None for c in self._chunks):  # unindexed chunks (salvage): not countable here
+        if not declared:
+            if total != sum(indexed.values()):
+                self._lost('the Statistics record', f'declares {total} messages, the message indexes '
+                                                    f'{sum(indexed.values())}')
             return
         differ = [f'channel {cid}: {declared.get(cid, 0)} declared, {indexed.get(cid, 0)} indexed'
                   for cid in sorted(set(declared) | set(indexed)) if declared.get(cid, 0) != indexed.get(cid, 0)]
@@ -547,27 +582,27 @@ class McapSource:
                                if found.get(cid, 0) != chunk.counts.get(cid, 0))
             self._lost(f'chunk at offset {chunk.offset}', f'its messages and its message indexes disagree ({differ})')
 
-    def _scan_unindexed(self) -> None:
-        """Files without chunk index: read every record once, keep messages in memory."""
-        self._file.seek(0)
+    def _scan_unindexed(self, summary: Summary | None) -> None:
+        """Files without chunk index: every record of the data section read once, in file order (top-level
+        messages, chunks after a DataEnd, records of unknown type, which the specification lets readers skip);
+        messages kept in memory. What the file declares is checked against what it holds: each chunk's
+        message indexes, the DataEnd record's CRC, the Statistics record of a summary without chunk index."""
         messages: list[Split] = []
+        if summary is not None:
+            for schema in summary.schemas.values():
+                self._schemas.setdefault(schema.id, (schema.name, schema.encoding,
+                                                     schema.data.decode(errors='replace')))
+            for channel in summary.channels.values():
+                self._pending_channels.setdefault(channel.id, (channel.schema_id, channel.topic,
+                                                               channel.message_encoding, dict(channel.metadata)))
         try:
-            for record in StreamReader(self._file, skip_magic=False, validate_crcs=True).records:
-                parts = list(breakup_chunk(record, validate_crc=True)) if isinstance(record, Chunk) else [record]
-                for part in parts:
-                    if isinstance(part, Schema):
-                        self._schemas.setdefault(part.id, (part.name, part.encoding,
-                                                           part.data.decode(errors='replace')))
-                    elif isinstance(part, McapChannel):
-                        self._pending_channels.setdefault(
-                            part.id, (part.schema_id, part.topic, part.message_encoding, dict(part.metadata)))
-                    elif isinstance(part, Metadata) and part.name == 'rosbag2':
-                        self._read_rosbag2_metadata(part.metadata)
-                    elif isinstance(part, Message):
-                        messages.append((part.log_time, part.publish_time, part.channel_id, len(messages),
-                                         memoryview(part.data)))
-        except READ_ERRORS as exc:
+            self._walk_unindexed(messages)
+        except (Corrupt, *READ_ERRORS) as exc:
             self._lost(f'after {len(messages)} messages', f'{one_line(exc)}')
+        if summary is not None and summary.statistics is not None and \
+                summary.statistics.message_count != len(messages):
+            self._lost('the Statistics record', f'declares {summary.statistics.message_count} messages, the file '
+                                                f'holds {len(messages)}')
         messages.sort(key=lambda m: (m[0], m[3]))
         for channel_id in sorted(self._pending_channels):
             self._register(channel_id)
@@ -575,6 +610,65 @@ class McapSource:
         self.message_count = len(messages)
         if messages:
             self.start_time, self.end_time = messages[0][0], messages[-1][0]
+
+    def _walk_unindexed(self, messages: list[Split]) -> None:
+        """The records of the data section into `messages` (position: the order found), checked as they come."""
+        self._file.seek(0)
+        crc = zlib.crc32(self._file.read(8))
+        position, end = 8, self._data_end
+        chunk: tuple[int, dict[int, int]] | None = None  # the last chunk: offset, messages per channel
+        indexed: dict[int, int] = {}  # entries of the message indexes that follow it, per channel
+        while position < end:
+            head = self._file.read(9)
+            if len(head) < 9:
+                raise Corrupt(f'{len(head)} stray bytes at offset {position}, after the last record')
+            opcode, length = _REC.unpack(head)
+            if position + 9 + length > end:
+                raise Corrupt(f'the record at offset {position} claims {length} bytes, past the end of the data '
+                              'section')
+            body = memoryview(self._file.read(length))
+            if opcode != OP_MESSAGE_INDEX and chunk is not None:
+                self._check_declared(*chunk, indexed)
+                chunk, indexed = None, {}
+            if opcode == OP_DATA_END:
+                (declared,) = _U32.unpack_from(body) if length >= 4 else (0,)
+                if declared and declared != crc:
+                    raise Corrupt(f'the data section CRC does not match (stored {declared:#010x}, computed '
+                                  f'{crc:#010x})')
+            crc = zlib.crc32(body, zlib.crc32(head, crc))
+            if opcode == OP_MESSAGE:
+                if length < MESSAGE_HEAD:
+                    raise Corrupt(f'the message record at offset {position} is shorter than its header')
+                channel_id, _seq, log_time, publish_time = _MSG.unpack_from(body)
+                messages.append((log_time, publish_time, channel_id, len(messages), body[MESSAGE_HEAD:]))
+            elif opcode in (OP_SCHEMA, OP_CHANNEL):
+                self._definition(opcode, body, 0, length)
+            elif opcode == OP_CHUNK:
+                found: dict[int, int] = {}
+                for log_time, publish_time, channel_id, _, data in self._split(self._records(body, position),
+                                                                                position):
+                    messages.append((log_time, publish_time, channel_id, len(messages), data))
+                    found[channel_id] = found.get(channel_id, 0) + 1
+                chunk = (position, found)
+            elif opcode == OP_MESSAGE_INDEX and chunk is not None and length >= 6:
+                channel_id, entries = struct.unpack_from('<HI', body)
+                indexed[channel_id] = indexed.get(channel_id, 0) + entries // 16
+            elif opcode == OP_METADATA:
+                name, at = _string(body, 0, length)
+                if name == 'rosbag2':
+                    self._read_rosbag2_metadata(_string_map(body, at, length))
+            elif opcode == OP_FOOTER:
+                raise Corrupt(f'a Footer record at offset {position}, inside the data section')
+            position += 9 + length
+        if chunk is not None:
+            self._check_declared(*chunk, indexed)
+
+    def _check_declared(self, offset: int, found: dict[int, int], indexed: dict[int, int]) -> None:
+        """A chunk's messages per channel against the message indexes after it (none: nothing declared)."""
+        if indexed and indexed != found:
+            differ = ', '.join(f'channel {cid}: {indexed.get(cid, 0)} indexed, {found.get(cid, 0)} found'
+                               for cid in sorted(set(found) | set(indexed)) if found.get(cid, 0) != indexed.get(cid, 0))
+            self._lost(f'chunk at offset {offset}', f'its messages and its message indexes disagree ({differ})')
 
     # -- messages -----------------------------------------------------------------------------
     def messages(self) -> Iterator[RawItem]:
@@ -603,7 +697,8 @@ class McapSource:
             yield index, log_time, publish_time, data
 
     def _indexed_messages(self) -> Iterator[RawItem]:
-        pending: list[tuple[int, int, int, int, int, memoryview]] = []
+        pending = [(log_time, -1, pos, publish_time, channel_id, payload)
+                   for log_time, publish_time, channel_id, pos, payload in self._loose]
         chunks = self._chunks
         for number, chunk in enumerate(chunks):
             data = self._chunk_at(chunk.offset)
@@ -626,8 +721,8 @@ class McapSource:
     # -- chunks as they are (chunk copy) -----------------------------------------------------------
     def chunk_refs(self) -> list[ChunkRef] | None:
         """The chunks in file order when they can be copied as they are: an indexed file whose chunks follow
-        each other in time, each with its message indexes; None otherwise."""
-        if not self._indexed or self.salvage or not self._chunks:
+        each other in time, each with its message indexes, and no message outside them; None otherwise."""
+        if not self._indexed or self.salvage or not self._chunks or self._loose:
             return None
         chunks = sorted(self._chunks, key=lambda c: c.offset)
         if chunks != self._chunks or any(a.end > b.start for a, b in itertools.pairwise(chunks)):

@@ -8,6 +8,7 @@ ROS 2 data and the output MCAP is ROS 2.
 
 from __future__ import annotations
 
+import heapq
 import os
 import struct
 import zlib
@@ -24,6 +25,7 @@ from rosbags.typesys.base import TypesysError
 from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel
 from bagfault.io.qos import DURABILITY, HISTORY, QosProfile, dump_profiles
+from bagfault.io.ros1_walk import ChunkRecord, Corrupt, Message, check_entries, decompress, split, walk
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator
@@ -33,57 +35,6 @@ if TYPE_CHECKING:
 CONVERT_ERRORS = (SerdeError, TypesysError, struct.error, ValueError, IndexError, KeyError, UnicodeDecodeError)
 READ_ERRORS = (AnyReaderError, ReaderError, TypesysError, SerdeError, AssertionError, OSError, RuntimeError,
                ValueError, KeyError, IndexError, EOFError, struct.error, zlib.error, UnicodeDecodeError, MemoryError)
-
-
-def count_chunk_records(path: Path) -> tuple[int, int] | None:
-    """(chunk records between the bag header and the index, connection records in the index section), each
-    record's header read and its data skipped; None when the walk does not find the layout (the reader
-    reports that file on its own). Bytes after the index section that make no whole record (trailing garbage)
-    end the walk there; no read is ever larger than what the file has left."""
-    try:
-        with path.open('rb') as stream:
-            left = os.fstat(stream.fileno()).st_size
-            if stream.read(13) != b'#ROSBAG V2.0\n':
-                return None
-            index_pos: int | None = None
-            chunks = connections = 0
-            first = True
-            while True:
-                raw = stream.read(4)
-                length = struct.unpack('<I', raw)[0] if len(raw) == 4 else None
-                if length is None or stream.tell() + length + 4 > left:  # no whole record header here
-                    past_index = index_pos is not None and stream.tell() - len(raw) >= index_pos
-                    return (chunks, connections) if past_index else None
-                header = stream.read(length)
-                fields = _fields(header)
-                size = struct.unpack('<I', stream.read(4))[0]
-                if stream.tell() + size > left:  # a record's data past the end: not a record
-                    return (chunks, connections) if index_pos is not None and stream.tell() > index_pos else None
-                op = fields.get(b'op', b'')
-                if first:
-                    first = False
-                    if op != b'\x03' or b'index_pos' not in fields:
-                        return None
-                    index_pos = struct.unpack('<Q', fields[b'index_pos'])[0]
-                elif op == b'\x05' and index_pos is not None and stream.tell() <= index_pos:
-                    chunks += 1
-                elif op == b'\x07' and index_pos is not None and stream.tell() > index_pos:
-                    connections += 1
-                stream.seek(size, 1)
-    except (OSError, struct.error):
-        return None
-
-
-def _fields(header: bytes) -> dict[bytes, bytes]:
-    """The name=value fields of a record header."""
-    fields = {}
-    position = 0
-    while position + 4 <= len(header):
-        length = struct.unpack_from('<I', header, position)[0]
-        name, _, value = header[position + 4:position + 4 + length].partition(b'=')
-        fields[name] = value
-        position += 4 + length
-    return fields
 
 
 class Ros1Source:
@@ -115,36 +66,50 @@ class Ros1Source:
             raise InputError(f'{path}: cannot convert ROS 1 types to ROS 2 ({one_line(exc)})') from None
         # what the chunk infos declare (each chunk's messages per connection), not the index data's entries the
         # reader counts: an index data record whose connection id is damaged drops its entries from both
-        infos = getattr(self._reader.readers[0], 'chunk_infos', None) or []
-        declared = sum(sum(info.connection_counts.values()) for info in infos)
-        self.message_count: int | None = declared if infos else sum(c.msgcount for c in self._reader.connections)
-        self._check_chunks()
+        self._infos = {info.pos: info for info in getattr(self._reader.readers[0], 'chunk_infos', None) or []}
+        self._connections = {c.id: c for c in self._reader.readers[0].connections}
+        try:
+            self._layout = walk(path)
+        except Corrupt as exc:
+            self._reader.close()
+            raise InputError(f'{path}: corrupt ROS 1 bag: {exc}') from None
+        except OSError as exc:
+            self._reader.close()
+            raise InputError(f'{path}: cannot read ROS 1 bag ({one_line(exc)})') from None
+        declared = sum(sum(info.connection_counts.values()) for info in self._infos.values())
+        self.message_count: int | None = declared + len(self._layout.loose)
+        try:
+            self._check_layout()
+        except InputError:
+            self._reader.close()
+            raise
         self.start_time = self._reader.start_time if self.message_count else None
         self.end_time = self._reader.end_time - 1 if self.message_count else None
 
-    def _check_chunks(self) -> None:
-        """The chunks the index lists (the header's chunk_count of chunk infos, which the reader trusts) against
-        the chunk records in the file, walked record by record up to the index: a bag holding more chunks than
-        it indexes would be read in part, its own counts agreeing with that part. An error (or with salvage a
-        listed loss: the indexed chunks are read)."""
-        indexed = len(getattr(self._reader.readers[0], 'chunk_infos', ()) or ())
-        walked = count_chunk_records(self.path)
-        if walked is None:
-            return
-        found, connections = walked
-        known = len(getattr(self._reader.readers[0], 'connections', ()) or ())
-        problems = []
-        if found > indexed:
-            problems.append(f'the bag holds {found} chunks and its index lists {indexed} (its header says '
-                            f'chunk_count={indexed}): the other chunks would not be read')
-        if connections > known:
-            problems.append(f'its index holds {connections} connection records and its header says '
-                            f'conn_count={known}: the messages of the others would not be read')
-        for text in problems:
-            if not self.salvage:
-                self._reader.close()
-                raise InputError(f'{self.path}: {text} (--salvage reads the indexed ones and says so)')
-            self.losses.append(f'{self.path}: {text}')
+    def _lost(self, text: str, hint: str = '--salvage copies what can be read') -> None:
+        """A part that cannot be read as the index declares it: an error, or (salvage) a listed loss."""
+        if not self.salvage:
+            raise InputError(f'{self.path}: {text} ({hint})')
+        self.losses.append(f'{self.path}: {text}')
+
+    def _check_layout(self) -> None:
+        """The index (the header's chunk_count of chunk infos, which the reader trusts, and its conn_count of
+        connection records) against the records the file holds: a bag holding more chunks than it indexes
+        would be read in part, its own counts agreeing with that part."""
+        layout, infos = self._layout, self._infos
+        walked = {chunk.position for chunk in layout.chunks}
+        unlisted = walked - set(infos)
+        if unlisted:
+            self._lost(f'the bag holds {len(walked)} chunks and its index lists {len(set(infos) & walked)} (its '
+                       f'header says chunk_count={len(infos)}): the chunk at {min(unlisted)} would not be read',
+                       '--salvage reads the indexed ones and says so')
+        astray = set(infos) - walked
+        if astray:
+            self._lost(f'its index lists a chunk at {min(astray)}, where the file holds none')
+        if layout.index_connections > len(self._connections):
+            self._lost(f'its index holds {layout.index_connections} connection records and its header says '
+                       f'conn_count={len(self._connections)}: the messages of the others would not be read',
+                       '--salvage reads the indexed ones and says so')
 
     def _setup(self) -> None:
         source = self._reader.typestore
@@ -179,22 +144,71 @@ class Ros1Source:
         self._by_connection = {id(c): by_type[c.msgtype][0] for c in self._reader.connections}
 
     def messages(self) -> Iterator[tuple[int, int, int, bytes | memoryview]]:
-        """(channel index, log_time, publish_time, CDR data) in time order."""
-        ids, converters, by_connection = self._ids, self._converters, self._by_connection
+        """(channel index, log_time, publish_time, CDR data) in time order: every chunk the index lists read
+        once, in the order of its start time, its records checked against its index data and chunk info, and
+        merged with the messages outside any chunk."""
+        ids, converters, by_connection, connections = self._ids, self._converters, self._by_connection, \
+            self._connections
+        for message in self._ordered():
+            connection = connections.get(message.conn)
+            if connection is None:
+                self._lost(f'a message at {message.time} ns of connection {message.conn}, which its index does '
+                           'not define')
+                continue
+            key = id(connection)
+            try:
+                converted = converters[by_connection[key]](message.data)
+            except CONVERT_ERRORS as exc:
+                self._lost(f'{connection.topic} at {message.time} ns: cannot convert the message ({one_line(exc)})')
+                continue
+            yield ids[key], message.time, message.time, converted
+
+    def _ordered(self) -> Iterator[Message]:
+        """Messages in time order (ties: file order): chunks by their chunk info's start time, each message
+        held back until no later chunk can hold an earlier one."""
+        infos = self._infos
+        chunks = sorted((c for c in self._layout.chunks if c.position in infos),
+                        key=lambda c: (infos[c.position].start_time, c.position))
+        pending = [(m.time, -1, m.offset, m) for m in sorted(self._layout.loose, key=lambda m: (m.time, m.offset))]
+        fd = self._reader.readers[0].bio.fileno()  # type: ignore[union-attr]
+        for number, chunk in enumerate(chunks):
+            found = self._read(fd, chunk)
+            horizon = infos[chunks[number + 1].position].start_time if number + 1 < len(chunks) else None
+            in_order = all(found[i].time <= found[i + 1].time for i in range(len(found) - 1))
+            if not pending and in_order and (horizon is None or not found or found[-1].time <= horizon):
+                yield from found
+                continue
+            for message in found:
+                heapq.heappush(pending, (message.time, number, message.offset, message))
+            while pending and (horizon is None or pending[0][0] < horizon):
+                yield heapq.heappop(pending)[3]
+
+    def _read(self, fd: int, chunk: ChunkRecord) -> list[Message]:
+        """One chunk's messages, checked against what its index data and chunk info declare."""
+        where = f'corrupt ROS 1 bag: chunk at {chunk.position}'
         try:
-            for connection, timestamp, raw in self._reader.messages():
-                key = id(connection)
-                try:
-                    converted = converters[by_connection[key]](raw)
-                except CONVERT_ERRORS as exc:
-                    problem = f'{connection.topic} at {timestamp} ns: cannot convert the message ({one_line(exc)})'
-                    if not self.salvage:
-                        raise InputError(f'{self.path}: {problem} (--salvage copies what can be read)') from None
-                    self.losses.append(f'{self.path}: {problem}')
-                    continue
-                yield ids[key], timestamp, timestamp, converted
-        except READ_ERRORS as exc:
-            raise InputError(f'{self.path}: corrupt ROS 1 bag ({one_line(exc)})') from None
+            raw = os.pread(fd, chunk.data_size, chunk.data_position)
+            messages, _ = split(chunk, decompress(chunk, raw))
+        except Corrupt as exc:
+            self._lost(f'{where}: {exc}')
+            return []
+        except OSError as exc:
+            self._lost(f'{where}: cannot read it ({one_line(exc)})')
+            return []
+        differ = check_entries(chunk, messages)
+        if differ:
+            self._lost(f'{where}: its messages and its index data disagree ({differ})')
+        info = self._infos[chunk.position]
+        counts: dict[int, int] = {}
+        for message in messages:
+            counts[message.conn] = counts.get(message.conn, 0) + 1
+        if counts != {conn: n for conn, n in info.connection_counts.items() if n}:
+            self._lost(f'{where}: its chunk info declares {sum(info.connection_counts.values())} messages '
+                       f'{dict(info.connection_counts)}, the chunk holds {len(messages)} {counts}')
+        if messages and (min(m.time for m in messages) < info.start_time or
+                         max(m.time for m in messages) >= info.end_time):
+            self._lost(f'{where}: messages outside the time range its chunk info gives')
+        return messages
 
     def close(self) -> None:
         """Close the bag."""

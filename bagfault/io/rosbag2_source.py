@@ -20,13 +20,13 @@ import zstandard
 from bagfault.errors import InputError, one_line
 from bagfault.io.mcap_source import McapSource
 from bagfault.io.merged import MergedSource, Source
+from bagfault.io.qos import normalized
 from bagfault.io.sqlite_source import SqliteSource
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Iterator
 
-    from bagfault.io.qos import normalized
-from bagfault.io.channel import Channel
+    from bagfault.io.channel import Channel, InputMessage
 
 STORAGE_SUFFIXES = ('.db3', '.mcap', '.db3.zstd', '.mcap.zstd')
 
@@ -166,6 +166,48 @@ class Rosbag2Source(MergedSource):
             return replace(channel, message_encoding=encoding, metadata=tuple(metadata.items()))
 
         return adjust
+
+    def messages(self) -> Iterator[InputMessage]:
+        """Every file's messages merged by time; at the end, each topic's count against metadata.yaml."""
+        counts = [0] * len(self.channels)
+        for item in super().messages():
+            counts[item[0]] += 1
+            yield item
+        read: dict[str, int] = {}
+        for channel, count in zip(self.channels, counts, strict=True):
+            read[channel.topic] = read.get(channel.topic, 0) + count
+        self._check_topic_counts(read)
+
+    def _check_topic_counts(self, read: dict[str, int]) -> None:
+        """metadata.yaml's messages per topic against those read: fewer read means part of a file was not read
+        (an error, or with salvage a warning); more read, or a count that is not one, a warning."""
+        listed = self.metadata.get('topics_with_message_count')
+        declared: dict[str, int] = {}
+        for entry in listed if isinstance(listed, list) else []:
+            topic = entry.get('topic_metadata', {}).get('name') if isinstance(entry, dict) else None
+            count = entry.get('message_count') if isinstance(entry, dict) else None
+            if not isinstance(topic, str):
+                continue
+            if not isinstance(count, int) or isinstance(count, bool) or count < 0:
+                self._late(f'metadata.yaml: {topic}: message_count {count!r} is not a count; ignored')
+                continue
+            declared[topic] = declared.get(topic, 0) + count
+        if not declared:
+            return
+        fewer = [f'{t}: {n} declared, {read.get(t, 0)} read' for t, n in declared.items() if read.get(t, 0) < n]
+        more = [f'{t}: {declared.get(t, 0)} declared, {n} read' for t, n in read.items() if n > declared.get(t, 0)]
+        if fewer and not self.salvage:
+            raise InputError(f'{self.path}: metadata.yaml declares more messages than its files hold '
+                             f'({"; ".join(fewer[:3])}): part of them was not read (--salvage writes what can be '
+                             'read and says what is missing)')
+        if fewer:
+            self._late(f'metadata.yaml declares more messages than were read ({"; ".join(fewer[:3])}; --salvage)')
+        if more:
+            self._late(f'metadata.yaml declares fewer messages than its files hold ({"; ".join(more[:3])}): its '
+                       'counts are older than its files; every message read is in the output')
+
+    def _late(self, text: str) -> None:
+        self.own_warnings.append(f'{self.path}: {text}')
 
     def close(self) -> None:
         """Close every file and remove decompressed copies."""

@@ -136,6 +136,40 @@ def test_a_sqlite3_bag_of_version_9_gives_its_qos_and_hashes(tmp_path: Path) -> 
     assert topic['type_description_hash'] == expected != ''
 
 
+def test_a_version_9_qos_sequence_in_metadata_fills_a_storage_without_qos(tmp_path: Path) -> None:
+    """Where the storage file keeps no QoS (its topics row empty), metadata.yaml's version 9 sequence is the
+    offered QoS: best effort, depth 5 here, as written. (This path once named a function it never imported.)"""
+    import sqlite3
+
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Rosbag2Writer
+    from rosbags.rosbag2.metadata import parse_qos
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    bag = tmp_path / 'v9'
+    best_effort = parse_qos('- history: 1\n  depth: 5\n  reliability: 2\n  durability: 2\n'
+                            '  deadline: {sec: 0, nsec: 0}\n  lifespan: {sec: 0, nsec: 0}\n  liveliness: 1\n'
+                            '  liveliness_lease_duration: {sec: 0, nsec: 0}\n'
+                            '  avoid_ros_namespace_conventions: false\n')
+    with Rosbag2Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        connection = writer.add_connection('/n', 'std_msgs/msg/Int32', typestore=store,
+                                           offered_qos_profiles=best_effort)
+        Int32 = store.types['std_msgs/msg/Int32']
+        for k in range(4):
+            writer.write(connection, 1_000 + k, store.serialize_cdr(Int32(k), 'std_msgs/msg/Int32'))
+    [database] = bag.glob('*.db3')
+    with sqlite3.connect(database) as connection:
+        connection.execute("UPDATE topics SET offered_qos_profiles = ''")
+    declared = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    [qos] = [t['topic_metadata']['offered_qos_profiles'] for t in declared['topics_with_message_count']]
+    assert isinstance(qos, list) and qos[0]['reliability'] == 'best_effort'  # the version 9 form, names
+    out = tmp_path / 'out.mcap'
+    api.run(parse_scenario('injectors: []\n'), [bag], out)
+    [(topic, count)] = [(t, n) for t, n in check_mcap(out)['topics'] if t['name'] == '/n']
+    assert count == 4 and topic['offered_qos_profiles'][0]['reliability'] == 2
+    assert topic['offered_qos_profiles'][0]['depth'] == 5
+
+
 @pytest.mark.parametrize('name', ['OneMessage-ch-chx-mx-rch-rsh-st-sum.mcap'])
 def test_a_non_ros_mcap_gets_default_qos_every_distro_reads(tmp_path: Path, name: str) -> None:
     source = need(EXTERNAL / 'mcap' / 'tests' / 'conformance' / 'data' / 'OneMessage' / name)
