@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
 import sqlite3
 import tempfile
 from dataclasses import dataclass, replace
@@ -25,7 +26,15 @@ from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 from support import mcap_records as m
 from support import ros1_records as r1
-from support.differential import declared_counts, judge, ros1_walk_count, streamed_count, streamed_counts
+from support.differential import (
+    declared_counts,
+    judge,
+    output_count,
+    ros1_walk_count,
+    run,
+    streamed_count,
+    streamed_counts,
+)
 
 EditKind = Literal['inner-delete', 'inner-duplicate', 'inner-move', 'inner-unknown', 'message-out', 'insert-message',
                    'delete', 'duplicate', 'move', 'insert-unknown', 'data-end-at', 'chunk-duplicate', 'chunk-move']
@@ -483,3 +492,56 @@ def topic_counts(folder: Path, listed: list[str]) -> dict[str, int]:
                                                'topics.id = messages.topic_id GROUP BY topics.name'):
                     out[topic] = out.get(topic, 0) + count
     return out
+
+
+# -- --salvage ------------------------------------------------------------------------------------------------
+
+LOST = re.compile(r'(\d+) missing|(\d+) messages? (?:could not be kept|not kept)')
+
+
+def check_salvage(path: Path, folder: Path, expected: int | None, declared: int | None,
+                  capsys: pytest.CaptureFixture[str]) -> str:
+    """`--salvage` on a damaged input keeps what it can and says how many messages it could not keep: the
+    number (what the input declares less what was kept) where the input declares a count, else that it is not
+    known; never only where it stopped. Nothing is invented: never more than the input holds."""
+    code, said, err, out = run(path, folder, ['--salvage'], capsys)
+    if code == 2:
+        lines = [line for line in err.splitlines() if not line.startswith('warning:')]
+        assert len(lines) == 1 and lines[0].startswith('bagfault: error: '), err
+        return 'refused'
+    assert code == 0, err
+    kept, _ = output_count(out)
+    out.unlink()
+    if expected is not None:
+        assert kept <= expected, f'--salvage wrote {kept} messages; the input holds {expected}'
+    if expected is None or kept < expected:
+        numbers = {int(a or b) for a, b in LOST.findall(err)}
+        if declared is not None and declared > kept:
+            assert declared - kept in numbers, f'{declared} declared, {kept} kept; not said: {err}'
+        else:
+            assert numbers or 'not known' in err, f'{kept} kept of {expected}; how many lost is not said: {err}'
+    return 'salvaged'
+
+
+@generated(150)
+@given(case=mcap_cases(valid=False))
+def test_salvage_says_how_many_mcap_messages_it_could_not_keep(case: McapCase,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    data = case.bytes()
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        path = folder / 'case.mcap'
+        path.write_bytes(data)
+        event(check_salvage(path, folder, streamed_count(data), declared_counts(data).get('statistics'), capsys))
+
+
+@generated(100)
+@given(case=ros1_cases(valid=False))
+def test_salvage_says_how_many_ros1_messages_it_could_not_keep(case: Ros1Case,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    data, extent = case.bytes()
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        path = folder / 'case.bag'
+        path.write_bytes(data)
+        event(check_salvage(path, folder, ros1_walk_count(data[:extent]), None, capsys))

@@ -256,11 +256,18 @@ def check_declared(inputs: InputSet, run: Run, paths: Sequence[Path], *, salvage
     metadata.yaml, the rows of a sqlite3 file). Fewer read means part of an input was never read (a chunk left
     out of the index, a record that swallowed the next, a truncated file): an error, or with `salvage` a
     warning saying how many are missing. More read than declared loses nothing (a recorder that died before
-    it wrote its final counts): a warning."""
+    it wrote its final counts): a warning. With `salvage`, how many messages were not kept is always said: the
+    difference, or that it is not known (damaged parts skipped where the input declares no count, or a count
+    its messages outgrew)."""
     declared, read = inputs.message_count, run.stats.input_messages
+    names = ', '.join(str(p) for p in paths)
+    if salvage and inputs.losses and (declared is None or read >= declared):
+        known = 'the input declares no count' if declared is None else f'the input declares {declared}'
+        run.warnings.append(f'{names}: --salvage skipped {len(inputs.losses)} damaged part'
+                            f'{"s" if len(inputs.losses) > 1 else ""}; how many messages they held is not known '
+                            f'({known}; {read} were read and are in the output)')
     if declared is None or declared == read:
         return
-    names = ', '.join(str(p) for p in paths)
     text = f'{names}: the input declares {declared} messages and {read} were read'
     if read > declared:
         run.warnings.append(f'{text}: its counts are older than its messages (a recording cut short); every '

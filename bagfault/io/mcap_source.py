@@ -225,7 +225,13 @@ class McapSource:
             raise InputError(f'{self.path}: truncated MCAP file')
         self._file.seek(-8, io.SEEK_END)
         if self._file.read(8) != MAGIC:
-            raise InputError(f'{self.path}: truncated MCAP file (no closing magic; was the recording stopped cleanly?)')
+            if not self.salvage:
+                raise InputError(f'{self.path}: truncated MCAP file (no closing magic; was the recording stopped '
+                                 'cleanly?) (--salvage reads what it holds; `bagfault recover` completes it)')
+            self.losses.append(f'{self.path}: no closing magic: the file was cut short; read record by record')
+            self._data_end = self._size
+            self._scan_unindexed(None)
+            return
         summary, metadata = self._read_summary()
         for record in metadata:
             if record.name == 'rosbag2':
