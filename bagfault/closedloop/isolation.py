@@ -79,6 +79,30 @@ def strangers(node: Any, ours: Callable[[int], bool]) -> list[Stranger]:
     return sorted(found.values(), key=lambda s: (s.node, s.pid))
 
 
+def shared(node: Any, topics: Iterable[str], family: set[int], own_pid: int) -> tuple[str, str, int] | None:
+    """(topic, node, pid16) of a publisher of the system (processes in `family`, as pid16) on a topic bagfault
+    plays, or None: its messages would be heard, recorded and judged with the bag's."""
+    own = pid16(own_pid)
+    for topic in sorted(set(topics) - QUIET_TOPICS):  # every node publishes those: the bag's are not its data
+        for info in node.get_publishers_info_by_topic(topic):
+            gid = bytes(info.endpoint_gid)
+            low = int.from_bytes(gid[4:6], 'little')
+            if gid[:2] != EPROSIMA or low == own or low not in family:
+                continue
+            return topic, f'{info.node_namespace.rstrip("/")}/{info.node_name}', low
+    return None
+
+
+def shared_error(topic: str, name: str, low: int) -> ClosedLoopError:
+    """The one-line error of a system that publishes a topic bagfault plays."""
+    who = 'a node not named yet' if UNKNOWN in name else name
+    return ClosedLoopError(
+        f'the system under test publishes {topic} ({who}, pid {_full_pid(low)}), which bagfault plays from the '
+        "bag: the system's messages would be judged as the bag's; the run is invalid, nothing judged (if the "
+        f'system owns the topic, declare it: system_under_test: {{publishes: [{topic}]}}, and bagfault does not '
+        'play it)')
+
+
 def invalid(domain: int, intruders: Iterable[Stranger], system_pid: int | None) -> ClosedLoopError:
     """The one-line error of a run whose domain was shared."""
     names = '; '.join(s.describe() for s in intruders)

@@ -3,9 +3,10 @@
 Before the first message the link waits until the system is ready (each
 condition in turn, failing at once if the system exits), learns the types
 of the topics the oracles read, and subscribes on a second node, spun in
-a thread, to what the system publishes (on a topic the bag plays too, once
-the system publishes there, with bagfault's own messages told apart by
-`OwnEchoes`). A message from the system takes
+a thread, to what the system publishes; a system that publishes a topic the
+bag plays makes the run invalid (unless declared in
+`system_under_test.publishes`, then bagfault does not play it). A message
+from the system takes
 the bag time of its arrival (wall time since the first record x rate),
 never earlier than what was judged before it and never later than the
 record about to be played; before each record is judged everything that
@@ -16,23 +17,22 @@ on for `tail` seconds of bag time while the system's answers come in.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
-from rclpy.qos import DurabilityPolicy
-
 from bagfault.assertions.base import AssertionResult
 from bagfault.closedloop.clocks import GRACE, HOLD, ClockCheck
+from bagfault.closedloop.isolation import NAME_POLL, NAME_WAIT, UNKNOWN, pid16, shared, shared_error
 from bagfault.closedloop.process import describe_exit
 from bagfault.engine.run import OutputChannel
 from bagfault.engine.stop import Stopped
 from bagfault.errors import ClosedLoopError
 from bagfault.events import AssertionEvent
 from bagfault.faults.header import has_header
-from bagfault.live.echoes import OwnEchoes
-from bagfault.live.graph import OWN_PREFIXES, oracle_topics, watched_topics
+from bagfault.live.graph import OWN_PREFIXES, watched_topics
 from bagfault.live.recorder import Recorder
 from bagfault.live.sink import MATCH_SETTLE, LiveSink
 from bagfault.units import NS
@@ -93,8 +93,7 @@ class SystemLink(LiveSink):
         self._run: Run | None = None
         self._floor = 0  # nothing is handed over earlier than what was judged before
         self._last_look = 0.0
-        self._echoes = OwnEchoes()
-        self._latched: dict[str, deque[bytes]] = {}  # played transient-local topics: their publisher's history
+        self._unnamed_since: float | None = None  # when the system was first seen on a played topic, unnamed
 
     # -- before the first record --------------------------------------------------------------
     def prepare(self, routing: Routing) -> Mapping[str, Schema]:
@@ -107,20 +106,15 @@ class SystemLink(LiveSink):
         for condition in self.system.conditions():
             self._await(condition)
         self.ready_seconds = time.monotonic() - started
+        self._check_shared(wait=True)
         own = {*self.played, *NOT_RECORDED}
         watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
         record = self.system.record
         every = record == 'all'
-        asserted_played = [t for t in oracle_topics(self.scenario) if t in self._graph]
-        for topic, publisher in self._graph.items():
-            profile = publisher.qos_profile
-            if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
-                self._latched[topic] = deque(maxlen=max(1, profile.depth))
-        self._recorder = Recorder(self.listener, [*([] if record == 'all' else record), *asserted_played], every,
+        self._recorder = Recorder(self.listener, [] if record == 'all' else record, every,
                                   on_topic=self._on_topic, on_message=self._on_message,
-                                  exclude=NOT_RECORDED, every_excludes=(*NOT_RECORDED, *OWN_PREFIXES),
-                                  shared=self.played, own_nodes={self.node.get_fully_qualified_name()},
-                                  echoes=self._echoes)
+                                  exclude={*NOT_RECORDED, *self.played},
+                                  every_excludes=(*NOT_RECORDED, *OWN_PREFIXES))
         self._recorder.discover()
         for topic, msgtype in watched.items():
             if topic not in self._recorder.subscriptions:
@@ -217,8 +211,6 @@ class SystemLink(LiveSink):
 
     # -- the system's messages ---------------------------------------------------------------
     def _on_topic(self, topic: str, msgtype: str, metadata: dict[str, str]) -> None:
-        if topic in self._graph:  # the system publishes on a topic the bag plays: tell ours from its
-            self._echoes.listen(topic, tuple(self._latched.get(topic, ())))
         channel = self.record_only(topic, msgtype, *self.catalog.schema(msgtype),
                                    metadata=metadata)
         codec = self.catalog.codec(msgtype)
@@ -232,19 +224,6 @@ class SystemLink(LiveSink):
             self._queue.append((topic, now, data))
             if self._hold[0] <= now <= self._hold[1]:
                 self.clocks.during_hold(topic)
-
-    def write(self, channel_id: int, log_time: int, publish_time: int, data: bytes | memoryview) -> None:
-        """Play one record; on a topic the system publishes on too, noted first so the listener drops it."""
-        publisher = self._entries[channel_id][0]
-        if (self._latched or self._echoes) and publisher is not None:
-            topic = publisher.topic_name
-            kept = self._latched.get(topic)
-            if kept is not None or topic in self._echoes:
-                data = bytes(data)
-                if kept is not None:
-                    kept.append(data)  # what a late subscriber of a latched topic receives first
-                self._echoes.sent(topic, data)
-        super().write(channel_id, log_time, publish_time, data)
 
     def begin(self, run: Run) -> None:
         """Messages of the system go into this run; its events go out live."""
@@ -264,8 +243,27 @@ class SystemLink(LiveSink):
                 self._recorder.discover()
             if self.watch is not None:
                 self.watch.look()
+            self._check_shared()
             self._check_alive(bag_time)
         self._hand_over(bag_time)
+
+    def _check_shared(self, *, wait: bool = False) -> None:
+        """ClosedLoopError when the system publishes a topic bagfault plays (undeclared: a declared one is not
+        played); its messages would be judged as the bag's. The node is named once the graph says its name
+        (NAME_WAIT at most: `wait` polls for it, else a later look says it)."""
+        deadline = time.monotonic() + NAME_WAIT
+        while True:
+            found = shared(self.listener, self._graph, {pid16(pid) for pid in self.process.pids()}, os.getpid())
+            if found is None:
+                return
+            if UNKNOWN not in found[1]:
+                raise shared_error(*found)
+            self._unnamed_since = self._unnamed_since or time.monotonic()
+            if time.monotonic() - self._unnamed_since >= NAME_WAIT:
+                raise shared_error(*found)
+            if not wait or time.monotonic() >= deadline:
+                return
+            time.sleep(NAME_POLL)
 
     def _hand_over(self, upto: int) -> None:
         """Everything that arrived, into the run loop, stamped with its bag time of arrival (clamped)."""
@@ -322,6 +320,7 @@ class SystemLink(LiveSink):
         self._reached(end)
         if self.watch is not None:
             self.watch.look(now=True)  # before any verdict: a stranger that joined late spoils them too
+        self._check_shared(wait=True)
         self._hand_over(end)
         self._check_alive(end)
         if self.died_at is None:

@@ -104,13 +104,15 @@ def _interruptible_children() -> Iterator[None]:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _watchdog(leader: int, start: int, token: str) -> subprocess.Popen[bytes] | None:
-    """The watchdog of closedloop/watchdog.py for a system's session (None if it cannot start: then only a live
-    bagfault stops the system)."""
+def _watchdog(leader: int, start: int, token: str, scratch: Path | None) -> subprocess.Popen[bytes] | None:
+    """The watchdog of closedloop/watchdog.py for a system's session, which also removes `scratch` (None if it
+    cannot start: then only a live bagfault stops the system)."""
     import sys  # noqa: PLC0415
 
+    extra = [str(scratch)] if scratch is not None else []
     try:
-        return subprocess.Popen([sys.executable, '-m', 'bagfault.closedloop.watchdog', str(leader), str(start), token],
+        return subprocess.Popen([sys.executable, '-m', 'bagfault.closedloop.watchdog', str(leader), str(start), token,
+                                 *extra],
                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                 start_new_session=True, close_fds=True)
     except OSError:
@@ -121,7 +123,7 @@ class SystemProcess:
     """A running system under test with its stdout and stderr in files."""
 
     def __init__(self, command: list[str], *, env: dict[str, str], cwd: Path | None, shell: bool,
-                 logs: Path) -> None:
+                 logs: Path, scratch: Path | None = None) -> None:
         logs.mkdir(parents=True, exist_ok=True)
         self.command = command
         self.stdout_path = logs / 'system.stdout.log'
@@ -143,7 +145,7 @@ class SystemProcess:
                                   f'{exc.strerror or exc}') from None
         self.pid = self.popen.pid
         self._known: dict[int, int] = family(self.pid, {})  # the group: the new process at least
-        self._watchdog = _watchdog(self.pid, self._known.get(self.pid, 0), self.token)
+        self._watchdog = _watchdog(self.pid, self._known.get(self.pid, 0), self.token, scratch)
 
     @property
     def returncode(self) -> int | None:

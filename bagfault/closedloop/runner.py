@@ -19,6 +19,7 @@ from bagfault.closedloop.domain import DomainLease
 from bagfault.closedloop.isolation import PRESTART, CrowdedDomainError, DomainWatch
 from bagfault.closedloop.link import SystemLink
 from bagfault.closedloop.process import SystemProcess
+from bagfault.closedloop.watchdog import SCRATCH_PREFIX, hold_scratch, sweep_scratch
 from bagfault.engine.offline import finish, replay
 from bagfault.engine.provenance import provenance, record_origin
 from bagfault.engine.result import SystemReport
@@ -93,9 +94,11 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
     os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
     view_notes: list[str] = []
     with ros_context(stop, domain_id=lease.domain) as context, \
-            tempfile.TemporaryDirectory(prefix='bagfault-test-') as scratch, InputSet(inputs) as input_set, \
+            tempfile.TemporaryDirectory(prefix=SCRATCH_PREFIX) as scratch, InputSet(inputs) as input_set, \
             contextlib.ExitStack() as closing:  # closed in the reverse order
         quiet_until = time.monotonic() + PRESTART  # this process's participant looks from now on
+        sweep_scratch(str(Path(scratch).parent))  # what a killed run's watchdog could not remove
+        closing.callback(os.close, hold_scratch(scratch))
         folder = logs if logs is not None else Path(scratch)
         command = command_line(system, sys.executable)
         report = SystemReport(command=command, domain_id=lease.domain, logs=logs)
@@ -119,7 +122,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
             closing.callback(lambda: view_notes.extend(view.notes() if view is not None else ()))
             log.info(f'Foxglove view on {view.url}')
         process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
-                                shell=system.shell, logs=folder)
+                                shell=system.shell, logs=folder, scratch=None if logs is not None else Path(scratch))
         closing.callback(_stopped, process, system, report)
         log.debug(f'system under test starting on ROS domain {lease.domain}')
 
@@ -134,7 +137,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         closing.callback(link.close)
         link.view = view
         run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output, hooks=link,
-                              observers=observers)
+                              observers=observers, withheld=frozenset(system.publishes))
         with run:  # its black boxes are dropped unless the recording is complete
             if stopped:
                 raise ClosedLoopError(f'stopped by {stop.reason or "a signal"} before the end of the bag; '

@@ -98,15 +98,17 @@ def replay(
     hooks: PassHooks | None = None,
     control: FaultControl | None = None,
     chunks: ChunkCopy | None = None,
+    withheld: frozenset[str] = frozenset(),
 ) -> tuple[Run, bool]:
-    """One pass of the inputs through the scenario into `sink`; (the run, True if a Stopped ended it early).
+    """One pass of the inputs through the scenario into `sink`; (the run, True if a Stopped ended it early);
+    topics in `withheld` are not played (the closed loop's system publishes them).
 
     On an error the run's black boxes are removed; on success the caller
     closes the run once its own output is complete.
     """
     keep = None if chunks is None else partial(chunks.keep, cast('McapSink', sink))
     state = control.state if control is not None else FaultState(scenario)  # a control's lasts across passes
-    routing = build_routing(inputs, scenario, catalog, sink, keep, state)
+    routing = build_routing(inputs, scenario, catalog, sink, keep, state, withheld)
     stopped = False
     try:
         outside = hooks.prepare(routing) if hooks is not None else {}

@@ -76,15 +76,21 @@ class _Wired:
 
 
 def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink,
-                  keep: Callable[[int], int | None] | None = None, state: FaultState | None = None) -> Routing:
+                  keep: Callable[[int], int | None] | None = None, state: FaultState | None = None,
+                  withheld: frozenset[str] = frozenset()) -> Routing:
     """Check the scenario against the bag and register every output channel; `keep(number)` (chunk copy)
-    registers an input channel that passes through under its input id, or says None."""
+    registers an input channel that passes through under its input id, or says None; topics in `withheld`
+    (the closed loop's system publishes them) get no output channel: they are neither played nor judged."""
     _check_encodings(inputs)
     routing = Routing()
     wired = _wire(inputs, scenario, routing)
     _check_no_chains(scenario, wired)
-    _register(inputs, scenario, catalog, sink, wired, routing, keep, state)
+    _register(inputs, scenario, catalog, sink, wired, routing, keep, state, withheld)
     return routing
+
+
+def _slashed(topic: str) -> str:
+    return topic if topic.startswith('/') else f'/{topic}'
 
 
 def _check_encodings(inputs: InputSet) -> None:
@@ -147,18 +153,31 @@ def _check_no_chains(scenario: Scenario, wired: list[_Wired]) -> None:
 
 
 def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: Sink, wired: list[_Wired],
-              routing: Routing, keep: Callable[[int], int | None] | None, state: FaultState | None = None) -> None:
+              routing: Routing, keep: Callable[[int], int | None] | None, state: FaultState | None = None,
+              withheld: frozenset[str] = frozenset()) -> None:
     """Output channels in input order: copies of untouched topics, then each injector output of the topic."""
+    rank = COPY_RANK
+    held = sorted({c.topic for c in inputs.channels if _slashed(c.topic) in withheld} |
+                  {w.output_topic for w in wired if _slashed(w.output_topic) in withheld})
+    for topic in held:
+        routing.notes.append(f'topic {topic} is not played: the system under test publishes it '
+                             "(system_under_test.publishes); what is judged on it is the system's")
+    for w in wired:
+        if _slashed(w.output_topic) in withheld:
+            routing.warnings.append(f'{scenario.name}: injector {w.spec.id!r} writes {w.output_topic}, which the '
+                                    'system under test publishes (system_under_test.publishes): its faults have '
+                                    'no effect')
+    wired = [w for w in wired if _slashed(w.output_topic) not in withheld]
     in_place = {w.input_topic for w in wired if w.input_topic == w.output_topic}
     written = {w.output_topic for w in wired}
-    rank = COPY_RANK
     for number, channel in enumerate(inputs.channels):
-        kept = keep(number) if keep is not None and (channel.topic not in written or channel.topic in in_place) \
-            else None
+        hold = _slashed(channel.topic) in withheld  # read by an injector perhaps, but not played as it is
+        kept = keep(number) if keep is not None and not hold and \
+            (channel.topic not in written or channel.topic in in_place) else None
         if channel.topic in written and channel.topic not in in_place:
             routing.replaced.append(channel.topic)
             routing.notes.append(f'recorded topic {channel.topic} is replaced by the injector that writes it')
-        elif channel.topic not in in_place:
+        elif channel.topic not in in_place and not hold:
             encoding, text = _schema(channel, catalog)
             channel_id = kept if kept is not None else sink.add_channel(
                 channel.topic, channel.msgtype, encoding, text, channel.message_encoding, dict(channel.metadata))

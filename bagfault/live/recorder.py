@@ -26,7 +26,6 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from bagfault.engine.stop import StopFlag
-    from bagfault.live.echoes import OwnEchoes
 
 DISCOVERY_PERIOD = 0.1  # seconds between looks at the graph for new topics
 DEPTH = 1000  # messages a topic may queue while the executor is busy elsewhere (keep-last drops beyond)
@@ -48,25 +47,17 @@ class Recorder:
 
     `on_topic(topic, msgtype, metadata)` (offered_qos_profiles, topic_type_hash) is called once per subscribed
     topic, `on_message(topic, data)` for every message (in the executor's
-    thread). Topics in `exclude` are never subscribed. Topics in `shared`
-    are also published by this process (a player's own): they are subscribed
-    once a node not in `own_nodes` publishes on them too, and the messages
-    `echoes` knows as this process's own are dropped.
+    thread). Topics in `exclude` are never subscribed.
     """
 
     def __init__(self, node: Any, topics: Collection[str], every: bool, *,
                  on_topic: Callable[[str, str, dict[str, str]], None], on_message: Callable[[str, bytes], None],
-                 exclude: Collection[str] = (), every_excludes: tuple[str, ...] = (),
-                 shared: Collection[str] = (), own_nodes: Collection[str] = (),
-                 echoes: OwnEchoes | None = None) -> None:
+                 exclude: Collection[str] = (), every_excludes: tuple[str, ...] = ()) -> None:
         self.node = node
         self.wanted = set(topics)
         self.every = every
         self.exclude = set(exclude)
         self.every_excludes = every_excludes  # prefixes `every` does not take (they can still be named)
-        self.shared = set(shared)
-        self.own_nodes = set(own_nodes)  # fully qualified names of this process's publishing nodes
-        self.echoes = echoes
         self.on_topic = on_topic
         self.on_message = on_message
         self.subscriptions: dict[str, Any] = {}
@@ -84,9 +75,6 @@ class Recorder:
             publishers = self.node.get_publishers_info_by_topic(topic)
             if not publishers:
                 continue  # only subscribers so far: nothing to record, and no QoS to match
-            if topic in self.shared and all(_qualified(p.node_namespace, p.node_name) in self.own_nodes
-                                            for p in publishers):
-                continue  # only this process publishes there so far
             msgtype = types[0]
             if not has_interface(msgtype):
                 self.skipped[topic] = msgtype
@@ -113,15 +101,9 @@ class Recorder:
                       if subscription.get_publisher_count() < self.node.count_publishers(topic))
 
     def _received(self, topic: str, data: bytes) -> None:
-        if self.echoes is not None and self.echoes.take(topic, data):
-            return  # this process's own message on a shared topic
         self.counts[topic] += 1
         self.on_message(topic, data)
 
-
-def _qualified(namespace: str, name: str) -> str:
-    """'/' and 'talker' -> '/talker'; '/ns' and 'talker' -> '/ns/talker'."""
-    return f'{namespace.rstrip("/")}/{name}'
 
 
 def run_record(

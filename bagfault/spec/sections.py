@@ -148,6 +148,9 @@ SYSTEM = Section('system_under_test', 'system_under_test', 'The system `bagfault
     Key('ready', 'list', 'Conditions met, in turn, before the first message is played.', section='ready',
         what='a list of conditions'),
     Key('record', 'string_or_list', '`all`, or the topics of the system to record.', default='all'),
+    Key('publishes', 'string_or_list', 'Topics of the bag the system publishes itself: bagfault does not play '
+        "them, and what is judged on them is the system's (a system publishing a played topic undeclared makes "
+        'the run invalid).', what='a list of topics'),
     Key('stop_timeout', 'seconds', 'SIGINT, then SIGTERM, then SIGKILL, this far apart.', unit='seconds',
         default=5.0, minimum=0, exclusive=True, maximum=3600),
     Key('use_sim_time', 'boolean', 'Add `--ros-args -p use_sim_time:=true`.', default=True),

@@ -76,6 +76,7 @@ class SystemUnderTest:
     cwd: Path | None = None
     ready: list[ReadyCondition] = field(default_factory=list)
     record: list[str] | Literal['all'] = 'all'
+    publishes: list[str] = field(default_factory=list)  # topics of the bag the system publishes: not played
     stop_timeout: float = 5.0
     use_sim_time: bool = True
     tail: float = 1.0
@@ -124,6 +125,12 @@ def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], 
         system.record = list(record)
     else:
         problem((*path, 'record'), "must be 'all' or a list of topics")
+    publishes = read.get('publishes', [])
+    publishes = [publishes] if isinstance(publishes, str) else publishes
+    if isinstance(publishes, list) and all(isinstance(t, str) and t.strip() for t in publishes):
+        system.publishes = [t if t.startswith('/') else f'/{t}' for t in publishes]
+    else:
+        problem((*path, 'publishes'), 'must be a topic or a list of topics')
     return system
 
 

@@ -77,6 +77,59 @@ def test_a_lease_held_by_another_process_is_skipped_and_freed_when_it_dies(locks
         assert {a.domain, b.domain} == {50, 51}
 
 
+def test_a_lease_leaves_no_lock_file_and_removes_those_of_a_killed_run(locks: Path) -> None:
+    """A released lease removes its lock file; a run killed with SIGKILL leaves its file unlocked, and the next
+    lease (of any id) removes it. A file another live process holds stays."""
+    with DomainLease(40, 41) as lease:
+        assert sorted(p.name for p in locks.iterdir()) == [f'{lease.domain}.lock']
+    assert list(locks.iterdir()) == []
+    killed = subprocess.Popen(
+        [sys.executable, '-c', 'import os, time\nfrom bagfault.closedloop.domain import DomainLease\n'
+                               'lease = DomainLease(44, 44)\nprint(lease.domain, flush=True)\ntime.sleep(60)'],
+        stdout=subprocess.PIPE, text=True, env=os.environ)
+    holder = subprocess.Popen(
+        [sys.executable, '-c', 'import time\nfrom bagfault.closedloop.domain import DomainLease\n'
+                               'lease = DomainLease(45, 45)\nprint(lease.domain, flush=True)\ntime.sleep(60)'],
+        stdout=subprocess.PIPE, text=True, env=os.environ)
+    try:
+        assert int(killed.stdout.readline()) == 44 and int(holder.stdout.readline()) == 45  # type: ignore[union-attr]
+        killed.kill()
+        killed.wait()
+        assert sorted(p.name for p in locks.iterdir()) == ['44.lock', '45.lock']  # the killed run's is left
+        with DomainLease(40, 41):
+            assert sorted(p.name for p in locks.iterdir()) in (['40.lock', '45.lock'], ['41.lock', '45.lock'])
+        assert sorted(p.name for p in locks.iterdir()) == ['45.lock']  # held by a live process: kept
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+def test_leases_that_remove_their_files_stay_exclusive_under_contention(locks: Path) -> None:
+    """Eight processes lease and release one of two ids as fast as they can for 2 s while each records when it
+    held which: no two ever held the same id at once, though each lease removes its lock file on release (each
+    waits 2 ms between opening a lock file and locking it, so that holders remove files in that moment), and no
+    lock file is left."""
+    script = (
+        'import fcntl, json, sys, time\nlocking = fcntl.flock\n'
+        'fcntl.flock = lambda handle, op: (time.sleep(0.002) if op & fcntl.LOCK_EX else None, locking(handle, op))[1]\n'
+        'from bagfault.closedloop.domain import DomainLease\nfrom bagfault.errors import '
+        'ClosedLoopError\nspans = []\nend = time.monotonic() + 2\nwhile time.monotonic() < end:\n'
+        '    try:\n        lease = DomainLease(40, 41)\n    except ClosedLoopError:\n        continue\n'
+        '    began = time.monotonic()\n    time.sleep(0.001)\n    spans.append((lease.domain, began, '
+        'time.monotonic()))\n    lease.release()\nprint(json.dumps(spans))\n')
+    workers = [subprocess.Popen([sys.executable, '-c', script], stdout=subprocess.PIPE, text=True, env=os.environ)
+               for _ in range(8)]
+    import json
+
+    spans = [span for worker in workers for span in json.loads(worker.communicate(timeout=60)[0])]
+    assert len(spans) > 50  # the contention happened
+    for domain in (40, 41):
+        held = sorted((b, e) for d, b, e in spans if d == domain)
+        overlaps = [(a, b) for a, b in itertools.pairwise(held) if b[0] < a[1]]
+        assert overlaps == [], f'domain {domain} held twice at once: {overlaps[:3]}'
+    assert list(locks.iterdir()) == []
+
+
 def test_the_current_domain_is_never_leased(locks: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv('ROS_DOMAIN_ID', '60')
     with DomainLease(60, 61) as lease:
@@ -273,3 +326,29 @@ def test_the_watchdog_ends_a_daemon_when_bagfault_dies(tmp_path: Path) -> None:
     wait_for(lambda: running_with(token) == [], timeout=10.0)
     watchdog.wait(timeout=5)
     process.popen.wait(timeout=5)
+
+
+def test_scratch_folders_of_dead_runs_are_swept_and_live_ones_kept(tmp_path: Path) -> None:
+    """A run holds a lock on its scratch folder's `.owner` while it lives; the next run removes the folders whose
+    lock is free (a run killed with its watchdog), never a live run's, one being made, or anything else."""
+    from bagfault.closedloop.watchdog import hold_scratch, sweep_scratch
+
+    live, dead, making, other = (tmp_path / n for n in ('bagfault-test-live', 'bagfault-test-dead',
+                                                         'bagfault-test-making', 'notes'))
+    for folder in (live, dead, making, other):
+        folder.mkdir()
+        (folder / 'system.stdout.log').write_text('log\n')
+    (dead / '.owner').write_text('')
+    (other / '.owner').write_text('')
+    holder = subprocess.Popen([sys.executable, '-c', 'import sys, time\nfrom bagfault.closedloop.watchdog import '
+                               f'hold_scratch\nhold_scratch({str(live)!r})\nprint("held", flush=True)\ntime.sleep(60)'],
+                              stdout=subprocess.PIPE, text=True, env=os.environ)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == 'held'
+        os.close(hold_scratch(str(tmp_path / 'bagfault-test-dead')))  # held and let go: as a run that ended
+        assert sweep_scratch(str(tmp_path)) == ['bagfault-test-dead']
+        assert sorted(p.name for p in tmp_path.iterdir()) == ['bagfault-test-live', 'bagfault-test-making', 'notes']
+    finally:
+        holder.kill()
+        holder.wait()
+    assert sweep_scratch(str(tmp_path)) == ['bagfault-test-live']  # its run is gone now

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -285,54 +286,47 @@ print(f'published {len(received) // 50}', file=sys.stderr, flush=True)
 """
 
 
-def test_a_system_publishing_on_a_played_topic_is_heard_there_and_bagfaults_own_messages_are_not(
-        tester: LoopRunner, example_bag: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize('declared', [False, True], ids=['undeclared', 'declared'])
+def test_a_system_publishing_a_played_topic_voids_the_run_unless_it_is_declared_and_then_not_played(
+        tester: LoopRunner, example_bag: Path, tmp_path: Path, declared: bool) -> None:
+    """The fuser publishes its own /odom, a topic the bag plays: its messages would be judged as the bag's, so the
+    run is invalid (exit 2, one line naming the topic and the node). Declared in system_under_test.publishes,
+    the bag's /odom is not played and /odom holds the fuser's messages alone, one per 50 IMU messages heard."""
     (tmp_path / 'fuser.py').write_text(FUSER)
-    (tmp_path / 'fuser.bagfault.yaml').write_text("""
+    (tmp_path / 'fuser.bagfault.yaml').write_text(f"""
 system_under_test:
-  command: ['{python}', fuser.py]
+  command: ['{{python}}', fuser.py]
+  ready: [{{subscribes: [/imu]}}]
   record: all
   stop_timeout: 10
   tail: 3   # a starved machine: the fuser may be behind by more than the default second
+  {'publishes: [/odom]' if declared else ''}
 injectors: []
 faults: []
 """)
     out = tmp_path / 'fused.mcap'
     result = tester.run(str(tmp_path / 'fuser.bagfault.yaml'), str(example_bag), '-o', str(out),
                         '--keep-logs', str(tmp_path / 'logs'))
+    if not declared:
+        assert result.code == 2, result.stdout + result.stderr
+        (line,) = [line for line in result.stderr.splitlines() if line.startswith('bagfault')]
+        assert 'the system under test publishes /odom (/odom_fuser, pid ' in line
+        assert 'system_under_test: {publishes: [/odom]}' in line and 'nothing judged' in line
+        assert not out.exists()
+        return
     assert result.code == 0, result.stdout + result.stderr
     log = (tmp_path / 'logs' / 'system.stderr.log').read_text()
     published = int(log.rsplit('published ', 1)[1].split()[0])
     assert published == 1200 // 50  # it heard every one of the bag's 1200 IMU messages (12 s at 100 Hz)
-    topics = decoded(out)
-    fused = [m for _, m in topics['/odom'] if m.child_frame_id == 'fused']
-    played = [m for _, m in topics['/odom'] if m.child_frame_id != 'fused']
-    assert [m.pose.pose.position.x for m in fused] == [50.0 * n for n in range(1, published + 1)]
-    assert len(played) == 600  # the bag's odometry (50 Hz for 12 s) once each: its echo is not heard as the system's
+    odometry = [m for _, m in decoded(out)['/odom']]
+    assert [m.pose.pose.position.x for m in odometry] == [50.0 * n for n in range(1, published + 1)]
+    assert all(m.child_frame_id == 'fused' for m in odometry)  # none of the bag's 600: they were not played
     assert result.report is not None
     assert result.report['system_under_test']['heard_per_topic'] == {'/odom': published}
+    assert '/odom' not in result.report['system_under_test']['played_per_topic']
+    assert any('topic /odom is not played' in note for note in result.report['notes'])
 
 
-DESCRIBER = """
-import sys
-import time
-import rclpy
-from rclpy.executors import ExternalShutdownException
-from rclpy.qos import DurabilityPolicy, QoSProfile
-from std_msgs.msg import String
-
-rclpy.init(args=sys.argv)
-node = rclpy.create_node('describer')
-time.sleep(2.0)  # after the bag's own description was played: bagfault's listener subscribes late
-publisher = node.create_publisher(String, '/robot_description', QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-publisher.publish(String(data='system urdf'))
-try:
-    rclpy.spin(node)
-except (KeyboardInterrupt, ExternalShutdownException):
-    pass
-"""
-
-LATCHED = '- history: keep_last\n  depth: 1\n  reliability: reliable\n  durability: transient_local\n'
 VOLATILE = '- history: keep_last\n  depth: 10\n  reliability: reliable\n  durability: volatile\n'
 
 
@@ -357,38 +351,10 @@ def string_bag(path: Path, messages: list[tuple[str, str, int, str]]) -> Path:
     return path
 
 
-def latched_bag(path: Path) -> Path:
-    """/robot_description latched once at 0 s, /chatter at 10 Hz for 4 s."""
-    start = 1_700_000_000 * NS
-    return string_bag(path, [('/robot_description', LATCHED, start, 'bag urdf'),
-                             *(('/chatter', VOLATILE, start + n * NS // 10, f'hello {n}') for n in range(40))])
-
-
-def test_a_latched_topic_the_system_publishes_on_late_keeps_bagfaults_history_out_of_what_is_heard(
-        tester: LoopRunner, tmp_path: Path) -> None:
-    (tmp_path / 'describer.py').write_text(DESCRIBER)
-    (tmp_path / 'describer.bagfault.yaml').write_text("""
-system_under_test:
-  command: ['{python}', describer.py]
-  ready: [{delay: 0.2}]
-  record: all
-  stop_timeout: 10
-injectors: []
-faults: []
-""")
-    out = tmp_path / 'described.mcap'
-    result = tester.run(str(tmp_path / 'describer.bagfault.yaml'), str(latched_bag(tmp_path / 'latched.mcap')),
-                        '-o', str(out))
-    assert result.code == 0, result.stdout + result.stderr
-    assert sorted(m.data for _, m in decoded(out)['/robot_description']) == ['bag urdf', 'system urdf']
-    assert result.report is not None
-    # the listener joined after the bag's description was played and received it from bagfault's history first
-    assert result.report['system_under_test']['heard_per_topic'] == {'/robot_description': 1}
-
-
 def test_the_system_and_its_children_end_when_bagfault_is_killed(tester: LoopRunner, example_bag: Path) -> None:
     """SIGKILL leaves bagfault no chance to stop anything: its watchdog (closedloop/watchdog.py) sees the pipe
-    close and ends the system's whole session, a child it started in the background included."""
+    close and ends the system's whole session, a child it started in the background included, then removes
+    the run's log folder."""
     import signal
     import time
 
@@ -402,12 +368,16 @@ def test_the_system_and_its_children_end_when_bagfault_is_killed(tester: LoopRun
     while len(running_with(token)) < 3 and time.monotonic() < deadline:
         time.sleep(0.1)
     assert len(running_with(token)) >= 3  # bagfault (its --command), the monitor and the background child
+    system = next(pid for pid in running_with(token) if pid != process.pid)
+    logs = Path(os.readlink(f'/proc/{system}/fd/1')).parent  # the run's own log folder: its stdout goes there
+    assert logs.name.startswith('bagfault-test-') and logs.is_dir()
     process.send_signal(signal.SIGKILL)
     process.wait(timeout=30)
     deadline = time.monotonic() + 10
-    while running_with(token) and time.monotonic() < deadline:
+    while (running_with(token) or logs.exists()) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert running_with(token) == []
+    assert not logs.exists()  # removed by the watchdog once the system ended
 
 
 HEARTBEAT = """
