@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from bagfault import __version__
 from bagfault.errors import BagfaultError, UsageError
 from bagfault.io.outputs import PUBLISHED, check_output
+from bagfault.io.regular import read_text
 from bagfault.log import console
 
 if TYPE_CHECKING:
@@ -340,7 +341,7 @@ def _leading_copy(args: argparse.Namespace) -> Iterator[LeadingCopy | None]:
         yield None  # refused later, with its message
         return
     try:
-        text = args.scenario.read_text(encoding='utf-8')
+        text = read_text(args.scenario)
     except (OSError, ValueError):
         yield None  # said later, with the scenario's own message
         return

@@ -99,3 +99,26 @@ def test_third_party_data_is_found_through_bagfault_shared_only() -> None:
              for number, line in enumerate(path.read_text().splitlines(), 1)
              if "'shared'" in line or '"shared"' in line]
     assert found == []
+
+
+# files read whole by name that are never a user's: package resources, /proc, a log bagfault wrote itself
+READ_BY_NAME_ALLOWED = {'report/page.py', 'demo/__init__.py', 'closedloop/process.py', 'campaign/engines.py',
+                        'io/regular.py'}
+
+
+def test_every_file_read_by_name_is_checked_to_be_a_regular_file() -> None:
+    """A FIFO, a device or a socket given as a scenario, a campaign file or a message definition blocked
+    `read_text` for ever: bagfault reads named files through io/regular.py, which opens without blocking and
+    refuses what is not a regular file. No `Path.read_text`/`read_bytes` elsewhere (bags are opened by their
+    readers after `sources.require_regular`)."""
+    found = []
+    for path in PACKAGE.rglob('*.py'):
+        relative = str(path.relative_to(PACKAGE))
+        if relative in READ_BY_NAME_ALLOWED:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Attribute) and node.attr in ('read_text', 'read_bytes') and \
+                    isinstance(node.ctx, ast.Load) and not (isinstance(node.value, ast.Name) and
+                                                             node.value.id in ('regular',)):
+                found.append(f'{relative}:{node.lineno}')
+    assert found == []

@@ -663,3 +663,46 @@ def test_a_signal_while_the_command_loads_is_one_line_never_a_traceback(tmp_path
         written = said[-1].endswith(f'written before that: {tmp_path / "out.mcap"}')  # (stopped while reporting)
         assert (tmp_path / 'out.mcap').exists() == written
         (tmp_path / 'out.mcap').unlink(missing_ok=True)
+
+
+FIFO_READERS = ['validate', 'run', 'msg-path', 'campaign-file', 'campaign-scenario', 'explore', 'latency',
+                'rosbag2-metadata']
+
+
+@pytest.mark.parametrize('reader', FIFO_READERS)
+def test_a_fifo_given_where_a_file_is_read_whole_is_refused_at_once(tmp_path, reader):
+    """A FIFO as the scenario, a .msg file, the campaign file, an explore space, a latency architecture or a
+    rosbag2 folder's metadata.yaml: each reader opened it and waited for a writer that never comes (hung past
+    60 s). Refused in one line naming the file, exit 2, nothing written."""
+    bag = FIXTURES / 'rover_20s.mcap'
+    fifo = tmp_path / 'fifo.yaml'
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text('injectors: []\nfaults: []\n')
+    out = tmp_path / 'out'
+    if reader == 'msg-path':
+        (tmp_path / 'msgs' / 'pkg' / 'msg').mkdir(parents=True)
+        fifo = tmp_path / 'msgs' / 'pkg' / 'msg' / 'Thing.msg'
+    elif reader == 'rosbag2-metadata':
+        shutil.copytree(FIXTURES / 'rover_3s_sqlite3', tmp_path / 'folder')
+        fifo = tmp_path / 'folder' / 'metadata.yaml'
+        fifo.unlink()
+    os.mkfifo(fifo)
+    (tmp_path / 'c.yaml').write_text(f'scenario: {fifo.name}\nbags: [{bag}]\n')
+    arguments = {
+        'validate': ['validate', str(fifo)],
+        'run': ['run', str(fifo), str(bag), '-o', str(out)],
+        'msg-path': ['run', str(scenario), str(bag), '-o', str(out), '--msg-path', str(tmp_path / 'msgs')],
+        'campaign-file': ['campaign', str(fifo), '-o', str(out)],
+        'campaign-scenario': ['campaign', str(tmp_path / 'c.yaml'), '-o', str(out)],
+        'explore': ['explore', str(fifo), str(bag), '-o', str(out)],
+        'latency': ['latency', str(fifo), str(bag)],
+        'rosbag2-metadata': ['run', str(scenario), str(tmp_path / 'folder'), '-o', str(out)],
+    }[reader]
+    began = time.monotonic()
+    done = subprocess.run([sys.executable, '-m', 'bagfault', *arguments], capture_output=True, text=True,
+                          timeout=60, check=False)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count('\n') == 1 and 'not a regular file' in done.stderr, done.stderr
+    assert fifo.name in done.stderr
+    assert time.monotonic() - began < 20
+    assert not out.exists()

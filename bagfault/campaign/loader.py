@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 from bagfault.campaign.edit import PathError, expanded, scenario_data
 from bagfault.campaign.model import Campaign, Search, Until
 from bagfault.errors import CampaignError, ScenarioError, one_line
+from bagfault.io.regular import read_text
 from bagfault.spec import sections
 from bagfault.spec.reader import Reader
 from bagfault.spec.yamlnodes import YamlSyntaxError, format_path, load_located
@@ -41,7 +42,7 @@ def load_campaign(path: str | Path) -> Campaign:
     """The campaign, checked (its scenario and every swept path included); CampaignError with all problems."""
     file = Path(path)
     try:
-        text = file.read_text(encoding='utf-8')
+        text = read_text(file)
     except OSError as exc:
         raise CampaignError(f'{file}: cannot read the campaign file: {exc.strerror}') from None
     try:
@@ -142,7 +143,7 @@ def _search(node: object, problems: _Problems) -> Search | None:
 def _check_scenario(campaign: Campaign, problems: _Problems, *, seeded: bool) -> None:
     """The scenario loads, and every swept path takes its first and last value (as it would in a job)."""
     try:
-        text = campaign.scenario.read_text(encoding='utf-8')
+        text = read_text(campaign.scenario)
     except OSError as exc:
         problems.add(('scenario',), f'cannot read {campaign.scenario}: {exc.strerror}')
         return

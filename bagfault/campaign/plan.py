@@ -16,6 +16,7 @@ from bagfault import __version__
 from bagfault.campaign.edit import expanded, scenario_data
 from bagfault.errors import CampaignError, InputError
 from bagfault.io.objects import RemoteBag, is_remote, list_bags
+from bagfault.io.regular import read_text
 from bagfault.io.sources import digests_of, fingerprint, remember_digests
 
 if TYPE_CHECKING:
@@ -195,7 +196,7 @@ def make_plan(campaign: Campaign) -> Plan:
             remember_digests(known)
             plan.file_digests[str(bag)] = [[*key, digest] for key, digest in known.items()]
         plan.fingerprints[str(bag)] = bag_digest(bag)
-    data = scenario_data(campaign.scenario.read_text(encoding='utf-8'))
+    data = scenario_data(read_text(campaign.scenario))
     texts = [(point, expanded(data, point, campaign.scenario)[0]) for point in points(campaign)]
     for bag in bags:
         for point, text in texts:
@@ -210,7 +211,7 @@ def search_job(plan: Plan, index: int, bag: Bag, value: float, seed: int, sample
     `sample`th run of that value and seed."""
     campaign = plan.campaign
     assert campaign.search is not None
-    data = scenario_data(campaign.scenario.read_text(encoding='utf-8'))
+    data = scenario_data(read_text(campaign.scenario))
     values = {campaign.search.parameter: value}
     text = expanded(data, values, campaign.scenario)[0]
     return Job(index, bag, values, seed, text,

@@ -26,6 +26,7 @@ from bagfault.campaign.results import make_table, parquet_available, render_repo
 from bagfault.campaign.search import find_breaking_points
 from bagfault.errors import CampaignError
 from bagfault.io.outputs import Protected, check_output, write_atomic
+from bagfault.io.regular import read_bytes, read_text
 from bagfault.log import log
 from bagfault.progress import _clock
 
@@ -154,7 +155,7 @@ class _Store:
             raise CampaignError(f'{self.directory}: cannot make the campaign folder: {exc.strerror}') from None
         for path in stored:
             try:
-                self.results[path.stem] = json.loads(path.read_text(encoding='utf-8'))['result']
+                self.results[path.stem] = json.loads(read_text(path))['result']
             except (OSError, ValueError, KeyError, TypeError):
                 continue  # unreadable: the job runs again
 
@@ -214,7 +215,7 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
         points, search_jobs = ([], []) if campaign.search is None else \
             find_breaking_points(plan, run_jobs, len(plan.jobs))
     plan.jobs += search_jobs
-    _, scenario = expanded(scenario_data(campaign.scenario.read_text(encoding='utf-8')), {}, campaign.scenario)
+    _, scenario = expanded(scenario_data(read_text(campaign.scenario)), {}, campaign.scenario)
     table = make_table(plan, [(job, store.results[job.key], store.kept(job)) for job in plan.jobs],
                        [a.id for a in scenario.assertions])
     description = getattr(engine, 'description', type(engine).__name__)
@@ -226,9 +227,9 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     notes = []
     if parquet_available():
         made = {'campaign': campaign.name, 'version': __version__,
-                'scenario_sha256': hashlib.sha256(campaign.scenario.read_bytes()).hexdigest()}
+                'scenario_sha256': hashlib.sha256(read_bytes(campaign.scenario)).hexdigest()}
         if campaign.source is not None:
-            made['campaign_sha256'] = hashlib.sha256(campaign.source.read_bytes()).hexdigest()
+            made['campaign_sha256'] = hashlib.sha256(read_bytes(campaign.source)).hexdigest()
         write_parquet(table, directory / 'results.parquet', made)
     else:  # the jobs ran: their table is in results.csv and the report, whatever is missing here
         notes.append('results.parquet not written: pyarrow is not installed (pip install "bagfault[campaign]"); '

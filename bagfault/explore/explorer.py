@@ -36,6 +36,7 @@ from bagfault.explore.draw import Search, Strategy
 from bagfault.explore.records import Failure, Outcome, Purpose, RunRecord
 from bagfault.explore.shrink import Shrinker, ShrinkMode
 from bagfault.io.outputs import Protected, check_output, write_atomic
+from bagfault.io.regular import read_text
 from bagfault.progress import _clock
 from bagfault.spec.yamlnodes import load_located
 
@@ -151,7 +152,7 @@ class _Folder:
                 check_output(self.directory / name, 'an exploration file', protected, force=force or resume)
         stored: dict[int, RunRecord] = {}
         if resume and self.log.exists():
-            for line in self.log.read_text(encoding='utf-8').splitlines():
+            for line in read_text(self.log).splitlines():
                 with contextlib.suppress(ValueError, KeyError, TypeError):  # a line cut short by a kill
                     record = RunRecord.from_json(json.loads(line))
                     stored[record.index] = record
@@ -388,7 +389,7 @@ class Explorer:
         if request.purpose == 'replay':
             assert request.failure is not None
             path = self.folder.failures / f'{request.failure.name}.min.yaml'
-            return path.read_text(encoding='utf-8'), path.resolve()
+            return read_text(path), path.resolve()
         data = scenario_data(self.base, self.space, request.candidate)
         data['seed'] = self.seed
         return dump(data), self.source

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from bagfault.errors import InputError, one_line
+from bagfault.io.regular import read_text
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -30,7 +31,7 @@ def load_definitions(folders: Sequence[Path]) -> Definitions:
             if msgtype in found:
                 continue
             try:
-                found[msgtype] = (SUFFIXES[path.suffix], path.read_text(encoding='utf-8'))
+                found[msgtype] = (SUFFIXES[path.suffix], read_text(path))
             except (OSError, UnicodeDecodeError) as exc:
                 raise InputError(f'{path}: cannot read message definition ({one_line(exc)})') from None
     return found

@@ -28,6 +28,8 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from bagfault.io.regular import read_text
+
 if TYPE_CHECKING:
     from bagfault.io.sources import StatKey
 
@@ -53,7 +55,7 @@ def recall(key: StatKey) -> str | None:
     """The digest kept for this version of a file, or None."""
     path = root() / _name(key)
     try:
-        text = path.read_text(encoding='ascii').strip()
+        text = read_text(path, 'ascii').strip()
     except (OSError, UnicodeDecodeError):
         return None
     if not HEX.fullmatch(text):

@@ -29,6 +29,7 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import InputError, OutputError
+from bagfault.io.regular import read_text
 from bagfault.io.sources import StatKey, digests_of, input_files, stat_key
 
 if TYPE_CHECKING:
@@ -204,7 +205,7 @@ def _digests(entry: Path, target: Path) -> dict[StatKey, str]:
     """The bag's files' BLAKE3 digests, computed by the first job on this node and kept beside the bag."""
     record = entry / '.digests.json'
     with contextlib.suppress(OSError, ValueError, TypeError):
-        stored = {tuple(k): v for *k, v in json.loads(record.read_text())}
+        stored = {tuple(k): v for *k, v in json.loads(read_text(record))}
         if all(stat_key(f) in stored for f in input_files(target)):
             return stored
     known = digests_of(target)

@@ -21,6 +21,7 @@ from bagfault.errors import InputError, one_line
 from bagfault.io.mcap_source import McapSource
 from bagfault.io.merged import MergedSource, Source
 from bagfault.io.qos import normalized
+from bagfault.io.regular import read_text
 from bagfault.io.sqlite_source import SqliteSource
 
 if TYPE_CHECKING:
@@ -73,7 +74,7 @@ class Rosbag2Source(MergedSource):
                 raise InputError(f'{self.path}: directory holds no metadata.yaml and no .db3 or .mcap files')
             return files
         try:
-            info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
+            info = yaml.safe_load(read_text(meta))['rosbag2_bagfile_information']
             version = info['version']
             listed = info['relative_file_paths']
             if not isinstance(version, int) or isinstance(version, bool):

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from bagfault.errors import LatencyError, one_line
+from bagfault.io.regular import read_text
 from bagfault.spec import sections
 from bagfault.spec.reader import Reader
 
@@ -210,7 +211,7 @@ def load_architecture(path: str | Path) -> Architecture:
     """Read and check an architecture file; LatencyError names the file and the problem."""
     file = Path(path)
     try:
-        data = yaml.safe_load(file.read_text(encoding='utf-8'))
+        data = yaml.safe_load(read_text(file))
     except FileNotFoundError:
         raise LatencyError(f'{file}: architecture file not found') from None
     except (OSError, UnicodeDecodeError) as exc:

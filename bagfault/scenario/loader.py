@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from bagfault.errors import Problem, ScenarioError, one_line
+from bagfault.io.regular import read_text
 from bagfault.spec import sections
 from bagfault.spec.model import AssertionSpec, Dimension, Explore, ExploreFault, FaultSpec, InjectorSpec, Scenario
 from bagfault.spec.reader import Reader
@@ -63,7 +64,7 @@ def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = Fal
 
     file = Path(path)
     try:
-        text = file.read_text(encoding='utf-8')
+        text = read_text(file)
     except FileNotFoundError:
         raise ScenarioError([Problem(str(file), '', '', 'scenario file not found')]) from None
     except IsADirectoryError:
