@@ -218,6 +218,7 @@ class LocalEngine:
 
 
 TASK_RETRIES = 3  # times Ray runs a job again when its worker process or node was lost
+RAY_CONNECT_TIMEOUT = 60.0  # seconds for ray.init to join a cluster (it takes 1-5 s; Ray itself waits for ever)
 
 
 class RayEngine:
@@ -239,11 +240,13 @@ class RayEngine:
         self._adopting = None if address else _Adoption()
         try:
             if address:
-                ray.init(address=address, **options)
+                _join_cluster(ray, address, options)
             else:
                 # 'local': an instance of its own even when a cluster runs here (`ray start`, another suite's),
                 # which Ray would otherwise join (RAY_ADDRESS, /tmp/ray/ray_current_cluster) and refuse num_cpus
                 ray.init(address='local', num_cpus=workers or os.cpu_count() or 1, **options)
+        except CampaignError:
+            raise
         except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; all mean "no cluster"
             if self._adopting is not None:
                 self._adopting.reap(timeout=1.0)  # and this process is no subreaper any more
@@ -328,6 +331,43 @@ def _children() -> set[int]:
                 if int(handle.read().rsplit(')', 1)[1].split()[1]) == me:
                     found.add(int(entry))
     return found
+
+
+def _join_cluster(ray: Any, address: str, options: dict[str, Any]) -> None:
+    """ray.init on a thread of its own, waited for RAY_CONNECT_TIMEOUT: a head that accepts connections and never
+    answers, one reached under another address, or one that wants a token this driver lacks, kept ray.init
+    retrying for minutes without a word. Meanwhile Ray's own retry warnings (its C++ core writes to descriptor 2)
+    go nowhere; on time out the thread is left behind, a daemon, and descriptor 2 stays closed to it while
+    sys.stderr, on a copy of the real one, carries the one line that says so."""
+    failed: list[BaseException] = []
+
+    def join() -> None:
+        try:
+            ray.init(address=address, **options)
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread as it is
+            failed.append(exc)
+
+    sys.stderr.flush()
+    real = os.dup(2)
+    quiet = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(quiet, 2)
+    os.close(quiet)
+    thread = threading.Thread(target=join, name='ray-init', daemon=True)
+    try:
+        thread.start()
+        thread.join(RAY_CONNECT_TIMEOUT)
+    finally:
+        if thread.is_alive():
+            sys.stderr = open(real, 'w', encoding='utf-8', errors='replace', closefd=True)  # noqa: SIM115
+        else:
+            os.dup2(real, 2)
+            os.close(real)
+    if thread.is_alive():
+        raise CampaignError(f'--ray {address}: Ray did not join the cluster within {RAY_CONNECT_TIMEOUT:g} s (a head '
+                            'that does not answer, one started with token authentication while this shell has no '
+                            'RAY_AUTH_TOKEN, or one whose nodes advertise another address than the one given)')
+    if failed:
+        raise failed[0]
 
 
 def _reachable(address: str) -> None:

@@ -87,13 +87,28 @@ class RemoteBag:
         return cls(data['url'], tuple(RemoteFile(**f) for f in data['files']), bool(data['folder']))
 
 
+STORE_TIMEOUT = 10.0  # seconds to connect, and between two reads of an answer (S3 answers in well under 1)
+STORE_TRIES = 3  # each request, in all; then the call fails and says so
+
+
 def filesystem(url: str) -> Any:
-    """The fsspec filesystem of a URL's scheme; InputError naming the package when it is not installed."""
+    """The fsspec filesystem of a URL's scheme; InputError naming the package when it is not installed.
+
+    S3's client would wait 60 s per read and retry that for minutes on an endpoint that never answers: every
+    request here has STORE_TIMEOUT and STORE_TRIES (s3fs retries, botocore does not retry on top of it).
+    """
     scheme = url.split('://', 1)[0]
+    options: dict[str, Any] = {}
+    if scheme in ('s3', 's3a'):
+        options = {'config_kwargs': {'connect_timeout': STORE_TIMEOUT, 'read_timeout': STORE_TIMEOUT,
+                                     'retries': {'max_attempts': 1, 'mode': 'standard'}}}
     try:
         import fsspec  # type: ignore[import-untyped]  # noqa: PLC0415
 
-        return fsspec.filesystem(scheme, skip_instance_cache=True)  # credentials as the environment says now
+        fs = fsspec.filesystem(scheme, skip_instance_cache=True, **options)  # credentials as the environment says
+        if options:
+            fs.retries = STORE_TRIES
+        return fs
     except ImportError:
         raise InputError(f'{url}: reading {scheme}:// needs the {SCHEMES[scheme]} package '
                          f"(pip install 'bagfault[campaign]' installs s3fs)") from None
@@ -142,6 +157,9 @@ def list_bags(pattern: str) -> list[RemoteBag]:
 def _store_problem(exc: Exception) -> str:
     """What a store's client said, as one line: refused access and missing credentials named as such."""
     text = ' '.join(str(exc).split())[:200] or type(exc).__name__
+    if isinstance(exc, TimeoutError) or 'timeout' in type(exc).__name__.lower():
+        return (f'no answer from the store within {STORE_TIMEOUT:g} s, {STORE_TRIES} tries ({text}); '
+                'is the endpoint (AWS_ENDPOINT_URL) right and reachable?')
     if isinstance(exc, PermissionError):
         return (f'access refused by the store ({text}); credentials come from the standard chain (for S3: '
                 'AWS_ACCESS_KEY_ID, AWS_PROFILE, ...)')

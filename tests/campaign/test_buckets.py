@@ -7,7 +7,9 @@ bags on local disk.
 
 from __future__ import annotations
 
+import contextlib
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
@@ -246,3 +248,52 @@ def test_a_job_waits_for_a_download_never_for_another_jobs_run(store: S3Server) 
     for thread in threads:
         thread.join(timeout=20)
     assert found == [True, False]  # one download, shared
+
+
+class _Silent:
+    """A TCP server on 127.0.0.1 that accepts every connection and never answers (a stuck proxy or endpoint)."""
+
+    def __init__(self) -> None:
+        import socket
+        import threading
+
+        self.socket = socket.create_server(('127.0.0.1', 0))
+        self.url = f'http://127.0.0.1:{self.socket.getsockname()[1]}'
+        self.held: list[Any] = []
+        self.thread = threading.Thread(target=self._accept, daemon=True)
+        self.thread.start()
+
+    def _accept(self) -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                self.held.append(self.socket.accept()[0])
+
+    def close(self) -> None:
+        self.socket.close()
+        for connection in self.held:
+            connection.close()
+
+
+def test_a_store_that_never_answers_is_one_line_within_a_bounded_time(corpus: Path, tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """An endpoint that accepts connections and never answers: botocore waits 60 s per read and retries, s3fs
+    retries that five times (the campaign waited past 60 s without a word). Every call has a timeout and a
+    retry budget, and the line says it was spent."""
+    silent = _Silent()
+    try:
+        monkeypatch.setenv('AWS_ENDPOINT_URL', silent.url)
+        for name, value in (('AWS_ACCESS_KEY_ID', 'k'), ('AWS_SECRET_ACCESS_KEY', 's'),
+                            ('AWS_DEFAULT_REGION', 'us-east-1')):
+            monkeypatch.setenv(name, value)
+        monkeypatch.setenv('BAGFAULT_CACHE', str(tmp_path / 'cache'))
+        path = campaign_file(corpus, CAMPAIGN % f's3://{BUCKET}/bags/*.mcap')
+        began = time.monotonic()
+        assert main(['campaign', str(path), '-o', str(tmp_path / 'out')]) == 2
+        seconds = time.monotonic() - began
+    finally:
+        silent.close()
+    error = capsys.readouterr().err.strip()
+    assert error.count('\n') == 0 and 'no answer' in error and 'tries' in error, error
+    assert seconds < 100, seconds  # the listing asks twice: 2 x 3 tries x 10 s, and the start
+    assert not (tmp_path / 'out').exists()

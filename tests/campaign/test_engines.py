@@ -180,3 +180,28 @@ def test_jobs_spread_over_nodes_and_survive_a_node_and_a_driver_lost(cluster: An
                            env={**os.environ, 'RAY_ADDRESS': cluster.address})
     assert local.returncode == 0, local.stderr[-3000:]
     assert local.stdout.strip() == 'a local Ray instance (1 CPUs)'
+
+
+def test_a_ray_head_that_never_answers_is_one_line_within_the_connect_timeout(corpus: Path, tmp_path: Path) -> None:
+    """A head that accepts TCP connections and never answers (so the reachability probe passes): ray.init kept
+    retrying for minutes without a word, as it does against a token-authenticated cluster this shell has no
+    token for. Bounded (the bound lowered to 5 s here), one line, exit 2, no results folder, Ray's own retry
+    warnings kept off the terminal."""
+    import socket
+
+    path = campaign_file(corpus, 'campaign: silent\nscenario: drift.yaml\nbags: [bags/a.mcap]\n')
+    with socket.create_server(('127.0.0.1', 0)) as server:
+        address = f'127.0.0.1:{server.getsockname()[1]}'
+        out = tmp_path / 'out'
+        program = ('import sys\nfrom bagfault.campaign import engines\nengines.RAY_CONNECT_TIMEOUT = 5.0\n'
+                   'from bagfault.__main__ import run\n'
+                   f'sys.argv = ["bagfault", "campaign", {str(path)!r}, "-o", {str(out)!r}, "--ray", {address!r}]\n'
+                   'sys.exit(run())\n')
+        began = time.monotonic()
+        done = subprocess.run([sys.executable, '-c', program], capture_output=True, text=True, timeout=120,
+                              env={**os.environ, 'RAY_USAGE_STATS_ENABLED': '0'}, check=False)
+        seconds = time.monotonic() - began
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count('\n') == 1 and f'--ray {address}: Ray did not join the cluster within 5 s' in done.stderr
+    assert seconds < 60
+    assert not out.exists()
