@@ -14,7 +14,7 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from bagfault import __version__
+from bagfault import __version__, settings
 from bagfault.errors import BagfaultError, UsageError
 from bagfault.io.outputs import PUBLISHED, check_output
 from bagfault.io.regular import read_text
@@ -709,6 +709,7 @@ def _main(argv: Sequence[str] | None) -> int:
     PUBLISHED.clear()
     try:
         with _terminating_signals():
+            settings.check()  # a bad environment variable is one line before anything runs
             return COMMANDS[args.command](args)
     except BagfaultError as exc:
         if args.debug:

@@ -122,3 +122,15 @@ def test_every_file_read_by_name_is_checked_to_be_a_regular_file() -> None:
                                                              node.value.id in ('regular',)):
                 found.append(f'{relative}:{node.lineno}')
     assert found == []
+
+
+def test_every_environment_variable_of_bagfault_is_read_in_settings():
+    """One owner: settings.py parses and checks each BAGFAULT_* variable; nothing else reads one."""
+    import re
+
+    package = PACKAGE
+    reads = re.compile(r"""(environ\.get|getenv|environ\[)\(?\s*['"](BAGFAULT_|XDG_CACHE_HOME)""")
+    found = [f'{path.relative_to(package)}:{number}' for path in sorted(package.rglob('*.py'))
+             if path.name != 'settings.py'
+             for number, line in enumerate(path.read_text().splitlines(), 1) if reads.search(line)]
+    assert found == []

@@ -20,6 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
+from bagfault import settings
 from bagfault.errors import ClosedLoopError
 
 if TYPE_CHECKING:
@@ -31,7 +32,7 @@ COORDINATOR_PORT_BASE = 32768  # domain_coordinator's claim on domain N is this 
 
 def port_base() -> int:
     """domain_coordinator's base port (`BAGFAULT_DOMAIN_PORT_BASE` overrides, for tests of leases alone)."""
-    return int(os.environ.get('BAGFAULT_DOMAIN_PORT_BASE', COORDINATOR_PORT_BASE))
+    return settings.domain_port_base(COORDINATOR_PORT_BASE)
 
 
 def claim_port(domain: int) -> socket.socket | None:
@@ -47,9 +48,9 @@ def claim_port(domain: int) -> socket.socket | None:
 
 def lock_folder() -> Path:
     """Where the lock files live (`BAGFAULT_DOMAIN_LOCKS` overrides, for tests)."""
-    folder = os.environ.get('BAGFAULT_DOMAIN_LOCKS')
-    if folder:
-        return Path(folder)
+    folder = settings.domain_locks()
+    if folder is not None:
+        return folder
     return Path(tempfile.gettempdir()) / f'bagfault-domains-{os.getuid()}'
 
 

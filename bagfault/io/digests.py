@@ -28,6 +28,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from bagfault import settings
 from bagfault.io.regular import read_text
 
 if TYPE_CHECKING:
@@ -39,12 +40,14 @@ HEX = re.compile(r'[0-9a-f]{64}')
 KEPT = 20_000  # digests kept (a 4 KB block each); past it, the least recently used go down to 90 % of it
 
 
-def root() -> Path:
-    """Where digests are kept."""
-    base = os.environ.get('BAGFAULT_CACHE')
-    if base:
-        return Path(base) / 'digests'
-    return Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'bagfault' / 'digests'
+def root() -> Path | None:
+    """Where digests are kept; None when BAGFAULT_CACHE cannot be used (the cache is only a speed-up: the
+    command line refuses the setting before, an API caller just hashes)."""
+    try:
+        folder = settings.cache_folder()
+    except settings.SettingError:
+        return None
+    return (folder or settings.user_cache()) / 'digests'
 
 
 def _name(key: StatKey) -> str:
@@ -53,7 +56,10 @@ def _name(key: StatKey) -> str:
 
 def recall(key: StatKey) -> str | None:
     """The digest kept for this version of a file, or None."""
-    path = root() / _name(key)
+    folder = root()
+    if folder is None:
+        return None
+    path = folder / _name(key)
     try:
         text = read_text(path, 'ascii').strip()
     except (OSError, UnicodeDecodeError):
@@ -71,6 +77,8 @@ def keep(key: StatKey, digest: str, hashed_from_ns: int) -> bool:
     if max(key[3], key[4]) > hashed_from_ns - SETTLED_NS or not HEX.fullmatch(digest):
         return False
     folder = root()
+    if folder is None:
+        return False
     staging: str | None = None
     try:
         folder.mkdir(parents=True, exist_ok=True)

@@ -28,9 +28,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
+from bagfault import settings
 from bagfault.errors import InputError, OutputError
 from bagfault.io.regular import read_text
 from bagfault.io.sources import StatKey, digests_of, input_files, stat_key
+from bagfault.log import log
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -171,16 +173,14 @@ def _store_problem(exc: Exception) -> str:
 
 def cache_root() -> Path:
     """This machine's cache (one folder per Ray node when several run on one machine)."""
-    base = os.environ.get('BAGFAULT_CACHE')
-    root = Path(base) if base else Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'bagfault' / \
-        'objects'
-    node = os.environ.get('BAGFAULT_CACHE_NODE')
+    root = settings.cache_folder() or settings.user_cache() / 'objects'
+    node = settings.cache_node()
     return root / node if node else root
 
 
 def cache_limit() -> int:
     """Bytes the cache may hold before the entries unused longest are removed."""
-    return int(float(os.environ.get('BAGFAULT_CACHE_GB', '50')) * 1e9)
+    return int(settings.cache_gigabytes() * 1e9)
 
 
 @dataclass
@@ -202,13 +202,18 @@ def fetched(bag: RemoteBag) -> Iterator[Fetched]:
     with (root / f'{entry.name}.lock').open('a+b') as lock:
         fcntl.flock(lock, fcntl.LOCK_SH)  # in use: eviction passes it over; other jobs may share it
         downloaded = False
-        if not target.exists():
+        if not _intact(bag, entry, target):
             # one download per bag and machine, under a lock of its own: a job that waits for another's
             # download waits for that, never for the other job's whole run (which holds the use lock)
             with (root / f'{entry.name}.download').open('a+b') as downloading:
                 fcntl.flock(downloading, fcntl.LOCK_EX)
-                if not target.exists():
+                if not _intact(bag, entry, target):
+                    if target.exists() or target.is_symlink():
+                        log.warning('%s: the cached copy %s differs from what was downloaded; fetched again',
+                                    bag.url, target)
+                        _discard(entry, target)
                     _download(bag, entry)
+                    _record_content(entry, target)
                     downloaded = True
         (entry / '.used').touch()
         try:
@@ -217,6 +222,52 @@ def fetched(bag: RemoteBag) -> Iterator[Fetched]:
             yield Fetched(target, downloaded, _digests(entry, target))
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+CONTENT = '.content.json'  # each file's size and BLAKE3 as downloaded: what a reused copy must still be
+
+
+def _files(bag: RemoteBag, target: Path) -> dict[str, Path]:
+    """The cached copy's files by their object's name."""
+    return {f.name: target / f.name for f in bag.files} if bag.folder else {bag.files[0].name: target}
+
+
+def _record_content(entry: Path, target: Path) -> None:
+    known = digests_of(target)
+    content = {f.name: [f.stat().st_size, known[stat_key(f)]] for f in input_files(target)}
+    staging = entry / f'.content.{os.getpid()}.json'
+    staging.write_text(json.dumps(content, sort_keys=True))
+    os.replace(staging, entry / CONTENT)
+
+
+def _intact(bag: RemoteBag, entry: Path, target: Path) -> bool:
+    """Whether the cached copy is the download, unchanged: every object's file there, of its listed size, and
+    every file's BLAKE3 the one recorded at download (hashed again only when a file's stat key changed)."""
+    if not target.exists() or target.is_symlink():
+        return False
+    try:
+        recorded = json.loads(read_text(entry / CONTENT))
+        files = _files(bag, target)
+        if any(not path.is_file() or path.is_symlink() or path.stat().st_size != remote.size
+               for remote, path in zip(bag.files, files.values(), strict=True)):
+            return False
+        present = input_files(target)
+        if sorted(f.name for f in present) != sorted(recorded):
+            return False
+        known = _digests(entry, target)
+        return all(recorded[f.name] == [f.stat().st_size, known.get(stat_key(f))] for f in present)
+    except (OSError, ValueError, TypeError, KeyError, InputError):
+        return False
+
+
+def _discard(entry: Path, target: Path) -> None:
+    for name in (CONTENT, '.digests.json'):
+        with contextlib.suppress(FileNotFoundError):
+            (entry / name).unlink()
+    if target.is_dir() and not target.is_symlink():
+        shutil.rmtree(target)
+    else:
+        target.unlink()
 
 
 def _digests(entry: Path, target: Path) -> dict[StatKey, str]:

@@ -14,6 +14,7 @@ import threading
 from importlib import metadata
 from typing import TYPE_CHECKING, Any
 
+from bagfault import settings
 from bagfault.io.types import DISTROS
 from bagfault.live import require_rclpy
 from bagfault.log import log
@@ -61,11 +62,9 @@ def make_executor(context: Any) -> Any:
     """The executor of a node that forwards messages: rclpy's events executor (C++ event queue, a fraction of
     the Python executor's cost per message) where this rclpy has it, else the single-threaded one.
     BAGFAULT_EXECUTOR=single forces the latter."""
-    import os  # noqa: PLC0415
-
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
 
-    if os.environ.get('BAGFAULT_EXECUTOR', 'events') != 'single':
+    if settings.executor() != 'single':
         try:
             from rclpy.experimental.events_executor import EventsExecutor  # noqa: PLC0415
         except ImportError:

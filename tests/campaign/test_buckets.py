@@ -217,6 +217,46 @@ def test_the_cache_is_bounded_and_never_evicts_a_bag_in_use(store: S3Server, mon
         assert held.path.exists()
 
 
+@pytest.mark.parametrize('change', ['a byte flipped', 'cut short', 'replaced by a symlink', 'record lost'])
+def test_a_cached_bag_that_changed_is_fetched_again(store: S3Server, change: str) -> None:
+    """A cached copy is reused only while it is the download: each file of its listed size and of the BLAKE3
+    recorded when it was downloaded (a copy edited in place, cut short or swapped was used as it was)."""
+    import os
+
+    import blake3
+
+    from bagfault.io.objects import fetched, list_bags
+
+    a = list_bags(f's3://{BUCKET}/{store.prefix}/bags/a.mcap')[0]  # type: ignore[attr-defined]
+    key = f'{store.prefix}/bags/a.mcap'  # type: ignore[attr-defined]
+    original = store.s3.get_object(Bucket=BUCKET, Key=key)['Body'].read()
+    gets = store.gets(key)
+    with fetched(a) as first:
+        assert first.downloaded
+    with fetched(a) as reused:
+        assert not reused.downloaded  # unchanged: the cache's
+    path = first.path
+    if change == 'a byte flipped':
+        data = bytearray(path.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        path.write_bytes(bytes(data))
+        os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns))
+    elif change == 'cut short':
+        with path.open('r+b') as stream:
+            stream.truncate(len(original) - 100)
+    elif change == 'replaced by a symlink':
+        other = path.with_name('elsewhere.mcap')
+        other.write_bytes(original)
+        path.unlink()
+        path.symlink_to(other)
+    else:
+        (path.parent / '.content.json').unlink()
+    with fetched(a) as again:
+        assert again.downloaded and store.gets(key) == gets + 2
+        assert not again.path.is_symlink() and again.path.read_bytes() == original
+        assert list(again.digests.values()) == [blake3.blake3(original).hexdigest()]
+
+
 def test_a_job_waits_for_a_download_never_for_another_jobs_run(store: S3Server) -> None:
     """Two jobs of one bag on one node: the second gets the bag while the first still holds it in use, from the
     first's download. (Before, two jobs that both found the bag missing could leave the second waiting for the
