@@ -340,12 +340,14 @@ def _leading_copy(args: argparse.Namespace) -> Iterator[LeadingCopy | None]:
     except ValueError:
         yield None  # refused later, with its message
         return
+    from bagfault.spec.yamlnodes import load_located  # noqa: PLC0415 - PyYAML only
+
     try:
-        text = read_text(args.scenario)
-    except (OSError, ValueError):
+        document = load_located(read_text(args.scenario)).data  # the loader's parse and limits: no bomb gets by
+    except (OSError, ValueError, RecursionError):
         yield None  # said later, with the scenario's own message
         return
-    lead = start_lead(text, args.inputs[0], args.output, start_offset=args.start, activations=activations)
+    lead = start_lead(document, args.inputs[0], args.output, start_offset=args.start, activations=activations)
     if lead is None:
         yield None
         return

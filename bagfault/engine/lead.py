@@ -27,7 +27,6 @@ from bagfault.io.channel import bag_name
 from bagfault.io.leading_copy import LeadingCopy, Piece
 from bagfault.io.mcap_layout import MAGIC, header_library, padding_length, record_bytes
 from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, read_summary
-from bagfault.spec.yamlnodes import load_located
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -41,11 +40,12 @@ MARGIN = 2_000_000  # ns a guessed chunk ends before a fault can start (seconds 
 SCHEDULED = ('active_on_startup', 'active', 'probability_per_second', 'repeat')  # keys of faults on from zero
 
 
-def start_lead(scenario_text: str, source: Path, output: Path, *, start_offset: float = 0.0,
+def start_lead(document: object, source: Path, output: Path, *, start_offset: float = 0.0,
                activations: Sequence[Activation] = (), observed: Sequence[str] = ()) -> LeadingCopy | None:
     """Start copying the input's leading chunks into a new partial output, or None when no chunk is guessed
-    copied (or the guess cannot be made: not an indexed MCAP file, a scenario that does not parse).
-    `activations` are the `--activate` requests; `observed` topics that reports need."""
+    copied (or the guess cannot be made: not an indexed MCAP file, a scenario that is no mapping).
+    `document` is the scenario as `load_located` parsed it (its `.data`: the loader's own parse and limits, done
+    once); `activations` are the `--activate` requests; `observed` topics that reports need."""
     try:
         with source.open('rb') as stream:
             magic = stream.read(len(MAGIC))
@@ -55,7 +55,6 @@ def start_lead(scenario_text: str, source: Path, output: Path, *, start_offset: 
             _, summary = read_summary(stream, size)
             if summary is None:
                 return None
-        document = load_located(scenario_text).data  # the loader's own parse and limits: no alias bomb gets by
         pieces = leading_pieces(summary, document, start_offset, activations, observed)
         if not pieces:
             return None

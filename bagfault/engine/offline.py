@@ -186,7 +186,7 @@ def _own_lead(scenario: Scenario, source: Path, output: Path, start_offset: floa
     wanted = wanted_topics(observers)
     if wanted is None:
         return None  # an observer sees every topic: nothing is copied
-    return start_lead(scenario.text, source, output, start_offset=start_offset,
+    return start_lead(scenario.located.data, source, output, start_offset=start_offset,
                       activations=activations, observed=sorted(wanted))
 
 

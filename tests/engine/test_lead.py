@@ -151,16 +151,16 @@ def test_observers_name_topics_too(bag: Path) -> None:
     assert sum(p.length for p in guess(bag, IMU.replace('start: 1.5', 'start: 100'), observed=['scan'])) < whole
 
 
-@pytest.mark.parametrize('text', ['- not a mapping\n', 'faults: [', ''])
-def test_no_guess_from_what_is_not_a_scenario(bag: Path, tmp_path: Path, text: str) -> None:
-    assert start_lead(text, bag, tmp_path / 'out.mcap') is None
+@pytest.mark.parametrize('document', [['not a mapping'], None, 'faults: ['])
+def test_no_guess_from_what_is_not_a_scenario(bag: Path, tmp_path: Path, document: object) -> None:
+    assert start_lead(document, bag, tmp_path / 'out.mcap') is None
     assert list(tmp_path.iterdir()) == []
 
 
 def test_no_guess_from_what_is_not_an_indexed_mcap(tmp_path: Path) -> None:
     (tmp_path / 'bag.db3').write_bytes(b'SQLite format 3\x00' + bytes(200))
-    assert start_lead(IMU, tmp_path / 'bag.db3', tmp_path / 'out.mcap') is None
-    assert start_lead(IMU, tmp_path / 'missing.mcap', tmp_path / 'out.mcap') is None
+    assert start_lead(yaml.safe_load(IMU), tmp_path / 'bag.db3', tmp_path / 'out.mcap') is None
+    assert start_lead(yaml.safe_load(IMU), tmp_path / 'missing.mcap', tmp_path / 'out.mcap') is None
     assert sorted(p.name for p in tmp_path.iterdir()) == ['bag.db3']
 
 
