@@ -630,9 +630,9 @@ def _cmd_latency(args: argparse.Namespace) -> int:
     report = measure(items[0], items[1:], path=args.path, stamp_origin=args.stamp_origin)
     print(render_text(report))
     if args.json:
-        write_atomic(args.json, json.dumps(report.to_dict(), indent=1, sort_keys=True) + '\n')
+        write_atomic(args.json, json.dumps(report.to_dict(), indent=1, sort_keys=True) + '\n', 'json')
     if args.html:
-        write_atomic(args.html, render_html(report))
+        write_atomic(args.html, render_html(report), 'html')
     return EXIT_OK
 
 
@@ -788,7 +788,7 @@ def _junit_error(args: argparse.Namespace, reason: str, began: float) -> None:
     try:
         check_output(path, '--junit report', named)
         write_atomic(path, render_error(str(scenario or args.command), reason, time.monotonic() - began,
-                                        extended=getattr(args, 'junit_file_line', False)))
+                                        extended=getattr(args, 'junit_file_line', False)), 'xml')
     except BagfaultError:
         return
 

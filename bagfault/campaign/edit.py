@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
+from bagfault.io.marks import stamp
 from bagfault.scenario import parse_scenario
 from bagfault.spec.yamlnodes import load_located
 
@@ -68,8 +69,9 @@ def _step(node: Any, part: str, parent: str | None, path: str) -> Any:
 
 
 def expanded(data: Any, values: dict[str, Any], source: Path | None) -> tuple[str, Scenario]:
-    """The scenario text with `values` set, and that text loaded and validated (ScenarioError if it is not)."""
+    """The scenario text with `values` set, and that text loaded and validated (ScenarioError if it is not).
+    The text carries its mark (io/marks.py): a job runs the very bytes the campaign folder keeps of it."""
     for path, value in values.items():
         data = set_path(data, path, value)
-    text = yaml.safe_dump(data, sort_keys=False, allow_unicode=True)
+    text = stamp(yaml.safe_dump(data, sort_keys=False, allow_unicode=True).encode(), 'yaml').decode()
     return text, parse_scenario(text, source=source)

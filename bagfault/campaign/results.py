@@ -130,7 +130,7 @@ def write_parquet(table: Table, path: Path, metadata: dict[str, str] | None = No
     buffer = pa.BufferOutputStream()
     schema = pa.schema(fields, metadata={f'bagfault.{k}': v for k, v in (metadata or {}).items()})
     pq.write_table(pa.Table.from_arrays(arrays, schema=schema), buffer)
-    write_atomic(path, buffer.getvalue().to_pybytes())
+    write_atomic(path, buffer.getvalue().to_pybytes(), 'table')
 
 
 def write_csv(table: Table, path: Path) -> None:
@@ -140,7 +140,7 @@ def write_csv(table: Table, path: Path) -> None:
     writer.writerow(table.columns)
     for row in table.rows:
         writer.writerow(['' if row.get(c) is None else _csv(row[c]) for c in table.columns])
-    write_atomic(path, text.getvalue())
+    write_atomic(path, text.getvalue(), 'table')
 
 
 def _csv(value: Any) -> str:

@@ -172,7 +172,7 @@ class _Store:
         self.results[job.key] = result
         write_atomic(self.jobs / f'{job.key}.json', json.dumps({'job': job.index, 'bag': str(job.bag),
                                                                  'values': job.values, 'seed': job.seed,
-                                                                 'result': result}, sort_keys=True, indent=1))
+                                                                 'result': result}, sort_keys=True, indent=1), 'json')
 
     def kept(self, job: Job) -> str:
         """The job's output relative to the folder, if it is kept."""
@@ -222,8 +222,8 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     _write_scenarios(directory, plan)
     write_csv(table, directory / 'results.csv')
     described = {**plan.describe(), 'breaking_points': [point.describe() for point in points]}
-    write_atomic(directory / 'campaign.json', json.dumps(described, indent=1, sort_keys=True) + '\n')
-    write_atomic(directory / 'report.html', render_report(plan, table, points, description))
+    write_atomic(directory / 'campaign.json', json.dumps(described, indent=1, sort_keys=True) + '\n', 'json')
+    write_atomic(directory / 'report.html', render_report(plan, table, points, description), 'html')
     notes = []
     if parquet_available():
         made = {'campaign': campaign.name, 'version': __version__,
@@ -245,4 +245,4 @@ def _write_scenarios(directory: Path, plan: Plan) -> None:
         path = directory / scenario_file(job, plan.campaign)
         if not path.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
-            write_atomic(path, job.scenario_text)
+            write_atomic(path, job.scenario_text, 'yaml')

@@ -35,7 +35,7 @@ from bagfault.explore.candidate import Candidate, digest, dump, relocated, scena
 from bagfault.explore.draw import Search, Strategy
 from bagfault.explore.records import Failure, Outcome, Purpose, RunRecord
 from bagfault.explore.shrink import Shrinker, ShrinkMode
-from bagfault.io.outputs import Protected, check_output, write_atomic
+from bagfault.io.outputs import Protected, check_output, mark_table, write_atomic
 from bagfault.io.regular import read_text
 from bagfault.progress import _clock
 from bagfault.spec.yamlnodes import load_located
@@ -167,7 +167,7 @@ class _Folder:
 
     def keep(self, records: Sequence[RunRecord]) -> None:
         """runs.jsonl as these records (rewritten at a resume that diverged, appended otherwise)."""
-        write_atomic(self.log, ''.join(json.dumps(r.to_json(), sort_keys=True) + '\n' for r in records))
+        write_atomic(self.log, ''.join(json.dumps(r.to_json(), sort_keys=True) + '\n' for r in records), 'table')
 
     def append(self, record: RunRecord) -> None:
         """One more finished run."""
@@ -410,7 +410,7 @@ class Explorer:
         path = self.folder.failures / name
         data = relocated(scenario_data(self.base, self.space, candidate), self.source, path)
         data['seed'] = self.seed
-        write_atomic(path, dump(data, f'{header}\nreplay: bagfault {self.mode} {path.name}'))
+        write_atomic(path, dump(data, f'{header}\nreplay: bagfault {self.mode} {path.name}'), 'yaml')
 
     def _save(self) -> list[Path]:
         """--save-failures: each minimal scenario where pytest runs it (test_<name>.bagfault.yaml)."""
@@ -427,7 +427,7 @@ class Explorer:
             data = relocated(scenario_data(self.base, self.space, failure.minimal), self.source, path)
             data['seed'] = self.seed
             write_atomic(path, dump(data, f'bagfault explore: {failure.name}, a regression test (fails until the '
-                                          f'cause is fixed)\nfaults: {failure.minimal.describe()}'))
+                                          f'cause is fixed)\nfaults: {failure.minimal.describe()}'), 'yaml')
             saved.append(path)
         return saved
 
@@ -436,8 +436,11 @@ class Explorer:
         from bagfault.explore.report import render_report  # noqa: PLC0415
 
         document = self.describe(engine)
-        write_atomic(self.folder.directory / 'explore.json', json.dumps(document, indent=1, sort_keys=True) + '\n')
-        write_atomic(self.folder.directory / 'report.html', render_report(document))
+        write_atomic(self.folder.directory / 'explore.json', json.dumps(document, indent=1, sort_keys=True) + '\n',
+                     'json')
+        if self.folder.log.exists():
+            mark_table(self.folder.log)  # appended run by run: marked now it is whole
+        write_atomic(self.folder.directory / 'report.html', render_report(document), 'html')
 
     def describe(self, engine: str) -> dict[str, Any]:
         """explore.json (keys documented in docs/modes/explore.md)."""

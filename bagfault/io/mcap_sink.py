@@ -196,6 +196,7 @@ class McapSink:
         try:
             self._writer.flush()
             self._writer.add_metadata('rosbag2', self._rosbag2_metadata())
+            self._writer.add_mark()  # proof that bagfault wrote it (io/marks.py)
             self._writer.finish()
             self._stream.close()
         except OSError as exc:

@@ -165,6 +165,36 @@ def read_summary(stream: IO[bytes], size: int) -> tuple[int, Summary | None]:
     return summary_start, parse_summary(memoryview(covered)[: footer - summary_start])
 
 
+def raw_records(section: bytes | memoryview, opcode: int) -> list[bytes]:
+    """The whole records (opcode and length included) of one type in a summary section, as written."""
+    buf = memoryview(section)
+    found, pos, total = [], 0, len(buf)
+    while pos + 9 <= total:
+        kind, length = _REC.unpack_from(buf, pos)
+        end = pos + 9 + length
+        if end > total:
+            raise SummaryError(f'a record of {length} bytes at offset {pos} runs past the summary')
+        if kind == opcode:
+            found.append(bytes(buf[pos:end]))
+        pos = end
+    return found
+
+
+def read_section(stream: IO[bytes], size: int) -> bytes:
+    """The summary section's bytes (from its start to the footer), its CRC checked; b'' when there is none."""
+    summary_start, crc = read_footer(stream, size)
+    footer = size - 8 - FOOTER_LENGTH
+    if not summary_start:
+        return b''
+    if not 8 < summary_start <= footer:
+        raise SummaryError(f'the footer points the summary at offset {summary_start}, outside the file')
+    stream.seek(summary_start)
+    covered = stream.read(footer + FOOTER_LENGTH - 4 - summary_start)
+    if crc and zlib.crc32(covered) != crc:
+        raise SummaryError('summary CRC mismatch')
+    return covered[: footer - summary_start]
+
+
 def read_metadata(stream: IO[bytes], index: MetadataIndex) -> Metadata:
     """The metadata record a metadata index points at."""
     stream.seek(index.offset)

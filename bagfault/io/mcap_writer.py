@@ -49,6 +49,7 @@ from mcap.records import (
 
 from bagfault.io import mcap_layout
 from bagfault.io.file_copy import IN_KERNEL, copy_range
+from bagfault.io.marks import MCAP_RECORD, mcap_mark
 from bagfault.io.mcap_layout import MAGIC, padding_length, padding_record, record_bytes
 
 if TYPE_CHECKING:
@@ -252,6 +253,15 @@ class McapWriter:
         start = self._record(Metadata(name=name, metadata=data))
         self._metadata_indexes.append(MetadataIndex(offset=start, length=self._offset - start, name=name))
         self._metadata_count += 1
+
+    def add_mark(self) -> None:
+        """The `bagfault.mark` metadata record (see io/marks.py), the last of the data section: over its own
+        offset and every chunk index record the summary will hold. Only `finish` may follow."""
+        self.flush()
+        start = self._offset
+        self.add_metadata(MCAP_RECORD, {'mark': mcap_mark(start, self._chunk_indexes)})
+        if self._metadata_indexes[-1].offset != start:  # flush wrote everything pending: nothing may move it
+            raise AssertionError(f'the mark record moved from {start} to {self._metadata_indexes[-1].offset}')
 
     def add_attachment(self, create_time: int, log_time: int, name: str, media_type: str, data: bytes) -> None:
         """An attachment record in the data section."""

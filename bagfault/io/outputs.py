@@ -4,7 +4,7 @@ An output may not be anything the command reads, by file identity (device and in
 link nor a symlink gets past): an input, a file inside an input folder, an SQLite input's `-wal`, `-shm`
 and `-journal` sidecars (a stray `-wal` beside a database is replayed into it by the next reader), the
 scenario, a `--msg-path` file. It must be a regular file or a new name, and an existing file must be one
-bagfault wrote (its header or first line says so), unless the caller forces it.
+bagfault wrote (it carries its mark: io/marks.py), unless the caller forces it.
 """
 
 from __future__ import annotations
@@ -12,12 +12,15 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+import struct
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, BinaryIO
 
 from bagfault.errors import OutputError
+from bagfault.io.marks import MCAP_RECORD, Kind, is_marked, mcap_mark, sidecar, stamp, table_mark
+from bagfault.io.regular import read_bytes, read_text
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence
@@ -127,10 +130,26 @@ def _kind(mode: int) -> str:
     return next((name for test, name in kinds if test(mode)), 'not a file')
 
 
-def write_atomic(path: Path, data: bytes | str) -> None:
-    """Write a whole file under a temporary name in the same folder, then rename it."""
+def write_atomic(path: Path, data: bytes | str, kind: Kind) -> None:
+    """Write a whole file, with its mark (io/marks.py), under a temporary name in the same folder, then rename
+    it; a table's mark goes beside it, after it."""
+    payload = stamp(data.encode() if isinstance(data, str) else data, kind)
+    _replace(path, payload)
+    if kind == 'table':
+        _replace(sidecar(path), table_mark(path.name, payload).encode(), published=False)
+
+
+def mark_table(path: Path) -> None:
+    """Mark a table or log bagfault wrote piece by piece (an exploration's runs.jsonl), now that it is whole."""
+    try:
+        data = read_bytes(path)
+    except OSError as exc:
+        raise OutputError(f'{path}: cannot read back: {exc.strerror or exc}') from None
+    _replace(sidecar(path), table_mark(path.name, data).encode(), published=False)
+
+
+def _replace(path: Path, payload: bytes, *, published: bool = True) -> None:
     folder = path.parent if str(path.parent) else Path('.')
-    payload = data.encode() if isinstance(data, str) else data
     try:
         handle, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=folder)
     except OSError as exc:
@@ -140,7 +159,8 @@ def write_atomic(path: Path, data: bytes | str) -> None:
             stream.write(payload)
         os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
-        PUBLISHED.append(path)
+        if published:
+            PUBLISHED.append(path)
     except OSError as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
@@ -159,52 +179,45 @@ def current_umask() -> int:
 
 
 def written_by_bagfault(path: Path) -> bool:
-    """Whether bagfault wrote a file (so a run may replace it): an MCAP whose header names bagfault as its
-    library, a report whose first line, root element, generator or `tool` says bagfault, a campaign table."""
+    """Whether bagfault wrote a file as it is now (so a run may replace it): it holds its own valid mark, or
+    has one beside it (io/marks.py). A look at its first bytes is no proof: nothing else counts."""
     try:
+        marker = sidecar(path)
+        if marker.is_file() and not marker.is_symlink():
+            return read_text(marker).strip() == table_mark(path.name, read_bytes(path))
         with path.open('rb') as stream:
-            head = stream.read(4096)
             size = os.fstat(stream.fileno()).st_size
-            if head.lstrip()[:1] in (b'{', b'['):
-                return size <= JSON_SNIFF_MAX and _json_by_bagfault(head + stream.read())
-            if head.startswith(b'PAR1'):  # a campaign's results.parquet carries bagfault.* metadata in its footer
-                stream.seek(max(0, size - (1 << 16)))
-                return b'bagfault.campaign' in stream.read()
-    except OSError:
+            if stream.read(len(MCAP_MAGIC)) == MCAP_MAGIC:
+                return _mcap_marked(stream, size)
+            if size > MARKED_TEXT_MAX:
+                return False
+            stream.seek(0)
+            return is_marked(stream.read())
+    except (OSError, ValueError):
         return False
-    if head[:8] == b'\x89MCAP0\r\n':
-        return _mcap_library(head).startswith(b'bagfault ')  # as McapSink names itself
-    return (head.startswith((b'# bagfault ', b'job,kind,bag,seed,')) or b'<testsuites name="bagfault"' in head[:512]
-            or b'<meta name="generator" content="bagfault' in head or b'<title>bagfault ' in head[:512])
 
 
-JSON_SNIFF_MAX = 64 << 20
+MARKED_TEXT_MAX = 256 << 20  # text read whole to check its mark; a larger file needs --force
+MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 
-def _json_by_bagfault(data: bytes) -> bool:
-    import json  # noqa: PLC0415
+def _mcap_marked(stream: BinaryIO, size: int) -> bool:
+    """The file's `bagfault.mark` record (named by the summary's metadata index) matches its offset and the
+    summary's chunk index records; the chunks are not read."""
+    from bagfault.io import mcap_summary  # noqa: PLC0415 - struct and the mcap record classes only
 
     try:
-        document = json.loads(data)
-    except ValueError:
+        section = mcap_summary.read_section(stream, size)
+        if not section:
+            return False
+        indexes = [i for i in mcap_summary.parse_summary(section).metadata_indexes if i.name == MCAP_RECORD]
+        if not indexes:
+            return False
+        record = mcap_summary.read_metadata(stream, indexes[-1])
+        chunks = mcap_summary.raw_records(section, mcap_summary.OP_CHUNK_INDEX)
+    except (mcap_summary.SummaryError, struct.error):
         return False
-    if not isinstance(document, dict):
-        return False
-    tool = document.get('tool')  # reports; campaign.json names the version under `bagfault`
-    return (tool == 'bagfault' or (isinstance(tool, dict) and tool.get('name') == 'bagfault')
-            or isinstance(document.get('bagfault'), str))
-
-
-def _mcap_library(head: bytes) -> bytes:
-    """The `library` string of an MCAP header record (b'' when the head is too short or not a header)."""
-    if len(head) < 21 or head[8] != 0x01:
-        return b''
-    profile_length = int.from_bytes(head[17:21], 'little')
-    at = 21 + profile_length
-    if at + 4 > len(head):
-        return b''
-    library_length = int.from_bytes(head[at:at + 4], 'little')
-    return head[at + 4:at + 4 + library_length]
+    return record.name == MCAP_RECORD and record.metadata.get('mark') == mcap_mark(indexes[-1].offset, chunks)
 
 
 def open_partial(path: Path) -> tuple[int, Path]:

@@ -63,12 +63,12 @@ class ReportPaths:
 
         report = model.build(result)
         if self.markdown is not None:
-            write_atomic(self.markdown, markdown.render(report))
+            write_atomic(self.markdown, markdown.render(report), 'markdown')
         if self.json is not None:
-            write_atomic(self.json, json_report.render(report))
+            write_atomic(self.json, json_report.render(report), 'json')
         if self.junit is not None:
-            write_atomic(self.junit, junit.render(report, extended=self.junit_file_line))
+            write_atomic(self.junit, junit.render(report, extended=self.junit_file_line), 'xml')
         if self.html is not None:
             rates: RateTracker | None = next((c for c in collectors if isinstance(c, RateTracker)), None)
             plots, media = collect(result)
-            write_atomic(self.html, html.render(report, rates, plots, media=media))
+            write_atomic(self.html, html.render(report, rates, plots, media=media), 'html')

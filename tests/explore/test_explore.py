@@ -125,6 +125,7 @@ def comparable(folder: Path) -> dict[str, object]:
     """explore.json less what depends on the machine (run times, the engine), and every failure file's bytes."""
     document = json.loads((folder / 'explore.json').read_text())
     document.pop('engine')
+    document.pop('bagfault_mark')  # over the whole document, run times included
     for run in document['runs']:
         run.pop('seconds')
     files = {p.name: sha256(p) for p in sorted((folder / 'failures').iterdir())}

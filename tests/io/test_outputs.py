@@ -184,3 +184,78 @@ def test_black_box_names_with_glob_characters(tmp_path, bag, scenario, capsys):
     (tmp_path / 'run[1].blackbox.ANY.1.mcap').write_text('notes\n')
     _refused(capsys, ['run', str(scenario), str(bag), '-o', str(tmp_path / 'run[1].mcap')], 'a black box of',
              'bagfault did not write it')
+
+
+LOOKALIKES = {
+    'notes.md': b'# bagfault notes\n\nmy own notes about the run\n',
+    'results.csv': b'job,kind,bag,seed,status\n0,run,a.mcap,0,passed\n',
+    'r.json': b'{"tool": "bagfault", "mine": true}\n',
+    'c.json': b'{"tool": {"name": "bagfault", "version": "1"}, "bagfault": "1"}\n',
+    'r.xml': b'<?xml version="1.0"?>\n<testsuites name="bagfault" tests="1"/>\n',
+    'r.html': b'<html><head><meta name="generator" content="bagfault 1"><title>bagfault run</title></head></html>\n',
+    'fake.json': b'{"x": 1,\n "bagfault_mark": "bagfault-mark:' + b'a' * 64 + b'"\n}\n',
+}
+
+
+@pytest.mark.parametrize('name', sorted(LOOKALIKES))
+def test_a_file_that_only_looks_like_bagfaults_is_not_replaced(tmp_path, name):
+    """The first bytes bagfault writes, or a made-up mark, are no proof (notes.md starting `# bagfault `, a CSV
+    with the campaign's columns and a JSON naming the tool were replaced without --force)."""
+    path = tmp_path / name
+    path.write_bytes(LOOKALIKES[name])
+    assert not written_by_bagfault(path)
+
+
+def test_an_mcap_naming_bagfault_as_its_library_is_not_bagfaults(tmp_path):
+    from mcap.writer import Writer
+
+    path = tmp_path / 'foreign.mcap'
+    with path.open('wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='bagfault 9.9')
+        writer.add_metadata('bagfault.mark', {'mark': 'a' * 64})
+        writer.finish()
+    assert not written_by_bagfault(path)
+
+
+def test_bagfaults_own_files_stop_being_its_own_once_edited_or_rewritten(tmp_path, bag, scenario):
+    """Every kind bagfault writes carries proof; an edited report, an edited table and an MCAP rewritten by
+    another writer that copies its records (metadata included) lose it."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    from bagfault.io.outputs import write_atomic
+
+    out = tmp_path / 'out.mcap'
+    argv = ['run', str(scenario), str(bag), '-o', str(out), '--report', str(tmp_path / 'r.md'),
+            '--json', str(tmp_path / 'r.json'), '--junit', str(tmp_path / 'r.xml'), '--html', str(tmp_path / 'r.html')]
+    assert main(argv) == 0
+    write_atomic(tmp_path / 't.csv', 'a,b\n1,2\n', 'table')
+    write_atomic(tmp_path / 's.yaml', 'faults: []\n', 'yaml')
+    names = ['out.mcap', 'r.md', 'r.json', 'r.xml', 'r.html', 't.csv', 's.yaml']
+    assert all(written_by_bagfault(tmp_path / name) for name in names)
+    for name in names[1:]:
+        path = tmp_path / name
+        data = path.read_bytes()
+        at = len(data) // 3
+        path.write_bytes(data[:at] + (b'Z' if data[at:at + 1] != b'Z' else b'Y') + data[at + 1:])
+        assert not written_by_bagfault(path), name
+    copy = tmp_path / 'copy.mcap'
+    with out.open('rb') as source, copy.open('wb') as stream:
+        reader = make_reader(source)
+        summary = reader.get_summary()
+        writer = Writer(stream)
+        writer.start(profile=reader.get_header().profile, library=reader.get_header().library)
+        for schema in summary.schemas.values():
+            writer.register_schema(schema.name, schema.encoding, schema.data)
+        for channel in summary.channels.values():
+            writer.register_channel(channel.topic, channel.message_encoding, channel.schema_id, channel.metadata)
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            writer.add_message(channel.id, message.log_time, message.data, message.publish_time)
+        for metadata in reader.iter_metadata():
+            writer.add_metadata(metadata.name, metadata.metadata)
+        writer.finish()
+    assert [m.name for m in make_reader(copy.open('rb')).iter_metadata()][-1] == 'bagfault.mark'
+    assert not written_by_bagfault(copy)
+    shutil.copy(out, tmp_path / 'same.mcap')  # the same bytes: bagfault's file still
+    assert written_by_bagfault(tmp_path / 'same.mcap')

@@ -88,7 +88,7 @@ def test_json_report_has_stable_documented_keys(reports):
     assert set(data) == {
         'schema_version', 'tool', 'mode', 'verdict', 'scenario', 'seed', 'inputs', 'output', 'time', 'messages',
         'fault_events', 'fault_windows', 'injectors', 'assertions', 'assertion_counts', 'assertion_events',
-        'final_status', 'notes', 'warnings'}
+        'final_status', 'notes', 'warnings', 'bagfault_mark'}
     documented = (FIXTURES.parent.parent / 'docs' / 'reference' / 'report.md').read_text()
     for key in data:
         assert f'`{key}`' in documented
