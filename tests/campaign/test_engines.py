@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 from support.corpus import SCENARIO, campaign_file
 from support.hold import hold_plugin
-from support.raycluster import RAY_ENV
+from support.raycluster import RAY_ENV, started_by_ray
 
 pytest.importorskip('ray', reason='campaign extra not installed')
 pq = pytest.importorskip('pyarrow.parquet', reason='campaign extra not installed')
@@ -73,14 +73,16 @@ def _cluster_on(server: S3Server, corpus: Path, tmp_path: Path, monkeypatch: pyt
     line = '  - {id: imu, type: imu, input_topic: /imu, output_topic: /imu_out}\n'
     assert line in text
     (corpus / 'drift.yaml').write_text(text.replace(line, line + HOLD).replace('faults:\n', 'faults:\n' + HELD))
-    ray_cluster = Cluster(initialize_head=True, head_node_args={
-        'num_cpus': 1, 'include_dashboard': False, 'env_vars': {'BAGFAULT_CACHE_NODE': 'head'}})
-    nodes = [ray_cluster.add_node(num_cpus=1, env_vars={'BAGFAULT_CACHE_NODE': f'node{n}'}) for n in (1, 2)]
-    ray_cluster.wait_for_nodes()
-    ray_cluster.nodes = nodes  # type: ignore[attr-defined]
-    ray_cluster.port = int(ray_cluster.address.rsplit(':', 1)[1])  # type: ignore[attr-defined]
-    assert ray_cluster.address.startswith('127.0.0.1:'), ray_cluster.address
+    ray_cluster = started_by_ray(lambda: Cluster(initialize_head=True, head_node_args={
+        'num_cpus': 1, 'include_dashboard': False, 'env_vars': {'BAGFAULT_CACHE_NODE': 'head'}}))
     try:
+        nodes = [started_by_ray(lambda n=n: ray_cluster.add_node(num_cpus=1,
+                                                                 env_vars={'BAGFAULT_CACHE_NODE': f'node{n}'}))
+                 for n in (1, 2)]
+        started_by_ray(ray_cluster.wait_for_nodes)
+        ray_cluster.nodes = nodes  # type: ignore[attr-defined]
+        ray_cluster.port = int(ray_cluster.address.rsplit(':', 1)[1])  # type: ignore[attr-defined]
+        assert ray_cluster.address.startswith('127.0.0.1:'), ray_cluster.address
         yield ray_cluster
     finally:
         ray_cluster.shutdown()

@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 from support.corpus import SCENARIO, InterruptAfter, campaign_file, write_imu_bag
 from support.html_check import figures, rendered
+from support.raycluster import skip_if_ray_did_not_start
 
 from bagfault import api
 from bagfault.cli import main
@@ -117,12 +118,15 @@ def test_a_job_writes_what_bagfault_run_writes_by_hand(sweep: Path, tmp_path: Pa
         assert hand.read_bytes() == (sweep / 'one' / 'outputs' / f'{job["key"]}.mcap').read_bytes()
 
 
-def test_the_table_is_the_same_on_two_workers_and_on_ray(sweep: Path) -> None:
+def test_the_table_is_the_same_on_two_workers_and_on_ray(sweep: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip('ray')
     assert main(['campaign', str(sweep / 'campaign.yaml'), '-o', str(sweep / 'two'), '--workers', '2']) == 1
     assert table(sweep / 'two') == table(sweep / 'one')
     assert (sweep / 'two' / 'results.csv').read_text().count('\n') == 13
-    assert main(['campaign', str(sweep / 'campaign.yaml'), '-o', str(sweep / 'ray'), '--ray', '--workers', '2']) == 1
+    code = main(['campaign', str(sweep / 'campaign.yaml'), '-o', str(sweep / 'ray'), '--ray', '--workers', '2'])
+    if code == 2:
+        skip_if_ray_did_not_start(capsys.readouterr().err)
+    assert code == 1
     assert table(sweep / 'ray') == table(sweep / 'one')
 
 
@@ -179,7 +183,8 @@ def test_a_campaign_on_a_ray_head_started_on_loopback(sweep: Path) -> None:
             said.append(line)
             if 'Ray runtime started' in line:
                 break
-        assert head.poll() is None, ''.join(said)[-2000:]
+        if head.poll() is not None or not any('Ray runtime started' in line for line in said):
+            pytest.skip(f'Ray itself could not start a head here: {" ".join("".join(said).split())[-300:]}')
         _wait_for_port(port, head, 60)
         done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'campaign', str(sweep / 'campaign.yaml'), '-o',
                                str(sweep / 'head'), '--ray', f'127.0.0.1:{port}'], env=env, capture_output=True,
@@ -477,6 +482,8 @@ def test_a_campaign_leaves_no_zombie_behind(corpus: Path, engine: list[str]) -> 
     done = subprocess.run([sys.executable, '-c', ORPHANS, sys.executable, '-m', 'bagfault.cli', 'campaign',
                            str(path), '-o', str(corpus / 'out'), *engine], capture_output=True, text=True,
                           timeout=300, check=False, env=env)
+    if done.stdout.split()[-2:-1] == ['2']:
+        skip_if_ray_did_not_start(done.stderr)
     assert done.stdout.split()[-2:] == ['0', '0'], done.stdout + done.stderr  # exit 0, nothing left to reap
 
 
@@ -558,3 +565,19 @@ def test_a_campaign_hashes_each_bag_once(corpus: Path, tmp_path: Path, monkeypat
     bag.write_bytes(bag.read_bytes())  # the same bytes, written again: its ctime changed, so it is not trusted
     result = run_job(plan.jobs[0].spec(plan.campaign, tmp_path / 'again.mcap', plan.file_digests))
     assert result['status'] == 'error' and 'hashed the bag again' in result['message']
+
+
+def test_only_rays_own_start_failure_makes_a_ray_test_skip() -> None:
+    """The suite under load says why a Ray test did not run, and never skips one for a bagfault error."""
+    from support.raycluster import started_by_ray
+
+    skip_if_ray_did_not_start('bagfault: error: campaign.yaml: scenario: no such file\n')  # judged by the test
+    with pytest.raises(pytest.skip.Exception, match='Ray itself could not start a local instance here: .*GCS'):
+        skip_if_ray_did_not_start('bagfault: error: --ray: cannot start or reach a local Ray instance: GCS timed out')
+
+    def failing() -> None:
+        raise TimeoutError('the head did not start within 30 s')
+
+    with pytest.raises(pytest.skip.Exception, match='Ray itself could not start a Ray cluster.*within 30 s'):
+        started_by_ray(failing)
+    assert started_by_ray(lambda: 7) == 7
