@@ -572,12 +572,12 @@ def test_only_rays_own_start_failure_makes_a_ray_test_skip() -> None:
     from support.raycluster import started_by_ray
 
     skip_if_ray_did_not_start('bagfault: error: campaign.yaml: scenario: no such file\n')  # judged by the test
-    with pytest.raises(pytest.skip.Exception, match='Ray itself could not start a local instance here: .*GCS'):
+    with pytest.raises(pytest.skip.Exception, match=r'Ray itself could not start a local instance here: .*GCS'):
         skip_if_ray_did_not_start('bagfault: error: --ray: cannot start or reach a local Ray instance: GCS timed out')
 
     def failing() -> None:
         raise TimeoutError('the head did not start within 30 s')
 
-    with pytest.raises(pytest.skip.Exception, match='Ray itself could not start a Ray cluster.*within 30 s'):
+    with pytest.raises(pytest.skip.Exception, match=r'Ray itself could not start a Ray cluster.*within 30 s'):
         started_by_ray(failing)
     assert started_by_ray(lambda: 7) == 7
