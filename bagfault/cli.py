@@ -409,13 +409,17 @@ def _cmd_record(args: argparse.Namespace) -> int:
     result = api.record(args.topics, args.output, every=args.all, duration=args.duration,
                         use_sim_time=args.use_sim_time, ros_args=args.ros_args, force=args.force)
     for topic, count in sorted(result.counts.items()):
-        print(f'  {count:>9}  {topic}')
+        print(f'  {count:>9}  {topic}' + (f'  (lost {result.lost[topic]})' if result.lost.get(topic) else ''))
     for topic in result.missing:
         print(f'note: {topic} never appeared; nothing recorded for it')
     for topic, msgtype in sorted(result.skipped.items()):
         print(f'note: {topic} ({msgtype}) not recorded: no Python bindings for the type here')
     print(f'recorded {sum(result.counts.values())} messages on {len(result.counts)} topics to {result.output}'
           + (f' (stopped by {result.reason})' if result.reason else ''))
+    if result.lost:
+        lost = ', '.join(f'{count} of {topic}' for topic, count in result.lost.items())
+        print(f'bagfault: warning: the recording lost {sum(result.lost.values())} messages ({lost}): the '
+              'recorder fell behind or the network dropped them', file=sys.stderr)
     return EXIT_OK
 
 

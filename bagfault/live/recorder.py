@@ -10,6 +10,7 @@ use_sim_time). Definitions come from the standard types of the distro.
 from __future__ import annotations
 
 import contextlib
+import json
 import time
 from dataclasses import dataclass, field
 from functools import partial
@@ -19,7 +20,7 @@ from bagfault import __version__
 from bagfault.io.types import TypeCatalog
 from bagfault.live.recording import start_recording
 from bagfault.live.ros import adapted_qos, has_interface, interface_class, make_node, offered_metadata
-from bagfault.live.runtime import make_executor, ros_context
+from bagfault.live.runtime import ros_context
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Collection
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
 
 DISCOVERY_PERIOD = 0.1  # seconds between looks at the graph for new topics
 DEPTH = 1000  # messages a topic may queue while the executor is busy elsewhere (keep-last drops beyond)
+UNKNOWN_SEQUENCE = 2**64 - 1  # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED
 
 
 @dataclass
@@ -40,6 +42,7 @@ class RecordResult:
     missing: list[str] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)
     reason: str = ''
+    lost: dict[str, int] = field(default_factory=dict)  # topic -> messages known lost (see Recorder.lost)
 
 
 class Recorder:
@@ -52,7 +55,8 @@ class Recorder:
 
     def __init__(self, node: Any, topics: Collection[str], every: bool, *,
                  on_topic: Callable[[str, str, dict[str, str]], None], on_message: Callable[[str, bytes], None],
-                 exclude: Collection[str] = (), every_excludes: tuple[str, ...] = ()) -> None:
+                 exclude: Collection[str] = (), every_excludes: tuple[str, ...] = (),
+                 count_lost: bool = False) -> None:
         self.node = node
         self.wanted = set(topics)
         self.every = every
@@ -63,6 +67,13 @@ class Recorder:
         self.subscriptions: dict[str, Any] = {}
         self.skipped: dict[str, str] = {}
         self.counts: dict[str, int] = {}
+        # with `count_lost` (an executor that hands message info over: not rclpy's events executor), messages
+        # known lost per topic: gaps in the publisher's sequence numbers (a topic with one publisher) and what
+        # the DDS layer reports lost
+        self.count_lost = count_lost
+        self.gaps: dict[str, int] = {}
+        self.reported_lost: dict[str, int] = {}
+        self._last: dict[str, int] = {}
 
     def discover(self) -> list[str]:
         """Subscribe to matching topics that appeared since the last look; the topics newly subscribed."""
@@ -90,8 +101,16 @@ class Recorder:
         profile = adapted_qos(DEPTH, infos)
         self.on_topic(topic, msgtype, offered_metadata(infos))
         self.counts.setdefault(topic, 0)
-        self.subscriptions[topic] = self.node.create_subscription(
-            interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
+        if self.count_lost:
+            from rclpy.event_handler import SubscriptionEventCallbacks  # noqa: PLC0415
+
+            events = SubscriptionEventCallbacks(message_lost=partial(self._lost, topic))
+            self.subscriptions[topic] = self.node.create_subscription(
+                interface_class(msgtype), topic, partial(self._received_with_info, topic, len(infos) == 1),
+                profile, raw=True, event_callbacks=events)
+        else:
+            self.subscriptions[topic] = self.node.create_subscription(
+                interface_class(msgtype), topic, partial(self._received, topic), profile, raw=True)
         self.node.get_logger().info(f'recording {topic} ({msgtype})')
 
     def unmatched(self) -> list[str]:
@@ -103,6 +122,26 @@ class Recorder:
     def _received(self, topic: str, data: bytes) -> None:
         self.counts[topic] += 1
         self.on_message(topic, data)
+
+    def _received_with_info(self, topic: str, one_publisher: bool, data: bytes, info: dict[str, int]) -> None:
+        sequence = info.get('publication_sequence_number', 0)
+        if one_publisher and 0 < sequence < UNKNOWN_SEQUENCE:
+            last = self._last.get(topic)
+            if last is not None and sequence > last + 1:
+                self.gaps[topic] = self.gaps.get(topic, 0) + sequence - last - 1
+            self._last[topic] = sequence  # a smaller one: the publisher started again, counted from there
+        self._received(topic, data)
+
+    def _lost(self, topic: str, status: Any) -> None:
+        self.reported_lost[topic] = int(status.total_count)
+
+    def lost(self) -> dict[str, int]:
+        """Messages known lost per topic, from the first one received on: the larger of the publisher's sequence
+        gaps and what the DDS layer reported (both see a message the reader's queue overflowed; a topic with
+        several publishers has no gap count)."""
+        topics = set(self.gaps) | set(self.reported_lost)
+        found = {topic: max(self.gaps.get(topic, 0), self.reported_lost.get(topic, 0)) for topic in topics}
+        return {topic: count for topic, count in sorted(found.items()) if count}
 
 
 
@@ -117,13 +156,14 @@ def run_record(
     ros_args: list[str] | None = None,
 ) -> RecordResult:
     """Record until `duration` seconds (wall clock) have passed or a stop; the file is complete on return."""
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.parameter import Parameter  # noqa: PLC0415
 
     names = [t if t.startswith('/') else '/' + t for t in topics]
     with ros_context(stop) as context:
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
         node = make_node('bagfault_recorder', context, ros_args, parameter_overrides=overrides)
-        executor = make_executor(context)
+        executor = SingleThreadedExecutor(context=context)  # hands each message's info over (sequence numbers)
         executor.add_node(node)
         metadata = {'tool': 'bagfault', 'version': __version__, 'mode': 'record',
                     'topics': ' '.join(names) if names else '--all'}
@@ -140,7 +180,7 @@ def run_record(
                 now = node.get_clock().now().nanoseconds
                 recording.write(channels[topic], now, now, data)
 
-            recorder = Recorder(node, names, every, on_topic=on_topic, on_message=on_message)
+            recorder = Recorder(node, names, every, on_topic=on_topic, on_message=on_message, count_lost=True)
             node.get_logger().info('bagfault record ready')
             started = last_look = time.monotonic()
             recorder.discover()
@@ -154,6 +194,9 @@ def run_record(
                     last_look = now
                 executor.spin_once(timeout_sec=0.05)
                 recording.tick()
+            lost = recorder.lost()
+            recording.add_metadata('bagfault.recording', {'received': json.dumps(recorder.counts, sort_keys=True),
+                                                          'lost': json.dumps(lost, sort_keys=True)})
             recording.finish()
     return RecordResult(output, dict(recorder.counts), sorted(set(names) - set(recorder.subscriptions)),
-                        dict(recorder.skipped), stop.reason)
+                        dict(recorder.skipped), stop.reason, lost)

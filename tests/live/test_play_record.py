@@ -193,3 +193,33 @@ def test_the_players_parameter_services_answer_and_switch_a_fault(graph, tmp_pat
     shifted = {t: round(_x(d) - raw[t], 9) for t, _, d in raw_messages(played)['/odom']}
     assert {d for t, d in shifted.items() if t < switch_time} == {0.0}
     assert {d for t, d in shifted.items() if t >= switch_time} == {0.5}
+
+
+def test_record_counts_what_it_lost_and_says_so(graph, tmp_path: Path) -> None:
+    """A burst faster than the recorder can take: what was recorded plus what it says it lost is what the
+    publisher sent, per the publisher's own count (under load `play --clock --record` kept 210 of 400 messages
+    of a topic and nothing said so). The count is in the summary, the output's metadata and one stderr line."""
+    import json
+
+    from mcap.reader import make_reader
+
+    recorded = tmp_path / 'burst.mcap'
+    recorder = graph.bagfault('record', '/burst', '-o', str(recorded), '--duration', '25', name='record')
+    graph.wait_for(recorder, 'bagfault record ready')
+    publisher = graph.peer('publish-imu', '/burst', '--rate', '50000', '--seconds', '3', '--best-effort',
+                           '--wait-subscriber', name='burst')
+    publisher.wait(timeout=60)
+    published = graph.lines(publisher)[-1]['published']
+    assert recorder.wait(timeout=60) == 0, recorder.err_path.read_text()  # type: ignore[attr-defined]
+    with recorded.open('rb') as stream:
+        reader = make_reader(stream)
+        kept = sum(1 for _ in reader.iter_messages())
+        [meta] = [m for m in reader.iter_metadata() if m.name == 'bagfault.recording']
+    lost = json.loads(meta.metadata['lost']).get('/burst', 0)
+    assert json.loads(meta.metadata['received']) == {'/burst': kept}
+    assert kept + lost == published, (kept, lost, published)
+    assert lost > 0, 'the burst was meant to be more than the recorder takes'
+    out = recorder.out_path.read_text()  # type: ignore[attr-defined]
+    err = recorder.err_path.read_text()  # type: ignore[attr-defined]
+    assert f'{kept:>9}  /burst  (lost {lost})' in out
+    assert f'bagfault: warning: the recording lost {lost} messages ({lost} of /burst)' in err
