@@ -24,6 +24,7 @@ from foxglove.websocket import Capability, PlaybackCommand, PlaybackState, Playb
 from bagfault.errors import BagfaultError, FieldValueError, UsageError
 from bagfault.events import EVENTS_JSON_TOPIC, FaultEvent, event_json
 from bagfault.injectors.registry import get_injector_type
+from bagfault.view.relay import Relay
 
 if TYPE_CHECKING:
     from bagfault.engine.run import Run
@@ -60,7 +61,6 @@ def parse_address(text: str) -> tuple[str, int]:
     return host or '127.0.0.1', number
 
 
-SUBPROTOCOL = 'foxglove.sdk.v1'  # the only one the SDK's server accepts (README, Foxglove view)
 HIDDEN_NOTE = '{topic} not shown in the Foxglove view: no definition of {msgtype} (give one with --msg-path)'
 
 
@@ -93,13 +93,18 @@ class FoxgloveView:
                 handler=lambda _request: json.dumps(dict(zip(('success', 'message'), reload(), strict=True))).encode()))
         if playback is not None:
             capabilities.append(Capability.PlaybackControl)
-        try:
+        try:  # on loopback, behind the relay that clients reach (view/relay.py: both subprotocol names)
             self.server = foxglove.start_server(
-                name=f'bagfault: {scenario.name}', host=host, port=port, capabilities=capabilities,
+                name=f'bagfault: {scenario.name}', host='127.0.0.1', port=0, capabilities=capabilities,
                 server_listener=_Listener(self), supported_encodings=['json'], services=services or None,
                 context=self.context, playback_time_range=time_range)
         except Exception as exc:  # noqa: BLE001 - the SDK raises RuntimeError for a port in use, a bad host
             raise BagfaultError(f'--foxglove {address}: cannot start the server: {exc}') from None
+        try:
+            self.relay = Relay(host, port, self.server.port)
+        except OSError as exc:
+            self.server.stop()
+            raise BagfaultError(f'--foxglove {address}: cannot start the server: {exc.strerror or exc}') from None
         self._events = foxglove.Channel(EVENTS_JSON_TOPIC, message_encoding='json', context=self.context)
 
     def notes(self) -> list[str]:
@@ -109,7 +114,7 @@ class FoxgloveView:
     @property
     def url(self) -> str:
         """ws:// address clients connect to."""
-        return f'ws://{parse_address("")[0]}:{self.server.port}'
+        return f'ws://{parse_address("")[0]}:{self.relay.port}'
 
     # -- records ---------------------------------------------------------------------------------
     def add_channel(self, topic: str, msgtype: str, schema_encoding: str, schema_text: str,
@@ -163,7 +168,8 @@ class FoxgloveView:
             request_id=None))
 
     def close(self) -> None:
-        """Stop the server."""
+        """Stop the server (and its relay)."""
+        self.relay.close()
         self.server.stop()
 
     # -- parameters --------------------------------------------------------------------------------

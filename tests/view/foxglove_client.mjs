@@ -11,7 +11,10 @@ const plan = JSON.parse(planText);
 const out = (o) => console.log(JSON.stringify(o, (_k, v) => (typeof v === "bigint" ? v.toString() : v)));
 // The SDK's server speaks "foxglove.sdk.v1", the successor of the client's "foxglove.websocket.v1" with the same
 // JSON and binary messages for what is used here; the Foxglove app offers both.
-const ws = new WebSocket(url, ["foxglove.sdk.v1", FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+// plan.open_only: offer only the client's own "foxglove.websocket.v1", as Lichtblick and ws-protocol's own
+// examples do (bagfault's relay lets it in; `ws` checks the answer names what was offered).
+const ws = new WebSocket(url, plan.open_only ? [FoxgloveClient.SUPPORTED_SUBPROTOCOL]
+  : ["foxglove.sdk.v1", FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
 const client = new FoxgloveClient({ ws });
 const subscriptions = new Map();
 let counted = 0;
@@ -44,7 +47,7 @@ function seek(toNs) {
 
 client.on("error", (error) => out({ kind: "error", message: String(error) }));
 client.on("serverInfo", (info) => {
-  out({ kind: "serverInfo", name: info.name, capabilities: info.capabilities });
+  out({ kind: "serverInfo", name: info.name, capabilities: info.capabilities, protocol: ws.protocol });
   client.getParameters([], "initial");
 });
 client.on("advertise", (channels) => {

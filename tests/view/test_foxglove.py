@@ -81,7 +81,10 @@ def play_without_ros(client_dir: Path, tmp_path: Path, args: list[str], plan: di
     return rows, out
 
 
-def test_play_in_foxglove_without_ros(client_dir: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize('open_only', [False, True], ids=['app', 'open-protocol-client'])
+def test_play_in_foxglove_without_ros(client_dir: Path, tmp_path: Path, open_only: bool) -> None:
+    """The official client drives a play: offering both subprotocol names as the Foxglove app does, and only
+    `foxglove.websocket.v1` as Lichtblick and ws-protocol 0.8 clients do (the SDK's server answered 400)."""
     bag = make_bag(tmp_path / 'imu.mcap', [('/imu', IMU, 100.0)], 12.0)
     scenario = tmp_path / 'bias.yaml'
     scenario.write_text(SCENARIO)
@@ -89,11 +92,12 @@ def test_play_in_foxglove_without_ros(client_dir: Path, tmp_path: Path) -> None:
     plan = {'subscribe': ['/imu_out', '/bagfault/events'], 'count_topic': '/imu_out', 'switch_at': 100,
             'switch': {'name': 'bias.active', 'value': True}, 'refuse_at': 200,
             'refuse': {'name': 'bias.angular_velocity_z_bias', 'value': 'fast'}, 'seek_at': 300,
-            'seek_to': start + NS // 2, 'after_seek': 20, 'timeout_s': 60}
+            'seek_to': start + NS // 2, 'after_seek': 20, 'timeout_s': 60, 'open_only': open_only}
     rows, out = play_without_ros(client_dir, tmp_path, [str(scenario), str(bag)], plan)
     assert 'played into the Foxglove view only (rclpy is not installed here)' in out
 
     info = next(r for r in rows if r['kind'] == 'serverInfo')
+    assert info['protocol'] == ('foxglove.websocket.v1' if open_only else 'foxglove.sdk.v1')
     assert {'parameters', 'time'} <= set(info['capabilities'])
     channels = {r['topic']: (r['encoding'], r['schemaName']) for r in rows if r['kind'] == 'channel'}
     assert channels['/imu_out'] == ('cdr', IMU) and channels['/imu'] == ('cdr', IMU)
@@ -141,7 +145,8 @@ def test_proxy_in_foxglove_switches_faults_for_ros_too(client_dir: Path, graph, 
     publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '100', '--seconds', '8', name='imu')
     plan = {'subscribe': ['/sensors/imu', '/bagfault/events'], 'count_topic': '/sensors/imu', 'switch_at': 50,
             'switch': {'name': 'imu_yaw_rate_bias.active', 'value': True}, 'refuse_at': 100,
-            'refuse': {'name': 'imu_dropout.drop_probability', 'value': 3.0}, 'stop_at': 200, 'timeout_s': 60}
+            'refuse': {'name': 'imu_dropout.drop_probability', 'value': 3.0}, 'stop_at': 200, 'timeout_s': 60,
+            'open_only': True}  # a client of the open protocol's name only (Lichtblick)
     client = subprocess.run(['node', 'client.mjs', f'ws://127.0.0.1:{port}', json.dumps(plan)], cwd=client_dir,
                             capture_output=True, text=True, check=False, timeout=120)
     rows = [json.loads(line) for line in client.stdout.splitlines() if line.startswith('{')]
@@ -161,29 +166,35 @@ def test_proxy_in_foxglove_switches_faults_for_ros_too(client_dir: Path, graph, 
     assert statuses and 'imu_dropout.drop_probability' in statuses[0] and 'maximum' in statuses[0]
 
 
-def _handshake(port: int, subprotocols: str) -> str:
-    """The status line a WebSocket upgrade offering `subprotocols` gets (RFC 6455 handshake, by hand)."""
+def _handshake(port: int, subprotocols: str) -> tuple[str, str]:
+    """The status line and the Sec-WebSocket-Protocol a WebSocket upgrade offering `subprotocols` gets (RFC 6455
+    handshake, by hand)."""
     request = (f'GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n'
                f'Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n'
                f'Sec-WebSocket-Protocol: {subprotocols}\r\n\r\n')
     with socket.create_connection(('127.0.0.1', port), timeout=10) as connection:
         connection.sendall(request.encode())
-        return connection.recv(4096).decode(errors='replace').split('\r\n')[0]
+        lines = connection.recv(4096).decode(errors='replace').split('\r\n')
+    chosen = [line.split(':', 1)[1].strip() for line in lines if line.lower().startswith('sec-websocket-protocol:')]
+    return lines[0], chosen[0] if chosen else ''
 
 
-def test_the_server_speaks_foxglove_sdk_v1_only_as_the_readme_says() -> None:
-    """The SDK's server (foxglove-sdk 0.30) accepts `foxglove.sdk.v1`; a client offering only the older
-    `foxglove.websocket.v1` (ws-protocol 0.8.0's SUPPORTED_SUBPROTOCOL) is refused with HTTP 400."""
+def test_the_view_takes_both_names_of_the_protocol() -> None:
+    """The SDK's server (foxglove-sdk 0.30) accepts `foxglove.sdk.v1` only and answers 400 to a client that
+    offers nothing but the older `foxglove.websocket.v1`; the view's relay asks it for the new name and answers
+    with the one offered. A client offering neither still gets the server's 400."""
     from bagfault.scenario import parse_scenario
-    from bagfault.view.foxglove import SUBPROTOCOL, FoxgloveView
+    from bagfault.view.foxglove import FoxgloveView
 
     view = FoxgloveView(f'127.0.0.1:{free_port()}', parse_scenario(SCENARIO))
     try:
-        port = view.server.port
-        assert SUBPROTOCOL == 'foxglove.sdk.v1'
-        assert ' 101 ' in _handshake(port, 'foxglove.sdk.v1') + ' '
-        assert ' 101 ' in _handshake(port, 'foxglove.websocket.v1, foxglove.sdk.v1') + ' '  # the app offers both
-        assert ' 400 ' in _handshake(port, 'foxglove.websocket.v1') + ' '
+        port = view.relay.port
+        assert _handshake(port, 'foxglove.sdk.v1') == ('HTTP/1.1 101 Switching Protocols', 'foxglove.sdk.v1')
+        assert _handshake(port, 'foxglove.websocket.v1') == ('HTTP/1.1 101 Switching Protocols',
+                                                             'foxglove.websocket.v1')
+        assert _handshake(port, 'foxglove.websocket.v1, foxglove.sdk.v1')[1] == 'foxglove.sdk.v1'  # the app
+        assert ' 400 ' in _handshake(port, 'chat')[0] + ' '
+        assert ' 400 ' in _handshake(view.server.port, 'foxglove.websocket.v1')[0] + ' '  # the SDK's own answer
     finally:
         view.close()
     page = (ROOT / 'docs' / 'modes' / 'foxglove.md').read_text()
