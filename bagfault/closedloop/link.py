@@ -114,7 +114,7 @@ class SystemLink(LiveSink):
         self._recorder = Recorder(self.listener, [] if record == 'all' else record, every,
                                   on_topic=self._on_topic, on_message=self._on_message,
                                   exclude={*NOT_RECORDED, *self.played},
-                                  every_excludes=(*NOT_RECORDED, *OWN_PREFIXES))
+                                  every_excludes=(*NOT_RECORDED, *OWN_PREFIXES), count_lost=True)
         self._recorder.discover()
         for topic, msgtype in watched.items():
             if topic not in self._recorder.subscriptions:
@@ -325,6 +325,10 @@ class SystemLink(LiveSink):
         self._check_alive(end)
         if self.died_at is None:
             self._verdict('passed', end, 'the system under test ran until the end of the bag and its tail')
+
+    def lost(self) -> dict[str, int]:
+        """Messages of the system known lost before they were heard, per topic (see Recorder.lost)."""
+        return self._recorder.lost() if self._recorder is not None else {}
 
     def close(self) -> None:
         """Stop the listener thread."""

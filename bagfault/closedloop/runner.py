@@ -30,7 +30,7 @@ from bagfault.io.types import TypeCatalog
 from bagfault.live import LOOPBACK_PROFILE
 from bagfault.live.pacer import CLOCK_NOTE
 from bagfault.live.recording import maybe_recording
-from bagfault.live.runtime import make_executor, ros_context
+from bagfault.live.runtime import ros_context
 from bagfault.log import log
 from bagfault.spec.system import command_line
 
@@ -89,6 +89,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
             system: SystemUnderTest, seed: int, rate: float, logs: Path | None, stop: StopFlag,
             foxglove: str | None, observers: Sequence[Observer]) -> RunResult:
     """`run_test` on one leased domain (CrowdedDomainError when other processes show nodes there at first)."""
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.node import Node  # noqa: PLC0415
 
     os.environ[PROFILE_VARIABLE] = str(LOOPBACK_PROFILE)  # our participant discovers over loopback too
@@ -110,7 +111,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         closing.callback(node.destroy_node)
         listener = Node('bagfault_test_listener', context=context)
         closing.callback(listener.destroy_node)
-        executor = make_executor(context)
+        executor = SingleThreadedExecutor(context=context)  # hands message info over: what was lost is counted
         closing.callback(executor.shutdown)
         executor.add_node(listener)
         view = None
@@ -159,6 +160,11 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
     report.ready_seconds = link.ready_seconds
     report.played = dict(link.published_per_topic)
     report.heard = dict(link.heard)
+    report.lost = link.lost()
+    if report.lost:
+        lost = ', '.join(f'{count} of {topic}' for topic, count in report.lost.items())
+        result.warnings.append(f"the system's messages were lost before bagfault heard them ({lost}): verdicts on "
+                               'those topics judged fewer messages than it sent (a machine too busy?)')
     report.unwatched = list(link.unwatched)
     result.system = report
     result.warnings += link.clocks.warnings()

@@ -76,6 +76,7 @@ class SystemReport:
     tail: list[str] = field(default_factory=list)  # its last lines of output
     played: dict[str, int] = field(default_factory=dict)  # messages published to it, per topic
     heard: dict[str, int] = field(default_factory=dict)  # messages it published that were recorded, per topic
+    lost: dict[str, int] = field(default_factory=dict)  # messages it published known lost before heard, per topic
     unwatched: list[str] = field(default_factory=list)  # asserted topics whose type nobody told
     leftovers: list[int] = field(default_factory=list)  # processes still running after the stop (none)
 

@@ -115,6 +115,7 @@ def system_section(result: RunResult) -> dict[str, Any]:
         'logs': str(system.logs) if system.logs is not None else None, 'output_tail': list(system.tail),
         'played_per_topic': dict(sorted(system.played.items())),
         'heard_per_topic': dict(sorted(system.heard.items())),
+        'lost_per_topic': dict(sorted(system.lost.items())),
         'unwatched_topics': list(system.unwatched), 'leftover_pids': list(system.leftovers),
     }
 

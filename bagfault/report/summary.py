@@ -83,6 +83,8 @@ def _print_system(result: RunResult, out: TextIO) -> None:
     heard = ', '.join(f'{t} {n}' for t, n in sorted(system.heard.items())) or 'nothing'
     print(f'played    {played}', file=out)
     print(f'heard     {heard}', file=out)
+    if system.lost:
+        print(f'lost      {", ".join(f"{t} {n}" for t, n in sorted(system.lost.items()))}', file=out)
     if system.logs is not None:
         print(f'logs      {system.logs}', file=out)
     if any(a.id == 'system_alive' and a.state == 'failed' for a in result.assertions) and system.tail:

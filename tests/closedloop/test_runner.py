@@ -426,3 +426,64 @@ injectors: []
     beats = len(decoded(out)['/heartbeat'])
     assert beats >= 1 and result.report is not None
     assert result.report['system_under_test']['heard_per_topic'] == {'/heartbeat': beats}
+
+
+BURSTER = """
+import sys
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Imu
+
+rclpy.init(args=sys.argv)
+node = rclpy.create_node('burster')
+publisher = node.create_publisher(Imu, '/burst', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+sent = []
+
+
+def on_imu(imu):
+    if sent:
+        return
+    for k in range(40000):  # on the first message played: far more, far faster than a recorder takes
+        imu.orientation_covariance[0] = float(k)
+        publisher.publish(imu)
+    sent.append(40000)
+
+
+node.create_subscription(Imu, '/imu', on_imu, 10)
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+print(f'published {sum(sent)}', file=sys.stderr, flush=True)
+"""
+
+
+def test_a_closed_loop_run_counts_the_systems_messages_it_lost(tester: LoopRunner, example_bag: Path,
+                                                                tmp_path: Path) -> None:
+    """A system that bursts past what bagfault's recorder takes: heard plus lost is what it published (per its
+    own count), in the report and the summary, and a warning says the verdicts judged fewer messages."""
+    (tmp_path / 'burster.py').write_text(BURSTER)
+    (tmp_path / 'burst.bagfault.yaml').write_text("""
+system_under_test:
+  command: ['{python}', burster.py]
+  ready: [{subscribes: [/imu]}]
+  record: [/burst]
+  stop_timeout: 10
+  tail: 3
+injectors: []
+faults: []
+""")
+    result = tester.run(str(tmp_path / 'burst.bagfault.yaml'), str(example_bag), '-o', str(tmp_path / 'b.mcap'),
+                        '--keep-logs', str(tmp_path / 'logs'))
+    assert result.code == 0, result.stdout + result.stderr
+    log = (tmp_path / 'logs' / 'system.stderr.log').read_text()
+    published = int(log.rsplit('published ', 1)[1].split()[0])
+    assert published == 40000
+    assert result.report is not None
+    system = result.report['system_under_test']
+    heard, lost = system['heard_per_topic'].get('/burst', 0), system['lost_per_topic'].get('/burst', 0)
+    assert heard + lost == published, (heard, lost)
+    assert lost > 0, 'the burst was meant to be more than the recorder takes'
+    assert f'/burst {lost}' in result.stdout
+    assert any(f'{lost} of /burst' in warning for warning in result.report['warnings'])
