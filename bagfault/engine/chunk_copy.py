@@ -2,8 +2,8 @@
 
 A chunk is copied, compressed bytes, message indexes and all, when every
 channel it holds messages of is passed through under its input id (a copied
-topic, or the topic of an in-place injector, whose channel already has what
-the ros2 profile asks: a schema and offered_qos_profiles), no oracle or report needs to
+topic, or the topic of an in-place injector, whose channel has a schema with its definition; its
+metadata is kept as the input has it, rosbag2's QoS or not), no oracle or report needs to
 see that topic, and no fault of that injector is active, holding messages,
 or due to change before the chunk ends (followers of other faults counted).
 Everything else takes the normal path, so the output's message stream is
@@ -123,8 +123,10 @@ class ChunkCopy:
             return None
         record = self.source.channel_records[channel_id]
         schema = self.source.schema_records.get(record.schema_id)
-        if schema is None or not schema.data or 'offered_qos_profiles' not in record.metadata:
-            return None  # the normal path completes it (definition, QoS) as the ros2 profile requires
+        if schema is None or not schema.data:
+            return None  # the normal path completes its definition as the ros2 profile requires
+        # kept as the input has it: a channel without rosbag2's QoS (the plain mcap writer's, Foxglove's,
+        # converters') stays without it, and `ros2 bag` uses its defaults for it, as it does for the input
         self.kept.add(number)
         return sink.keep_channel(schema, record, self.source.channels[number].msgtype)
 

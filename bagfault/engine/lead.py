@@ -182,8 +182,7 @@ def _kept(summary: Summary, injectors: list[_Injector]) -> tuple[list[int], int]
     for channel_id in sorted(summary.channels):
         channel = summary.channels[channel_id]
         schema = summary.schemas.get(channel.schema_id)
-        if channel.topic in replaced or schema is None or not schema.data or \
-                'offered_qos_profiles' not in channel.metadata:
+        if channel.topic in replaced or schema is None or not schema.data:
             continue
         if schema.id not in schemas:
             schemas.add(schema.id)

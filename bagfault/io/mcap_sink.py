@@ -1,9 +1,10 @@
 """Output MCAP (profile ros2) with rosbag2's conventions, written to a temporary name and renamed when complete.
 
 As rosbag2's MCAP storage writes it: a type without a definition gets a
-schema with an empty encoding and text, every channel carries
-`offered_qos_profiles` in the integer form with nine keys (the default
-profile when the input had none) and `topic_type_hash`, and a `rosbag2`
+schema with an empty encoding and text, every channel bagfault writes
+carries `offered_qos_profiles` in the integer form with nine keys (the
+default profile when the input had none) and `topic_type_hash` (an input's
+channel kept for chunk copy keeps its metadata as it is, QoS or none), and a `rosbag2`
 metadata record (version 8, its keys at the top level) describes the bag, so
 `ros2 bag info` and `ros2 bag play` of Humble, Iron and Jazzy read it as one
 of theirs. A disk that fills up, or any
@@ -27,7 +28,7 @@ from bagfault.errors import OutputError
 from bagfault.io.mcap_layout import header_library
 from bagfault.io.mcap_writer import LEVELS, CopiedChunk, McapWriter
 from bagfault.io.outputs import PUBLISHED, open_partial
-from bagfault.io.qos import DEFAULT_QOS, normalized
+from bagfault.io.qos import normalized
 
 if TYPE_CHECKING:
     from typing_extensions import Self
@@ -120,7 +121,7 @@ class McapSink:
                                           dict(channel.metadata), channel_id=channel.id)
         except OSError as exc:
             raise self._failed(exc) from None
-        qos = channel.metadata.get('offered_qos_profiles', DEFAULT_QOS)
+        qos = channel.metadata.get('offered_qos_profiles', '')  # none given: none said (ros2 bag's defaults)
         self._topics[channel.id] = (channel.topic, msgtype, channel.message_encoding, qos,
                                     channel.metadata.get('topic_type_hash', ''))
         return channel.id

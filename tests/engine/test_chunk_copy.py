@@ -28,7 +28,7 @@ from support.toolchain import converted
 from bagfault import api
 from bagfault.cli import main
 from bagfault.demo.workloads import scenario, write_bag
-from bagfault.io.mcap_sink import DEFAULT_QOS
+from bagfault.io.qos import DEFAULT_QOS
 from bagfault.scenario import parse_scenario
 
 QOS = {'offered_qos_profiles': DEFAULT_QOS}
@@ -404,3 +404,44 @@ def test_a_bag_rosbags_wrote_comes_out_aligned_and_every_reader_reads_it(rosbags
     assert {topic: len(found) for topic, found in streams(out).items()} == expected
     foxglove = foxglove_reads(out)
     assert foxglove['indexed'] == foxglove['stream']['counts'] == expected
+
+
+def test_an_mcap_from_the_plain_writer_gets_its_chunks_copied_and_its_channels_kept(tmp_path: Path) -> None:
+    """Channels without rosbag2's QoS (the plain mcap writer's, as Foxglove and converters write them): every
+    untouched chunk copied (none was: the missing QoS sent the whole bag down the slow path, 7x cp), each such
+    channel kept as the input has it, the stream the reference path writes, and every reader opens it."""
+    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__String as String
+    from support.toolchain import assert_toolchain_opens
+
+    bag = tmp_path / 'plain.mcap'
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with bag.open('wb') as stream:
+        writer = Writer(stream, chunk_size=4096)
+        writer.start(profile='ros2', library='plain')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data\n')
+        channels = {topic: writer.register_channel(topic, 'cdr', schema) for topic in ('/a', '/b')}
+        for k in range(600):
+            topic = '/a' if k % 2 else '/b'
+            data = store.serialize_cdr(String(data=f'{topic} {k}'), 'std_msgs/msg/String')
+            writer.add_message(channels[topic], 1_700_000_000 * 10**9 + k * 10**7, bytes(data),
+                               1_700_000_000 * 10**9 + k * 10**7)
+        writer.finish()
+    text = """
+injectors:
+  - {id: b, type: topic, input_topic: /b, output_topic: /b}
+faults:
+  - {id: gap, injector_id: b, start: 2.5, duration: 0.5, config: {drop_probability: 1.0}}
+"""
+    fast, _ = both(bag, text, tmp_path)
+    chunks = len(chunk_records(bag))
+    assert 0 < fast.stats.chunks_copied < fast.stats.chunks == chunks
+    (tmp_path / 'none').mkdir()
+    none, _ = both(bag, 'injectors: []\n', tmp_path / 'none')
+    assert none.stats.chunks_copied == none.stats.chunks == chunks
+    with (tmp_path / 'none' / 'copy.mcap').open('rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert {c.topic: dict(c.metadata) for c in summary.channels.values() if c.topic in ('/a', '/b')} == \
+        {'/a': {}, '/b': {}}  # as the input has them
+    (tmp_path / 'readers').mkdir()
+    assert_toolchain_opens(tmp_path / 'none' / 'copy.mcap', tmp_path / 'readers')
