@@ -21,7 +21,7 @@ from bagfault.engine.activation import Activation
 from bagfault.engine.offline import check_recording, run_to_file
 from bagfault.engine.result import RunResult
 from bagfault.engine.stop import StopFlag
-from bagfault.errors import BagfaultError, Problem, ScenarioError, UsageError
+from bagfault.errors import BagfaultError, OutputError, Problem, ScenarioError, UsageError
 from bagfault.io.mcap_sink import check_level
 from bagfault.io.objects import is_remote, staged_folder
 from bagfault.io.outputs import Protected, check_derived, check_output
@@ -372,16 +372,19 @@ def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int
     processes (default: one per core) or, with `ray` ('' for a local instance, or a cluster address), as Ray
     tasks; results, tables and report in `directory` (a folder, or a bucket prefix such as 's3://bucket/run1')."""
     from bagfault.campaign.loader import load_campaign  # noqa: PLC0415
-    from bagfault.campaign.runner import run_campaign  # noqa: PLC0415
+    from bagfault.campaign.runner import TABLES, run_campaign  # noqa: PLC0415
 
     if workers is not None and workers < 1:
         raise UsageError(f'--workers {workers}: must be 1 or more')
     loaded = file if not isinstance(file, (str, Path)) else load_campaign(file)
     if is_remote(str(directory)):  # a bucket prefix: written here, uploaded at the end (and on a stop)
-        with staged_folder(str(directory), resume=resume) as staged:
-            return run_campaign(loaded, staged.path, workers=workers, ray=ray, resume=resume, progress=progress,
-                                force=True,  # the staging folder holds nothing but what was downloaded into it
-                                kept_elsewhere=staged.outputs)
+        with staged_folder(str(directory), resume=resume, guarded=TABLES) as staged:
+            try:
+                return run_campaign(loaded, staged.path, workers=workers, ray=ray, resume=resume,
+                                    progress=progress, force=force,  # the prefix's tables came with their marks
+                                    kept_elsewhere=staged.outputs)
+            except OutputError as exc:  # named as the user knows it: the object in the bucket
+                raise OutputError(str(exc).replace(str(staged.path), str(directory).rstrip('/'))) from None
     return run_campaign(loaded, Path(directory), workers=workers, ray=ray, resume=resume, progress=progress,
                         force=force)
 

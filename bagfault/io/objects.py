@@ -30,12 +30,13 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault import settings
 from bagfault.errors import InputError, OutputError
+from bagfault.io.marks import sidecar
 from bagfault.io.regular import read_text
 from bagfault.io.sources import StatKey, digests_of, input_files, stat_key
 from bagfault.log import log
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
+    from collections.abc import Iterator, Sequence
 
 SCHEMES = {'s3': 's3fs', 'gs': 'gcsfs', 'gcs': 'gcsfs', 'az': 'adlfs', 'abfs': 'adlfs'}
 BAG_SUFFIXES = ('.mcap', '.bag', '.db3', '.mcap.zstd', '.db3.zstd')
@@ -346,10 +347,12 @@ class Staged:
 
 
 @contextlib.contextmanager
-def staged_folder(url: str, *, resume: bool) -> Iterator[Staged]:
+def staged_folder(url: str, *, resume: bool, guarded: Sequence[str] = ()) -> Iterator[Staged]:
     """A local folder standing for a bucket prefix (a campaign's `-o s3://...`): the prefix's `jobs/` first when
     resuming, and everything written there uploaded when the `with` ends, also after an error or Ctrl-C, so
-    `--resume` can continue from the bucket. Kept (and named) only when the upload fails."""
+    `--resume` can continue from the bucket. Kept (and named) only when the upload fails. The `guarded` files
+    the prefix holds already come down with their marks (io/marks.py), so the caller's output checks judge
+    them as they judge local files: one bagfault did not write is not replaced without --force."""
     fs = filesystem(url)
     remote = url.split('://', 1)[1].rstrip('/')
     staging = Path(tempfile.mkdtemp(prefix='bagfault-campaign-'))
@@ -367,6 +370,10 @@ def staged_folder(url: str, *, resume: bool) -> Iterator[Staged]:
                 (staging / 'jobs').mkdir()
             for key in stored:
                 fs.get_file(key, str(staging / 'jobs' / PurePosixPath(key).name))
+            for name in guarded:
+                for key in (f'{remote}/{name}', f'{remote}/{sidecar(Path(name)).name}'):
+                    if fs.exists(key):
+                        fs.get_file(key, str(staging / PurePosixPath(key).name))
             finished = {PurePosixPath(k).stem for k in stored}  # outputs of jobs whose result was stored
             outputs = {PurePosixPath(k).name for k in fs.glob(f'{remote}/outputs/*')
                        if PurePosixPath(k).stem in finished} if resume else set()

@@ -194,6 +194,29 @@ def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3
         api.campaign(path, 's3://no-results-bucket/run1', workers=1)  # said before any job, not at the upload
 
 
+def test_a_table_in_the_bucket_that_bagfault_did_not_write_is_not_replaced(store: S3Server, corpus: Path) -> None:
+    """-o s3://...: the prefix's results.csv of someone else's stops the campaign before any job, as a local
+    folder's does (it was replaced without --force); --force replaces it; a resumed campaign replaces the
+    bucket's tables it wrote itself (their marks came along)."""
+    from bagfault import api
+    from bagfault.errors import OutputError
+
+    prefix = store.prefix  # type: ignore[attr-defined]
+    path = campaign_file(corpus, CAMPAIGN % 'bags/a.mcap')
+    target = f's3://{BUCKET}/{prefix}/theirs'
+    store.s3.put_object(Bucket=BUCKET, Key=f'{prefix}/theirs/results.csv', Body=b'name,score\nmine,1\n')
+    said = rf'{target}/results\.csv: a campaign file exists and bagfault did not write it'
+    with pytest.raises(OutputError, match=said):
+        api.campaign(path, target, workers=1)
+    body = store.s3.get_object(Bucket=BUCKET, Key=f'{prefix}/theirs/results.csv')['Body'].read()
+    assert body == b'name,score\nmine,1\n'
+    assert 'Contents' not in store.s3.list_objects_v2(Bucket=BUCKET, Prefix=f'{prefix}/theirs/jobs/')
+    api.campaign(path, target, workers=1, force=True)
+    body = store.s3.get_object(Bucket=BUCKET, Key=f'{prefix}/theirs/results.csv')['Body'].read()
+    assert body.startswith(b'job,')
+    assert api.campaign(path, target, workers=1, resume=True).ran == 0  # its own tables: replaced, no --force
+
+
 def test_the_cache_is_bounded_and_never_evicts_a_bag_in_use(store: S3Server, monkeypatch: pytest.MonkeyPatch) -> None:
     """Room for one bag: fetching b removes a (the entry unused longest); fetching a again while b is in use
     keeps b (over the limit rather than pulling a bag from under a job); a second holder shares a download."""
