@@ -14,6 +14,7 @@ import argparse
 import itertools
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -68,6 +69,7 @@ def main() -> int:
     parser.add_argument('--only', help='the bugs whose id starts so')
     parser.add_argument('--json', type=Path, help='write every case and its outcome here')
     args = parser.parse_args()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the hogs are stopped (finally) on a kill too
     if not (HERE / 'rover_bench.mcap').exists():
         subprocess.run([sys.executable, str(HERE / 'make_bag.py')], check=True)
     rows, wrong = [], 0
@@ -86,6 +88,9 @@ def main() -> int:
                                  'seconds': round(time.monotonic() - began, 1), 'load': os.getloadavg()[0]})
                     print(f'{"ok " if right else "BAD"} {bug:24} {case:9} rate {rate:g} hogs {hogs}: failed '
                           f'{sorted(failed) or "nothing"}{" (" + error + ")" if error else ""}', flush=True)
+                    if args.json:  # every case as it is decided: a stopped check keeps what it found
+                        args.json.write_text(json.dumps({'date': time.strftime('%Y-%m-%d'), 'cases': rows},
+                                                        indent=1) + '\n')
             finally:
                 for burner in burners:
                     burner.kill()
