@@ -430,6 +430,7 @@ injectors: []
 
 BURSTER = """
 import sys
+import time
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -444,7 +445,9 @@ sent = []
 def on_imu(imu):
     if sent:
         return
-    for k in range(40000):  # on the first message played: far more, far faster than a recorder takes
+    publisher.publish(imu)  # one first, heard before the burst: losses count from the first message heard on
+    time.sleep(1.0)
+    for k in range(1, 40000):  # then far more, far faster than a recorder takes
         imu.orientation_covariance[0] = float(k)
         publisher.publish(imu)
     sent.append(40000)

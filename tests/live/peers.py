@@ -63,6 +63,9 @@ def publish_imu(args) -> None:
             publisher.publish(message)
         k += 1
         rclpy.spin_once(node, timeout_sec=0)
+        if k == 1 and args.pause_after_first:  # the first heard alone: a count of losses starts from it
+            time.sleep(args.pause_after_first)
+            start += args.pause_after_first
         delay = start + k * period - time.monotonic()
         if delay > 0:
             time.sleep(delay)
@@ -302,6 +305,7 @@ def main() -> None:
     p.add_argument('--best-effort', action='store_true')
     p.add_argument('--malformed-every', type=int, default=0)
     p.add_argument('--wait-subscriber', action='store_true', help='start once a subscriber is matched')
+    p.add_argument('--pause-after-first', type=float, default=0.0, help='seconds between the first and the rest')
     p = sub.add_parser('echo')
     p.add_argument('topic')
     p.add_argument('type')

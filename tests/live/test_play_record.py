@@ -207,7 +207,7 @@ def test_record_counts_what_it_lost_and_says_so(graph, tmp_path: Path) -> None:
     recorder = graph.bagfault('record', '/burst', '-o', str(recorded), '--duration', '25', name='record')
     graph.wait_for(recorder, 'bagfault record ready')
     publisher = graph.peer('publish-imu', '/burst', '--rate', '50000', '--seconds', '3', '--best-effort',
-                           '--wait-subscriber', name='burst')
+                           '--wait-subscriber', '--pause-after-first', '1', name='burst')
     publisher.wait(timeout=60)
     published = graph.lines(publisher)[-1]['published']
     assert recorder.wait(timeout=60) == 0, recorder.err_path.read_text()  # type: ignore[attr-defined]
