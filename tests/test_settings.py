@@ -51,3 +51,14 @@ def test_cache_paths_stay_inside_their_root(tmp_path, monkeypatch):
     monkeypatch.setenv('BAGFAULT_CACHE', str(tmp_path / 'cache'))
     monkeypatch.setenv('BAGFAULT_CACHE_NODE', 'node-2')
     assert cache_root() == tmp_path / 'cache' / 'node-2'
+
+
+def test_every_setting_is_documented():
+    """The reference page names every variable settings.py reads."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    read = set(re.findall(r"_text\('([A-Z_]+)'\)", (root / 'bagfault' / 'settings.py').read_text()))
+    page = (root / 'docs' / 'reference' / 'environment.md').read_text()
+    assert read and all(f'`{name}`' in page for name in read), read
