@@ -685,6 +685,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         with contextlib.suppress(OSError):
             print(f'bagfault: {_stopped_by(exc)}; {_written()}', file=sys.stderr)
         return EXIT_ERROR
+    except RuntimeError as exc:  # one that carries a signal (see interrupt_inside); any other is raised on
+        interrupt = interrupt_inside(exc)
+        if interrupt is None:
+            raise
+        with contextlib.suppress(OSError):
+            print(f'bagfault: {_stopped_by(interrupt)}; {_written()}', file=sys.stderr)
+        return EXIT_ERROR
     except OSError:  # stderr itself failed while saying why
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -752,6 +759,11 @@ def _main(argv: Sequence[str] | None) -> int:
     except Exception as exc:  # noqa: BLE001 - a bug must still end with the documented exit code
         if args.debug:
             traceback.print_exc()
+        interrupt = interrupt_inside(exc)
+        if interrupt is not None:  # Python wrapped it (a signal while a class was made: __set_name__)
+            print(f'bagfault: {_stopped_by(interrupt)}; {_written()}', file=sys.stderr)
+            _junit_error(args, 'interrupted', began)
+            return EXIT_ERROR
         print(f'bagfault: internal error: {type(exc).__name__}: {exc} (a bug in bagfault; --debug shows where)',
               file=sys.stderr)
         _junit_error(args, f'internal error: {type(exc).__name__}: {exc}', began)
@@ -759,6 +771,19 @@ def _main(argv: Sequence[str] | None) -> int:
 
 
 TERMINAL = (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG)
+
+
+def interrupt_inside(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or stop signal another exception carries as its cause or context (Python wraps an exception
+    raised in __set_name__ in a RuntimeError: a signal while a module's dataclass is made arrives so), or None."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
 
 
 def _stopped_by(exc: KeyboardInterrupt) -> str:

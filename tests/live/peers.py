@@ -64,6 +64,7 @@ def publish_imu(args) -> None:
         k += 1
         rclpy.spin_once(node, timeout_sec=0)
         if k == 1 and args.pause_after_first:  # the first heard alone: a count of losses starts from it
+            print('first sent', file=sys.stderr, flush=True)
             time.sleep(args.pause_after_first)
             start += args.pause_after_first
         delay = start + k * period - time.monotonic()
