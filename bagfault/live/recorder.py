@@ -136,9 +136,10 @@ class Recorder:
         self.reported_lost[topic] = int(status.total_count)
 
     def lost(self) -> dict[str, int]:
-        """Messages known lost per topic, from the first one received on: the larger of the publisher's sequence
-        gaps and what the DDS layer reported (both see a message the reader's queue overflowed; a topic with
-        several publishers has no gap count)."""
+        """Messages known lost per topic, between the first and the last one received (a loss shows as a gap
+        before a message heard after it): the larger of the publisher's sequence gaps and what the DDS layer
+        reported (both see a message the reader's queue overflowed; a topic with several publishers has no gap
+        count)."""
         topics = set(self.gaps) | set(self.reported_lost)
         found = {topic: max(self.gaps.get(topic, 0), self.reported_lost.get(topic, 0)) for topic in topics}
         return {topic: count for topic, count in sorted(found.items()) if count}

@@ -447,9 +447,11 @@ def on_imu(imu):
         return
     publisher.publish(imu)  # one first, heard before the burst: losses count from the first message heard on
     time.sleep(1.0)
-    for k in range(1, 40000):  # then far more, far faster than a recorder takes
+    for k in range(1, 39999):  # then far more, far faster than a recorder takes
         imu.orientation_covariance[0] = float(k)
         publisher.publish(imu)
+    time.sleep(1.0)
+    publisher.publish(imu)  # and one last alone: a loss shows as a gap before a message heard after it
     sent.append(40000)
 
 
