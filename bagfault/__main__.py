@@ -26,7 +26,10 @@ def run() -> int:
         sys.stderr.write(f'bagfault: {how}; nothing was written under the requested names\n')
         STOPPED.append(how)
         return 2
-    return main()
+    code = main()
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # finished, outputs published: a signal now
+        signal.signal(number, signal.SIG_IGN)  # would only turn the exit code into a death by signal
+    return code
 
 
 def _leave(code: int) -> None:
