@@ -26,15 +26,20 @@ def _text(name: str) -> str | None:
     return value if value else None
 
 
+def _folder(name: str) -> Path | None:
+    """A variable naming a folder (made when needed): None when unset, SettingError when it names something else."""
+    text = _text(name)
+    if text is None:
+        return None
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise SettingError(f'{name}={text}: not a folder')
+    return path
+
+
 def cache_folder() -> Path | None:
     """`BAGFAULT_CACHE`: the bag cache's folder (digests go in its `digests/`); None for the default."""
-    base = _text('BAGFAULT_CACHE')
-    if base is None:
-        return None
-    path = Path(base)
-    if path.exists() and not path.is_dir():
-        raise SettingError(f'BAGFAULT_CACHE={base}: not a folder')
-    return path
+    return _folder('BAGFAULT_CACHE')
 
 
 def user_cache() -> Path:
@@ -80,13 +85,7 @@ def domain_port_base(default: int) -> int:
 
 def domain_locks() -> Path | None:
     """`BAGFAULT_DOMAIN_LOCKS`: where domain lease lock files live, for tests; None for the default."""
-    text = _text('BAGFAULT_DOMAIN_LOCKS')
-    if text is None:
-        return None
-    path = Path(text)
-    if path.exists() and not path.is_dir():
-        raise SettingError(f'BAGFAULT_DOMAIN_LOCKS={text}: not a folder')
-    return path
+    return _folder('BAGFAULT_DOMAIN_LOCKS')
 
 
 def executor() -> str:

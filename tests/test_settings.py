@@ -59,6 +59,6 @@ def test_every_setting_is_documented():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    read = set(re.findall(r"_text\('([A-Z_]+)'\)", (root / 'bagfault' / 'settings.py').read_text()))
+    read = set(re.findall(r"(?:_text|_folder)\('([A-Z_]+)'\)", (root / 'bagfault' / 'settings.py').read_text()))
     page = (root / 'docs' / 'reference' / 'environment.md').read_text()
     assert read and all(f'`{name}`' in page for name in read), read
