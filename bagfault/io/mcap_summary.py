@@ -152,17 +152,8 @@ def _parse(buf: memoryview) -> Summary:
 def read_summary(stream: IO[bytes], size: int) -> tuple[int, Summary | None]:
     """(summary start, the summary section parsed, its CRC checked) of an MCAP file of `size` bytes; (0, None)
     when the footer says it has none."""
-    summary_start, crc = read_footer(stream, size)
-    footer = size - 8 - FOOTER_LENGTH
-    if not summary_start:
-        return 0, None
-    if not 8 < summary_start <= footer:
-        raise SummaryError(f'the footer points the summary at offset {summary_start}, outside the file')
-    stream.seek(summary_start)
-    covered = stream.read(footer + FOOTER_LENGTH - 4 - summary_start)  # up to the footer's CRC
-    if crc and zlib.crc32(covered) != crc:
-        raise SummaryError(f'summary CRC mismatch (stored {crc:#010x}, computed {zlib.crc32(covered):#010x})')
-    return summary_start, parse_summary(memoryview(covered)[: footer - summary_start])
+    summary_start, section = read_section(stream, size)
+    return (summary_start, parse_summary(section)) if summary_start else (0, None)
 
 
 def raw_records(section: bytes | memoryview, opcode: int) -> list[bytes]:
@@ -180,19 +171,20 @@ def raw_records(section: bytes | memoryview, opcode: int) -> list[bytes]:
     return found
 
 
-def read_section(stream: IO[bytes], size: int) -> bytes:
-    """The summary section's bytes (from its start to the footer), its CRC checked; b'' when there is none."""
+def read_section(stream: IO[bytes], size: int) -> tuple[int, bytes]:
+    """(summary start, the summary section's bytes up to the footer, its CRC checked); (0, b'') when the footer
+    says there is none."""
     summary_start, crc = read_footer(stream, size)
     footer = size - 8 - FOOTER_LENGTH
     if not summary_start:
-        return b''
+        return 0, b''
     if not 8 < summary_start <= footer:
         raise SummaryError(f'the footer points the summary at offset {summary_start}, outside the file')
     stream.seek(summary_start)
-    covered = stream.read(footer + FOOTER_LENGTH - 4 - summary_start)
+    covered = stream.read(footer + FOOTER_LENGTH - 4 - summary_start)  # up to the footer's CRC
     if crc and zlib.crc32(covered) != crc:
-        raise SummaryError('summary CRC mismatch')
-    return covered[: footer - summary_start]
+        raise SummaryError(f'summary CRC mismatch (stored {crc:#010x}, computed {zlib.crc32(covered):#010x})')
+    return summary_start, covered[: footer - summary_start]
 
 
 def read_metadata(stream: IO[bytes], index: MetadataIndex) -> Metadata:

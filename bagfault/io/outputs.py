@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, BinaryIO
 
 from bagfault.errors import OutputError
 from bagfault.io.marks import MCAP_RECORD, Kind, is_marked, mcap_mark, sidecar, stamp, table_mark
+from bagfault.io.mcap_layout import MAGIC
 from bagfault.io.regular import read_bytes, read_text
 
 if TYPE_CHECKING:
@@ -187,7 +188,7 @@ def written_by_bagfault(path: Path) -> bool:
             return read_text(marker).strip() == table_mark(path.name, read_bytes(path))
         with path.open('rb') as stream:
             size = os.fstat(stream.fileno()).st_size
-            if stream.read(len(MCAP_MAGIC)) == MCAP_MAGIC:
+            if stream.read(len(MAGIC)) == MAGIC:
                 return _mcap_marked(stream, size)
             if size > MARKED_TEXT_MAX:
                 return False
@@ -198,7 +199,6 @@ def written_by_bagfault(path: Path) -> bool:
 
 
 MARKED_TEXT_MAX = 256 << 20  # text read whole to check its mark; a larger file needs --force
-MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 
 def _mcap_marked(stream: BinaryIO, size: int) -> bool:
@@ -207,8 +207,8 @@ def _mcap_marked(stream: BinaryIO, size: int) -> bool:
     from bagfault.io import mcap_summary  # noqa: PLC0415 - struct and the mcap record classes only
 
     try:
-        section = mcap_summary.read_section(stream, size)
-        if not section:
+        start, section = mcap_summary.read_section(stream, size)
+        if not start:
             return False
         indexes = [i for i in mcap_summary.parse_summary(section).metadata_indexes if i.name == MCAP_RECORD]
         if not indexes:
