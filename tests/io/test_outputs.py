@@ -11,6 +11,8 @@ import shutil
 import sqlite3
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from support.helpers import make_bag
 
 from bagfault.cli import main
@@ -259,3 +261,20 @@ def test_bagfaults_own_files_stop_being_its_own_once_edited_or_rewritten(tmp_pat
     assert not written_by_bagfault(copy)
     shutil.copy(out, tmp_path / 'same.mcap')  # the same bytes: bagfault's file still
     assert written_by_bagfault(tmp_path / 'same.mcap')
+
+
+@given(data=st.binary(max_size=2000), kind=st.sampled_from(['markdown', 'html', 'xml', 'yaml', 'json']),
+       flip=st.integers(min_value=0), seed_bytes=st.binary(min_size=1, max_size=1))
+@settings(max_examples=200, deadline=None)
+def test_a_mark_is_never_found_by_chance_and_any_changed_byte_loses_it(data, kind, flip, seed_bytes):
+    """Generated: text bagfault never stamped holds no valid mark; a stamped text holds one; and changing any
+    one byte of the stamped text (mark included) loses it."""
+    from bagfault.io.marks import is_marked, stamp
+
+    assert not is_marked(data)
+    body = b'{"x": ' + str(len(data)).encode() + b'}\n' if kind == 'json' else data
+    stamped = stamp(body, kind)
+    assert is_marked(stamped)
+    at = flip % len(stamped)
+    changed = stamped[:at] + bytes([stamped[at] ^ (seed_bytes[0] or 1)]) + stamped[at + 1:]
+    assert not is_marked(changed)
