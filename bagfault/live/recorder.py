@@ -74,6 +74,7 @@ class Recorder:
         self.gaps: dict[str, int] = {}
         self.reported_lost: dict[str, int] = {}
         self._last: dict[str, int] = {}
+        self._mixed: set[str] = set()  # topics seen with several publishers: no gap count
 
     def discover(self) -> list[str]:
         """Subscribe to matching topics that appeared since the last look; the topics newly subscribed."""
@@ -106,7 +107,7 @@ class Recorder:
 
             events = SubscriptionEventCallbacks(message_lost=partial(self._lost, topic))
             self.subscriptions[topic] = self.node.create_subscription(
-                interface_class(msgtype), topic, partial(self._received_with_info, topic, len(infos) == 1),
+                interface_class(msgtype), topic, partial(self._received_with_info, topic),
                 profile, raw=True, event_callbacks=events)
         else:
             self.subscriptions[topic] = self.node.create_subscription(
@@ -123,12 +124,16 @@ class Recorder:
         self.counts[topic] += 1
         self.on_message(topic, data)
 
-    def _received_with_info(self, topic: str, one_publisher: bool, data: bytes, info: dict[str, int]) -> None:
+    def _received_with_info(self, topic: str, data: bytes, info: dict[str, int]) -> None:
         sequence = info.get('publication_sequence_number', 0)
-        if one_publisher and 0 < sequence < UNKNOWN_SEQUENCE:
+        if 0 < sequence < UNKNOWN_SEQUENCE and topic not in self._mixed:
             last = self._last.get(topic)
             if last is not None and sequence > last + 1:
-                self.gaps[topic] = self.gaps.get(topic, 0) + sequence - last - 1
+                # sequence numbers are a publisher's own: with several, a jump is another's, no loss
+                if self.subscriptions[topic].get_publisher_count() == 1:
+                    self.gaps[topic] = self.gaps.get(topic, 0) + sequence - last - 1
+                else:
+                    self._mixed.add(topic)
             self._last[topic] = sequence  # a smaller one: the publisher started again, counted from there
         self._received(topic, data)
 

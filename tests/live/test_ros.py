@@ -65,3 +65,29 @@ def test_adapted_qos_follows_rosbag2s_adapt_request_to_offers() -> None:
     assert one_latched.durability == DurabilityPolicy.VOLATILE
     none = adapted_qos(10, [])
     assert (none.reliability, none.durability) == (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE)
+
+
+class _Matched:
+    def __init__(self, publishers: int) -> None:
+        self.publishers = publishers
+
+    def get_publisher_count(self) -> int:
+        return self.publishers
+
+
+def test_lost_messages_are_sequence_gaps_of_one_publisher_only() -> None:
+    """Gaps in one publisher's sequence numbers are losses (by hand: 1, 2, 5, 9 lost 2 + 3); a restarted
+    publisher counts from its new start (1, 2, 4: one more); with two publishers matched a jump is the other's, not a loss, and
+    that topic is no longer counted (1, 7, 2, 8 from two publishers would have made 5 + 5 false losses)."""
+    from bagfault.live.recorder import Recorder
+
+    recorder = Recorder(None, ['/a', '/b'], False, on_topic=lambda *_: None, on_message=lambda *_: None,
+                        count_lost=True)
+    recorder.subscriptions = {'/a': _Matched(1), '/b': _Matched(2)}
+    recorder.counts = {'/a': 0, '/b': 0}
+    for sequence in (1, 2, 5, 9, 1, 2, 4):  # then the publisher restarted; its message 3 lost
+        recorder._received_with_info('/a', b'', {'publication_sequence_number': sequence})
+    for sequence in (1, 7, 2, 8, 3, 9):
+        recorder._received_with_info('/b', b'', {'publication_sequence_number': sequence})
+    assert recorder.lost() == {'/a': 2 + 3 + 1}
+    assert recorder.counts == {'/a': 7, '/b': 6}
