@@ -234,7 +234,7 @@ def _files(bag: RemoteBag, target: Path) -> dict[str, Path]:
 
 
 def _record_content(entry: Path, target: Path) -> None:
-    known = digests_of(target)
+    known = _digests(entry, target)  # kept beside the bag: the job's own look at the digests reads them back
     content = {f.name: [f.stat().st_size, known[stat_key(f)]] for f in input_files(target)}
     staging = entry / f'.content.{os.getpid()}.json'
     staging.write_text(json.dumps(content, sort_keys=True))

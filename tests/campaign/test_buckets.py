@@ -254,10 +254,22 @@ def test_a_cached_bag_that_changed_is_fetched_again(store: S3Server, change: str
     key = f'{store.prefix}/bags/a.mcap'  # type: ignore[attr-defined]
     original = store.s3.get_object(Bucket=BUCKET, Key=key)['Body'].read()
     gets = store.gets(key)
-    with fetched(a) as first:
-        assert first.downloaded
-    with fetched(a) as reused:
-        assert not reused.downloaded  # unchanged: the cache's
+    from bagfault.io import sources
+
+    hashed: list[Path] = []
+    real = sources._blake3
+
+    def counted(file: Path, *args: object) -> str:
+        hashed.append(file)
+        return real(file, *args)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sources, '_blake3', counted)
+        with fetched(a) as first:
+            assert first.downloaded
+        with fetched(a) as reused:
+            assert not reused.downloaded  # unchanged: the cache's
+    assert hashed == [first.path]  # a download is hashed once, its reuse not at all
     path = first.path
     if change == 'a byte flipped':
         data = bytearray(path.read_bytes())
