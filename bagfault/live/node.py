@@ -12,6 +12,7 @@ parameters; `~/reload_scenario` (std_srvs/srv/Trigger) reloads the file;
 from __future__ import annotations
 
 import contextlib
+import json
 import time
 from functools import partial
 from pathlib import Path
@@ -32,6 +33,7 @@ from bagfault.live.delay import DelayLine
 from bagfault.live.diagnostics import diagnostic_array
 from bagfault.live.events import LiveEvents
 from bagfault.live.graph import DIAGNOSTICS_TYPE, OBSERVE_WAIT, resolve_types, watched_topics
+from bagfault.live.losses import LossCount
 from bagfault.live.params import FaultParameters
 from bagfault.live.recording import start_recording
 from bagfault.live.ros import adapted_qos, interface_class, make_node, offered_metadata, qos, unacknowledged
@@ -95,6 +97,8 @@ class ProxyNode:
         self._last_diagnostics = 0.0
         self.early = 0  # delayed messages published before their time at the stop
         self.failure: BagfaultError | None = None  # raised once the proxy has stopped cleanly
+        # a recording says what the proxy's inputs lost (the executor then hands message info over)
+        self.losses = LossCount() if record is not None else None
 
     # -- time -------------------------------------------------------------------------------
     def now(self) -> int:
@@ -229,10 +233,26 @@ class ProxyNode:
         return adapted_qos(topic.spec.qos_depth, self.node.get_publishers_info_by_topic(topic.input_topic))
 
     def _subscribe(self, topic: LiveTopic, cls: Any, profile: Any) -> None:
+        events = SubscriptionEventCallbacks(incompatible_qos=partial(self._incompatible, topic, 'publisher'))
+        callback: Any = partial(self._on_message, topic)
+        if self.losses is not None:
+            events.message_lost = partial(self._on_lost, topic)
+            callback = partial(self._on_message_with_info, topic)
         self._inputs[id(topic)] = (self.node.create_subscription(
-            cls, topic.input_topic, partial(self._on_message, topic), profile, raw=True,
-            event_callbacks=SubscriptionEventCallbacks(
-                incompatible_qos=partial(self._incompatible, topic, 'publisher'))), cls, profile)
+            cls, topic.input_topic, callback, profile, raw=True, event_callbacks=events), cls, profile)
+
+    def _on_message_with_info(self, topic: LiveTopic, data: bytes, info: dict[str, int]) -> None:
+        assert self.losses is not None
+        self.losses.heard(topic.input_topic, info, self._inputs[id(topic)][0].get_publisher_count)
+        self._on_message(topic, data)
+
+    def _on_lost(self, topic: LiveTopic, status: Any) -> None:
+        assert self.losses is not None
+        self.losses.report(topic.input_topic, status.total_count)
+
+    def lost(self) -> dict[str, int]:
+        """Messages of the inputs known lost before the proxy heard them, per input topic (with a recording)."""
+        return self.losses.lost() if self.losses is not None else {}
 
     def _readapt(self) -> None:
         """A publisher that appeared later offers less than the input subscription asks: ask for less (in the
@@ -392,6 +412,10 @@ class ProxyNode:
             with self.session.run:  # black boxes dropped unless the recording is complete
                 if self.recording is not None:
                     record_origin(self.recording, self.session.run.stats.origin)
+                    received = {t.input_topic: t.received for t in self.session.topics}
+                    self.recording.add_metadata('bagfault.recording', {
+                        'received': json.dumps(received, sort_keys=True),
+                        'lost': json.dumps(self.lost(), sort_keys=True)})
                     finish(self.recording, self.session.run)
                 else:
                     self.session.run.close(ok=True)

@@ -32,7 +32,7 @@ def run_proxy(
     with ros_context(stop) as context, ProxyNode(scenario, context, stop, seed=seed, record=record,
                                                  use_sim_time=use_sim_time, ros_args=ros_args,
                                                  foxglove=foxglove) as proxy:
-        executor = make_executor(context)
+        executor = make_executor(context, message_info=record is not None)
         executor.add_node(proxy.node)
         with contextlib.ExitStack() as spinning:
             spinning.callback(executor.shutdown)
@@ -48,9 +48,15 @@ def run_proxy(
         return RunResult(scenario, [], None, seed, RunStats(), [f'stopped ({stop.reason}) before the proxy started'],
                          list(scenario.warnings), mode='proxy')
     result = session.run.result('proxy', [], record, seed)
+    lost = proxy.lost()
     for topic in session.topics:
-        result.notes.append(f'{topic.input_topic} -> {topic.output_topic}: {topic.received} received, '
-                            f'{topic.forwarded} published, {topic.malformed} malformed')
+        result.notes.append(f'{topic.input_topic} -> {topic.output_topic}: {topic.received} received'
+                            + (f' ({lost[topic.input_topic]} lost before)' if lost.get(topic.input_topic) else '')
+                            + f', {topic.forwarded} published, {topic.malformed} malformed')
+    if lost:
+        listed = ', '.join(f'{count} of {topic}' for topic, count in lost.items())
+        result.warnings.append(f'the proxy lost {sum(lost.values())} input messages before it heard them ({listed}): '
+                               'neither forwarded nor recorded (a deeper qos_depth, or fewer topics per proxy)')
     if proxy.unacknowledged:
         result.notes.append(f'{", ".join(proxy.unacknowledged)}: not every subscriber acknowledged the last messages '
                             f'within {DRAIN:g} s of the stop (they may have missed them)')

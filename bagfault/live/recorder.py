@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
 from bagfault.io.types import TypeCatalog
+from bagfault.live.losses import LossCount
 from bagfault.live.recording import start_recording
 from bagfault.live.ros import adapted_qos, has_interface, interface_class, make_node, offered_metadata
 from bagfault.live.runtime import ros_context
@@ -30,7 +31,6 @@ if TYPE_CHECKING:
 
 DISCOVERY_PERIOD = 0.1  # seconds between looks at the graph for new topics
 DEPTH = 1000  # messages a topic may queue while the executor is busy elsewhere (keep-last drops beyond)
-UNKNOWN_SEQUENCE = 2**64 - 1  # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED
 
 
 @dataclass
@@ -68,13 +68,9 @@ class Recorder:
         self.skipped: dict[str, str] = {}
         self.counts: dict[str, int] = {}
         # with `count_lost` (an executor that hands message info over: not rclpy's events executor), messages
-        # known lost per topic: gaps in the publisher's sequence numbers (a topic with one publisher) and what
-        # the DDS layer reports lost
+        # known lost per topic (see LossCount)
         self.count_lost = count_lost
-        self.gaps: dict[str, int] = {}
-        self.reported_lost: dict[str, int] = {}
-        self._last: dict[str, int] = {}
-        self._mixed: set[str] = set()  # topics seen with several publishers: no gap count
+        self.losses = LossCount()
 
     def discover(self) -> list[str]:
         """Subscribe to matching topics that appeared since the last look; the topics newly subscribed."""
@@ -125,30 +121,15 @@ class Recorder:
         self.on_message(topic, data)
 
     def _received_with_info(self, topic: str, data: bytes, info: dict[str, int]) -> None:
-        sequence = info.get('publication_sequence_number', 0)
-        if 0 < sequence < UNKNOWN_SEQUENCE and topic not in self._mixed:
-            last = self._last.get(topic)
-            if last is not None and sequence > last + 1:
-                # sequence numbers are a publisher's own: with several, a jump is another's, no loss
-                if self.subscriptions[topic].get_publisher_count() == 1:
-                    self.gaps[topic] = self.gaps.get(topic, 0) + sequence - last - 1
-                else:
-                    self._mixed.add(topic)
-            self._last[topic] = sequence  # a smaller one: the publisher started again, counted from there
+        self.losses.heard(topic, info, self.subscriptions[topic].get_publisher_count)
         self._received(topic, data)
 
     def _lost(self, topic: str, status: Any) -> None:
-        self.reported_lost[topic] = int(status.total_count)
+        self.losses.report(topic, status.total_count)
 
     def lost(self) -> dict[str, int]:
-        """Messages known lost per topic, between the first and the last one received (a loss shows as a gap
-        before a message heard after it): the larger of the publisher's sequence gaps and what the DDS layer
-        reported (both see a message the reader's queue overflowed; a topic with several publishers has no gap
-        count)."""
-        topics = set(self.gaps) | set(self.reported_lost)
-        found = {topic: max(self.gaps.get(topic, 0), self.reported_lost.get(topic, 0)) for topic in topics}
-        return {topic: count for topic, count in sorted(found.items()) if count}
-
+        """Messages known lost per topic, between the first and the last one received (see LossCount)."""
+        return self.losses.lost()
 
 
 def run_record(

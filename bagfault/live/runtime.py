@@ -58,13 +58,14 @@ def spin_until(executor: Any, stop: StopFlag, period: float = 0.05) -> None:
             log.exception('error in a callback (the proxy keeps running)')
 
 
-def make_executor(context: Any) -> Any:
+def make_executor(context: Any, *, message_info: bool = False) -> Any:
     """The executor of a node that forwards messages: rclpy's events executor (C++ event queue, a fraction of
     the Python executor's cost per message) where this rclpy has it, else the single-threaded one.
-    BAGFAULT_EXECUTOR=single forces the latter."""
+    BAGFAULT_EXECUTOR=single forces the latter, and so does `message_info` (callbacks that take each message's
+    info, its sequence number: the events executor fails on them)."""
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
 
-    if settings.executor() != 'single':
+    if settings.executor() != 'single' and not message_info:
         try:
             from rclpy.experimental.events_executor import EventsExecutor  # noqa: PLC0415
         except ImportError:

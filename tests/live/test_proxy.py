@@ -306,3 +306,36 @@ def test_a_best_effort_publisher_that_comes_later_is_heard_through_the_default_q
     assert len(numbers) >= 295 and numbers == sorted(numbers)  # best effort on loopback: none or hardly any lost
     assert 'subscription now best_effort' in proxy.err_path.read_text()
     assert decoded(record, ['/sensors/imu_raw'])['/sensors/imu_raw'][-1][1].orientation_covariance[0] == numbers[-1]
+
+
+def test_a_recording_proxy_counts_what_its_input_lost_and_says_so(graph, scenarios: Path, tmp_path: Path) -> None:
+    """A burst the proxy cannot take (it is stopped, SIGSTOP, while most of it goes by, its input queue of 10
+    overflowing): what it received plus what it says its input lost is what the publisher sent, per the
+    publisher's own count; the count is in the summary, one stderr warning and the recording's metadata."""
+    from mcap.reader import make_reader
+
+    record = tmp_path / 'proxy.mcap'
+    proxy = graph.bagfault('proxy', str(scenarios / 'imu.yaml'), '--record', str(record), name='proxy')
+    graph.wait_for(proxy, 'bagfault proxy ready')
+    publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '50000', '--seconds', '3', '--best-effort',
+                           '--wait-subscriber', '--pause-after-first', '1', name='burst')
+    graph.wait_for(publisher, 'first sent')
+    time.sleep(0.5)  # the proxy takes the first message; then it stands still while the burst goes by
+    proxy.send_signal(signal.SIGSTOP)
+    time.sleep(2.0)
+    proxy.send_signal(signal.SIGCONT)
+    publisher.wait(timeout=60)
+    published = graph.lines(publisher)[-1]['published']
+    time.sleep(1.0)
+    assert graph.stop(proxy, signal.SIGINT) == 0, proxy.err_path.read_text()
+    with record.open('rb') as stream:
+        reader = make_reader(stream)
+        raw = sum(1 for _ in reader.iter_messages(topics=['/sensors/imu_raw']))
+        [meta] = [m for m in reader.iter_metadata() if m.name == 'bagfault.recording']
+    lost = json.loads(meta.metadata['lost']).get('/sensors/imu_raw', 0)
+    assert json.loads(meta.metadata['received']) == {'/sensors/imu_raw': raw}
+    assert raw + lost == published, (raw, lost, published)
+    assert lost > 0, 'the burst was meant to be more than the proxy takes'
+    out, err = proxy.out_path.read_text(), proxy.err_path.read_text()
+    assert f'/sensors/imu_raw -> /sensors/imu: {raw} received ({lost} lost before)' in out, out
+    assert f'the proxy lost {lost} input messages before it heard them ({lost} of /sensors/imu_raw)' in err, err
