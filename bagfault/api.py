@@ -32,7 +32,7 @@ from bagfault.spec.system import SystemUnderTest, system_from
 from bagfault.spec.yamlnodes import format_path
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Collection, Mapping, Sequence
 
     from bagfault.campaign.model import Campaign
     from bagfault.campaign.runner import CampaignResult, JobProgress
@@ -49,13 +49,24 @@ DEFAULT_SEED = 0
 SEED_MAX = 2**64 - 1
 
 
-def scenario_of(scenario: Scenario | str | Path, *, space: bool = False) -> Scenario:
+def scenario_of(scenario: Scenario | str | Path, *, space: bool = False, mode: str = '',
+                acts_on: Collection[str] = ()) -> Scenario:
     """A loaded scenario, or the file loaded and validated; one with an `explore:` section only where `space`
-    (its assertions name faults that only `bagfault explore` draws)."""
+    (its assertions name faults that only `bagfault explore` draws); injectors of the system or its clock only
+    where the `mode` has what they act on (`acts_on`: 'process', 'clock')."""
     loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if loaded.explore is not None and not space:
         raise UsageError(f'{loaded.source or loaded.name}: has an explore: section, a fault space: '
                          f'`bagfault explore` searches it (run or test one of the scenarios it writes)')
+    if mode:
+        from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
+        from bagfault.injectors.system import SystemInjector  # noqa: PLC0415
+
+        for injector in loaded.injectors:
+            cls = get_injector_type(injector.type)
+            if cls is not None and issubclass(cls, SystemInjector) and injector.type not in acts_on:
+                raise UsageError(f'{loaded.source or loaded.name}: injector {injector.id!r} ({injector.type}) needs '
+                                 f'{cls.needs}; `{mode}` has none')
     return loaded
 
 
@@ -140,7 +151,7 @@ def run(
     writer's default (zstd 1, lz4 0). `lead` is a leading copy the caller started before its imports
     (`bagfault.engine.lead.start_lead`, which `bagfault run` calls first); the caller closes it.
     """
-    loaded = scenario_of(scenario)
+    loaded = scenario_of(scenario, mode='run')
     paths = _paths(inputs)
     out = Path(output)
     if compression_level is not None:
@@ -189,7 +200,7 @@ def proxy(
     require_rclpy()
     from bagfault.live.proxy import run_proxy  # noqa: PLC0415
 
-    loaded = scenario_of(scenario)
+    loaded = scenario_of(scenario, mode='proxy')
     out = Path(record) if record is not None else None
     if out is not None:
         _check_output(out, 'recording', [], loaded, force=force)
@@ -231,7 +242,9 @@ def play(
         require_rclpy()
     from bagfault.live.player import run_play  # noqa: PLC0415
 
-    loaded = scenario_of(scenario) if scenario is not None else Scenario([], [], [])
+    loaded = (scenario_of(scenario, mode='play' if clock else 'play without --clock',
+                          acts_on=('clock',) if clock else ())
+              if scenario is not None else Scenario([], [], []))
     paths = _paths(inputs)
     if not (math.isfinite(rate) and rate > 0):
         raise UsageError(f'--rate {rate:g}: must be above 0')
@@ -310,7 +323,7 @@ def test(
     from bagfault.closedloop.repeat import fold  # noqa: PLC0415
     from bagfault.closedloop.runner import run_test  # noqa: PLC0415
 
-    loaded = scenario_of(scenario)
+    loaded = scenario_of(scenario, mode='test', acts_on=('process', 'clock'))
     paths = [Path(p) for p in inputs] or list(loaded.bags)
     if not paths:
         raise UsageError(f'{loaded.name}: no bag given, and the scenario names none under `bags:`')

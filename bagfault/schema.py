@@ -8,12 +8,13 @@ so a value accepted in one place is accepted in all of them.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
 from bagfault.errors import FieldValueError
 
-FIELD_TYPES = ('double', 'int', 'bool', 'string', 'non_empty_string', 'special_float', 'list')
+FIELD_TYPES = ('double', 'int', 'bool', 'string', 'non_empty_string', 'special_float', 'list', 'target')
 
 SPECIAL_FLOATS = {
     'inf': math.inf,
@@ -171,6 +172,25 @@ def _to_list(value: object) -> list[Any]:
     return value
 
 
+def _to_target(value: object) -> str | dict[str, str]:
+    """A process of the system under test: 'system' (its whole tree), {node: NAME} (the process hosting that
+    node) or {command: REGEX} (processes whose command line matches)."""
+    if value == 'system':
+        return 'system'
+    if not (isinstance(value, dict) and len(value) == 1 and next(iter(value)) in ('node', 'command')):
+        raise FieldValueError(f"{_show(value)} is not 'system', {{node: NAME}} or {{command: REGEX}}")
+    [(kind, text)] = value.items()
+    if not isinstance(text, str) or not text:
+        raise FieldValueError(f'{kind}: {_show(text)} is not a non-empty string')
+    if kind == 'node':
+        return {'node': text if text.startswith('/') else '/' + text}
+    try:
+        re.compile(text)
+    except re.error as exc:
+        raise FieldValueError(f'command: {text!r} is not a regular expression ({exc})') from None
+    return {'command': text}
+
+
 _COERCE = {
     'double': _to_double,
     'int': _to_int,
@@ -179,6 +199,7 @@ _COERCE = {
     'non_empty_string': _to_non_empty_string,
     'special_float': _to_special_float,
     'list': _to_list,
+    'target': _to_target,
 }
 
 

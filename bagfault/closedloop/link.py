@@ -24,6 +24,7 @@ from collections import deque
 from typing import TYPE_CHECKING, Any
 
 from bagfault.assertions.base import AssertionResult
+from bagfault.closedloop.actions import ProcessFaults
 from bagfault.closedloop.clocks import GRACE, HOLD, ClockCheck
 from bagfault.closedloop.isolation import NAME_POLL, NAME_WAIT, UNKNOWN, pid16, shared, shared_error
 from bagfault.closedloop.process import describe_exit
@@ -46,7 +47,7 @@ if TYPE_CHECKING:
     from bagfault.engine.routing import Routing
     from bagfault.engine.run import Run
     from bagfault.engine.stop import StopFlag
-    from bagfault.events import AssertionState
+    from bagfault.events import AssertionState, FaultEvent
     from bagfault.io.mcap_sink import McapSink
     from bagfault.io.types import TypeCatalog
     from bagfault.spec.model import Scenario
@@ -94,6 +95,7 @@ class SystemLink(LiveSink):
         self._floor = 0  # nothing is handed over earlier than what was judged before
         self._last_look = 0.0
         self._unnamed_since: float | None = None  # when the system was first seen on a played topic, unnamed
+        self.faults = ProcessFaults(scenario, process, listener)
 
     # -- before the first record --------------------------------------------------------------
     def prepare(self, routing: Routing) -> Mapping[str, Schema]:
@@ -284,11 +286,17 @@ class SystemLink(LiveSink):
                 self.clocks.stamp(topic, data, stamp, wall - round((now - arrived) * NS))
             run.message(self._outputs[topic], stamp, stamp, data)
 
+    def act(self, event: FaultEvent) -> str:
+        """A process fault's change is carried out on the system; a clock fault's on /clock."""
+        return self.faults.act(event) or super().act(event)
+
     def _check_alive(self, bag_time: int) -> None:
         if self.died_at is not None or self.process.alive():
             if self.died_at is None:
                 self.process.watch()
             return
+        if self.faults.died_by_us(self.process.pid, self.process.returncode):
+            return  # a process fault's kill: not a crash (restarted when the fault ends, if it says so)
         self.died_at = bag_time
         code = self.process.returncode
         self._verdict('failed', bag_time, f'the system under test exited with {describe_exit(code)} during the run')
@@ -331,7 +339,8 @@ class SystemLink(LiveSink):
         return self._recorder.lost() if self._recorder is not None else {}
 
     def close(self) -> None:
-        """Stop the listener thread."""
+        """Paused or throttled processes go on; stop the listener thread."""
+        self.faults.close()
         thread, self._thread = self._thread, None
         if thread is not None:
             thread.join(timeout=2.0)

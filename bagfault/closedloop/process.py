@@ -160,6 +160,14 @@ class SystemProcess:
         """Remember the current descendants, so those that leave the group are still stopped."""
         self._known |= family(self.pid, self._known)
 
+    def replace_main(self, popen: subprocess.Popen[bytes]) -> None:
+        """A process fault restarted the main process: the new one is the system's main process (in a session of
+        its own, the group the stop signals), the processes seen so far stay known."""
+        self.popen.poll()  # the killed one reaped
+        self.popen = popen
+        self.pid = popen.pid
+        self._known |= family(self.pid, {})
+
     def _marked(self) -> set[int]:
         """Processes carrying the run's mark: a daemon that left the session and whose parent has gone."""
         return set(marked(self.token))

@@ -80,6 +80,10 @@ class PassHooks(Protocol):
         """After the last record, before the verdicts (a tail of outside messages)."""
         ...
 
+    def act(self, event: FaultEvent) -> str:
+        """A fault changed state: carry out what it does to the system or its clock; what was done ('' nothing)."""
+        ...
+
 
 def replay(
     inputs: InputSet,
@@ -129,6 +133,7 @@ def replay(
     if hooks is not None:
         hooks.begin(run)
         run.gate = hooks.gate
+        run.act = hooks.act
     try:
         try:
             if not stopped:

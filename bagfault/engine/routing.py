@@ -18,7 +18,7 @@ from bagfault.engine.merge import COPY_RANK
 from bagfault.engine.pipeline import InjectorRuntime
 from bagfault.engine.run import OutputChannel
 from bagfault.errors import EngineError
-from bagfault.injectors.base import Injector
+from bagfault.injectors.base import Injector, SystemInjector
 from bagfault.injectors.registry import get_injector_type
 from bagfault.io.channel import bag_name
 
@@ -109,6 +109,8 @@ def _wire(inputs: InputSet, scenario: Scenario, routing: Routing) -> list[_Wired
     for spec in scenario.injectors:
         cls = get_injector_type(spec.type)
         assert cls is not None
+        if issubclass(cls, SystemInjector):
+            continue  # the mode that runs a system carries its faults out (the others refuse the scenario)
         if not issubclass(cls, Injector):
             routing.notes.append(f'injector {spec.id!r} ({spec.type}) proxies a service: live mode only, '
                                  'its faults have no effect offline')

@@ -12,7 +12,7 @@ event channels and the sink, so all modes judge and count the same way.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from time import monotonic
 from typing import TYPE_CHECKING, Protocol
 
@@ -120,6 +120,8 @@ class Run:
         self.oracles = Oracles(scenario, schemas, catalog, self.write_event, blackbox_base, blackbox_numbers)
         self.observers: list[Observer] = [*self.oracles.observers, *observers]
         self.gate: Callable[[int], None] | None = None  # called before each merged record is judged (live passes)
+        # carries a fault's change out on a running system and its clock; what it did (live passes)
+        self.act: Callable[[FaultEvent], str] | None = None
         self.event_listeners: list[Callable[[Event, bytes], None]] = []  # every event written, encoded (live)
         self._events: dict[str, tuple[OutputChannel, Codec]] = {}
         self._topics: dict[str, OutputChannel] = {}
@@ -201,7 +203,12 @@ class Run:
             stats.last_output_time = max(stats.last_output_time or chunk.end, chunk.end)
 
     def event(self, event: FaultEvent, *, write: bool = True) -> None:
-        """A fault changed state: observed, kept, and written (unless it was read from a recording)."""
+        """A fault changed state: carried out on the system (`act`, whose account joins the details), observed,
+        kept, and written (unless it was read from a recording)."""
+        if self.act is not None:
+            said = self.act(event)
+            if said:
+                event = replace(event, details=f'{event.details}; {said}' if event.details else said)
         for observer in self.observers:
             observer.on_event(event)
         self.stats.events.append(event)

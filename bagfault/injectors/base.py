@@ -14,6 +14,7 @@ from bagfault.errors import InjectorConfigError, InjectorError, MalformedMessage
 from bagfault.faults.active import ActiveFault
 from bagfault.faults.combine import strongest
 from bagfault.faults.drop import drop_mask, should_drop
+from bagfault.injectors.system import SystemInjector
 from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, ConfigField
 
 if TYPE_CHECKING:
@@ -239,7 +240,7 @@ class ServiceInjector:
         return next((x for x in cls.fields if x.key == key), None)
 
 
-InjectorType = type[Injector] | type[ServiceInjector]
+InjectorType = type[Injector] | type[ServiceInjector] | type[SystemInjector]
 
 
 def patch_linear(injector: Injector, messages: list[RawMessage],
@@ -282,4 +283,4 @@ def patch_linear(injector: Injector, messages: list[RawMessage],
 
 # Plugins subclass Injector and raise these; they are bagfault.errors classes, re-exported for convenience.
 __all__ = ['ActiveFault', 'Codec', 'Injector', 'InjectorConfigError', 'InjectorError', 'InjectorType',
-           'MalformedMessageError', 'RawMessage', 'ServiceInjector', 'patch_linear']
+           'MalformedMessageError', 'RawMessage', 'ServiceInjector', 'SystemInjector', 'patch_linear']

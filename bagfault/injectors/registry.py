@@ -20,6 +20,7 @@ from bagfault.injectors.joint_state import JointStateInjector
 from bagfault.injectors.odom import OdomInjector
 from bagfault.injectors.pointcloud2 import PointCloud2Injector
 from bagfault.injectors.scan import ScanInjector
+from bagfault.injectors.system import ClockInjector, ProcessInjector, SystemInjector
 from bagfault.injectors.tf import TfInjector
 from bagfault.injectors.topic import CompressedImageInjector, TopicInjector
 from bagfault.injectors.trigger_service import TriggerServiceInjector
@@ -39,6 +40,8 @@ BUILTIN: tuple[InjectorType, ...] = (
     CompressedImageInjector,
     PointCloud2Injector,
     ImageInjector,
+    ProcessInjector,
+    ClockInjector,
 )
 
 _BUILTIN_TYPES: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}
@@ -59,7 +62,7 @@ def injector_types() -> dict[str, InjectorType]:
         except Exception as exc:  # noqa: BLE001 - a broken plugin must not break bagfault
             log.warning(f'plugin {entry.name} = {entry.value} failed to load: {exc}')
             continue
-        if not (isinstance(cls, type) and issubclass(cls, (Injector, ServiceInjector))):
+        if not (isinstance(cls, type) and issubclass(cls, (Injector, ServiceInjector, SystemInjector))):
             log.warning(f'plugin {entry.name} = {entry.value} is not an Injector subclass')
             continue
         types[entry.name] = cls

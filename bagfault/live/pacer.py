@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 
     from bagfault.engine.run import Run
     from bagfault.engine.stop import StopFlag
+    from bagfault.events import FaultEvent
     from bagfault.io.mcap_sink import McapSink
 
 CLOCK_PERIOD = 0.01  # ticks (and /clock) at 100 Hz while waiting for the next record
@@ -192,6 +193,10 @@ class Pacer:
 
     def finish(self, run: Run) -> None:
         """Nothing after the last record of a plain play."""
+
+    def act(self, event: FaultEvent) -> str:
+        """Nothing to carry out without a clock or a system (LiveSink and the closed loop's link do)."""
+        return ''
 
     def delivered(self, timeout: float) -> list[str]:
         """The topics whose subscribers have not acknowledged every message within `timeout` (none here)."""

@@ -17,6 +17,7 @@ from rclpy.exceptions import InvalidTopicNameException
 
 from bagfault.engine.stop import Stopped
 from bagfault.errors import LiveError
+from bagfault.live.clockwarp import CLOCK_TRACE, CLOCK_TYPE, ClockWarps, clock_cdr
 from bagfault.live.pacer import CLOCK_PERIOD, CLOCK_TOPIC, Pacer
 from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos, unacknowledged
 from bagfault.units import NS
@@ -26,8 +27,10 @@ if TYPE_CHECKING:
 
     from bagfault.engine.run import Run
     from bagfault.engine.stop import StopFlag
+    from bagfault.events import FaultEvent
     from bagfault.io.mcap_sink import McapSink
     from bagfault.live.pacer import View
+    from bagfault.spec.model import Scenario
 
 MATCH_WAIT = 5.0  # seconds after the settle time to wait for subscribers the graph knows to be matched
 MATCH_SETTLE = 0.25  # seconds after a publisher sees its subscriber until the subscriber has matched it too
@@ -49,10 +52,14 @@ class LiveSink(Pacer):
         self._publishers: dict[str, Any] = {}
         self._clock = None
         if clock:
-            clock_type = interface_class('rosgraph_msgs/msg/Clock')
+            clock_type = interface_class(CLOCK_TYPE)
             self._clock = node.create_publisher(clock_type, CLOCK_TOPIC, qos(1))
             self._clock_message = clock_type()
         self.skipped: dict[str, str] = {}  # topic -> why it is recorded but not published
+        self.warps = ClockWarps()
+        self._scenario: Scenario | None = None
+        self._clock_injectors: set[str] = set()
+        self._trace: int | None = None  # the recording's channel of the /clock bagfault published
         self.clock_left_out = False  # the bag's own /clock was recorded, not published (bagfault's is the clock)
 
     def _publisher(self, topic: str, msgtype: str, metadata: dict[str, str] | None) -> Any:
@@ -124,6 +131,10 @@ class LiveSink(Pacer):
     def begin(self, run: Run) -> None:
         """The run's events go out on /bagfault/events as they happen (and to the view)."""
         super().begin(run)
+        self._scenario = run.scenario
+        self._clock_injectors = {i.id for i in run.scenario.injectors if i.type == 'clock'}
+        if self._clock is not None and self._clock_injectors and self._trace is None:
+            self._trace = self.record_only(CLOCK_TRACE, CLOCK_TYPE, *run.catalog.schema(CLOCK_TYPE))
         if self._events is None:
             from bagfault.live.events import LiveEvents  # noqa: PLC0415
 
@@ -131,10 +142,48 @@ class LiveSink(Pacer):
         self._events.attach(run)
 
     def _reached(self, bag_time: int) -> None:
-        """/clock says the timeline's time."""
+        """/clock says the timeline's time (as the clock faults warp it; their trace recorded on CLOCK_TRACE)."""
         if bag_time <= self.clock_value:
             return
         super()._reached(bag_time)
+        self._publish_clock(bag_time)
+
+    def _publish_clock(self, bag_time: int) -> None:
         if self._clock is not None:
-            self._clock_message.clock.sec, self._clock_message.clock.nanosec = divmod(bag_time, NS)
+            clock = self.warps.clock_of(bag_time)
+            self._clock_message.clock.sec, self._clock_message.clock.nanosec = divmod(clock, NS)
             self._clock.publish(self._clock_message)
+            if self._trace is not None:
+                self.write(self._trace, bag_time, bag_time, clock_cdr(clock))
+
+    def act(self, event: FaultEvent) -> str:
+        """A clock fault's change: the warp of /clock starts or ends; a stall holds the timeline here."""
+        if self._clock is None or event.injector_id not in self._clock_injectors:
+            return ''
+        if event.state == 'inactive':
+            said = self.warps.end(event.fault_id)
+            self._publish_clock(event.time)  # at the event's time, not at the next tick
+            return said
+        if event.state != 'active':
+            return ''
+        fault = self._scenario.fault(event.fault_id) if self._scenario is not None else None
+        assert fault is not None
+        if not fault.config.get('stall'):
+            said = self.warps.start(event.fault_id, event.time, fault.config)
+            self._publish_clock(event.time)
+            return said
+        seconds = (fault.duration or 0.0) / self.rate
+        self.pause()
+        try:
+            self._stall(time.monotonic() + seconds)
+        finally:
+            self.resume()
+        return f'/clock stood still at {self.warps.clock_of(event.time) / NS:.3f} s for {seconds:g} s of wall time'
+
+    def _stall(self, until: float) -> None:
+        """Wait, nothing played and /clock still, until `until` (monotonic); the recording's chunks go on."""
+        while time.monotonic() < until:
+            if self.stop.wait(min(0.01, max(until - time.monotonic(), 0.0))):
+                raise Stopped(self.stop.reason)
+            if self.recording is not None:
+                self.recording.tick()

@@ -23,6 +23,7 @@ def schema_dict(type_name: str | None = None) -> dict[str, Any]:
             'description': types[name].description,
             'message_types': list(types[name].message_types),
             'live_only': types[name].live_only,
+            'needs': getattr(types[name], 'needs', ''),  # an injector acting on the running system: what it needs
             'options': [f.to_dict() for f in types[name].options],
             'fields': [f.to_dict() for f in types[name].fields],
         }
@@ -61,9 +62,9 @@ def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str
     lines = []
     for name, entry in data.items():
         kinds = ', '.join(entry['message_types']) or 'any message type'
-        live = ' (live mode only)' if entry['live_only'] else ''
+        live = ' (live mode only)' if entry['live_only'] and not entry['needs'] else ''
         lines.append(f'{name}: {entry["description"]}{live}')
-        lines.append(f'  messages: {kinds}')
+        lines.append(f'  needs: {entry["needs"]}' if entry['needs'] else f'  messages: {kinds}')
         for title in ('options', 'fields'):
             fields = entry[title]
             if not fields:
@@ -105,8 +106,9 @@ def render_markdown() -> str:
     lines += ['## Injector types', '']
     for name, entry in schema_dict().items():
         kinds = ', '.join(f'`{k}`' for k in entry['message_types']) or 'any message type'
-        live = ' Live mode only.' if entry['live_only'] else ''
-        lines += [f'### `{name}`', '', f'{entry["description"]}{live} Messages: {kinds}.', '']
+        live = ' Live mode only.' if entry['live_only'] and not entry['needs'] else ''
+        acts = f'Needs {entry["needs"]}.' if entry['needs'] else f'Messages: {kinds}.'
+        lines += [f'### `{name}`', '', f'{entry["description"]}{live} {acts}', '']
         for title, part in (('Injector options', 'options'), ('Fault `config` keys', 'fields')):
             if entry[part]:
                 lines += [f'{title}:', '', HEADER, *(_row(f) for f in entry[part]), '']
@@ -137,6 +139,11 @@ FIELD_JSON: dict[str, dict[str, Any]] = {
     'string': {'type': 'string'}, 'non_empty_string': {'type': 'string', 'minLength': 1},
     'special_float': {'anyOf': [{'type': 'number'}, {'enum': ['inf', '+inf', '-inf', '.inf', '-.inf', 'nan', '.nan']}]},
     'list': {'type': 'array'},
+    'target': {'anyOf': [{'const': 'system'},
+                         {'type': 'object', 'properties': {'node': {'type': 'string', 'minLength': 1}},
+                          'required': ['node'], 'additionalProperties': False},
+                         {'type': 'object', 'properties': {'command': {'type': 'string', 'minLength': 1}},
+                          'required': ['command'], 'additionalProperties': False}]},
 }
 KEY_JSON: dict[str, dict[str, Any]] = {
     'string': {'type': 'string'}, 'number': {'type': 'number'}, 'integer': {'type': 'integer'},

@@ -201,6 +201,7 @@ def _explore_fault(node: object, path: PathKey, scenario: Scenario, out: _Collec
 
 def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | None:
     from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
+    from bagfault.injectors.system import SystemInjector  # noqa: PLC0415
 
     if not isinstance(node, dict):
         out.add(path, 'an injector must be a mapping')
@@ -231,6 +232,10 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
         spec.target_service = read.get('target_service', '')
         return spec
 
+    if cls is not None and issubclass(cls, SystemInjector):  # acts on the system: no topic, no service
+        for key in sorted(ENDPOINT_KEYS & read.given):
+            out.add((*path, key), f'injector type {spec.type!r} acts on the running system; it takes no {key}')
+        return spec
     endpoint, endpoint_path = read, path
     if 'topic' in read.given:
         nested = out.reader().read(sections.TOPIC, read.get('topic'), (*path, 'topic'))

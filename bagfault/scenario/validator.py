@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.assertions.registry import ASSERTION_TYPES
 from bagfault.errors import FieldValueError, InjectorConfigError
-from bagfault.injectors.base import Injector, ServiceInjector
+from bagfault.injectors.base import Injector, ServiceInjector, SystemInjector
 from bagfault.injectors.registry import get_injector_type, injector_types
 from bagfault.schema import ConfigField
 from bagfault.yamlcpp import as_double
@@ -130,7 +130,11 @@ def _check_injector(injector: Any, out: _Collector) -> None:
     cls = get_injector_type(injector.type)
     assert cls is not None  # unknown types were left out
     is_service_type = issubclass(cls, ServiceInjector)
-    if is_service_type and not injector.is_service:
+    if issubclass(cls, SystemInjector):
+        if injector.is_service:
+            out.add(injector.path, f'injector type {injector.type!r} acts on the running system; it proxies no '
+                                   'service')
+    elif is_service_type and not injector.is_service:
         out.add(injector.path,
                 f'injector type {injector.type!r} proxies a service: give proxy_service and target_service')
     if not is_service_type and injector.is_service:
@@ -208,6 +212,11 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
         if issubclass(cls, Injector):
             for warning in cls.config_warnings(fault.config):
                 out.warn((*fault.path, 'config'), warning)
+        if issubclass(cls, SystemInjector):
+            has_end = fault.duration is not None or fault.repeat is not None or fault.probability_per_second is not None
+            problem = cls.check_schedule(fault.config, has_end)
+            if problem is not None:
+                out.add(fault.path, problem)
 
 
 def _check_chains(scenario: Scenario, out: _Collector) -> None:

@@ -40,8 +40,8 @@ def test_battery_scenario_names_the_unknown_type_and_skips_it(scenarios):
                                          "and no installed plugin provides it, so injector 'battery' and its faults "
                                          "(battery_voltage_bias) are skipped and the others run, as the anchor does "
                                          "(\"assuming external "
-                                         "plugin\"; known: compressed_image, field, image, imu, joint_state, odom, "
-                                         "pointcloud2, scan, tf, topic, trigger_service)")
+                                         "plugin\"; known: clock, compressed_image, field, image, imu, joint_state, "
+                                         "odom, pointcloud2, process, scan, tf, topic, trigger_service)")
     assert ':4:11: ' in scenario.warnings[0] and len(scenario.warnings) == 1
 
 

@@ -1,0 +1,280 @@
+"""Faults on the system under test and its clock (`process` and `clock` injectors), on real rclpy processes.
+
+The system is tests/closedloop/systems/rover_stack.py: a launcher starting /planner (each /odom of the bag ->
+/cmd_vel) and /controller (each /cmd_vel -> /controller/output; a 10 Hz sim-time timer -> /controller/tick).
+The bag is the closed-loop example's rover bag cut to 6 s (odometry at 50 Hz), so the controller's output
+comes every 20 ms of bag time: a pause of P seconds leaves a gap of about P on it, nothing else does.
+"""
+
+from __future__ import annotations
+
+import itertools
+import signal
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from support.loop import EXAMPLE, LoopRunner, running_with
+
+NS = 1_000_000_000
+STACK = Path(__file__).resolve().parent / 'systems' / 'rover_stack.py'
+
+
+@pytest.fixture(scope='module')
+def short_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The example's rover bag, 6 s long."""
+    sys.path.insert(0, str(EXAMPLE))
+    try:
+        import make_bag
+    finally:
+        sys.path.remove(str(EXAMPLE))
+    return make_bag.write(tmp_path_factory.mktemp('system_faults') / 'rover6.mcap', duration=6.0)
+
+
+def scenario(tmp_path: Path, token: str, injectors: str, faults: str, assertions: str = '') -> Path:
+    """A scenario running the stack (its command line carries `token`) with these injectors, faults, assertions."""
+    path = tmp_path / 'stack.bagfault.yaml'
+    path.write_text(f"""
+system_under_test:
+  command: ['{{python}}', '{STACK}', '{token}']
+  ready:
+    - {{subscribes: [/odom], timeout: 60}}
+    - {{topic: /controller/output, publisher: true, timeout: 60}}
+  record: [/controller/output, /controller/tick, /cmd_vel]
+  stop_timeout: 10
+  tail: 1.0
+injectors:
+{injectors}
+faults:
+{faults}
+assertions:
+{assertions or '  []'}
+""")
+    return path
+
+
+def decoded(path: Path) -> dict[str, list[tuple[int, object]]]:
+    topics: dict[str, list[tuple[int, object]]] = {}
+    with path.open('rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, message, value in reader.iter_decoded_messages(log_time_order=True):
+            topics.setdefault(channel.topic, []).append((message.log_time, value))
+    return topics
+
+
+def seconds(topics: dict[str, list[tuple[int, object]]], topic: str) -> list[float]:
+    origin = topics['/odom'][0][0]
+    return [(t - origin) / NS for t, _ in topics.get(topic, [])]
+
+
+def longest_gap(times: list[float], start: float, end: float) -> float:
+    inside = [t for t in times if start <= t <= end]
+    return max(b - a for a, b in itertools.pairwise(inside))
+
+
+@pytest.mark.parametrize(('pause', 'verdict'), [(1.5, 'failed'), (0.5, 'passed')])
+def test_a_pause_of_the_controller_longer_than_the_watchdog_fails_it(tester: LoopRunner, short_bag: Path,
+                                                                      tmp_path: Path, pause: float,
+                                                                      verdict: str) -> None:
+    """`topic_gap` with max_gap 1.0 s on the controller's output is the watchdog. Paused from 2.0 s for `pause`
+    seconds, the controller sends nothing meanwhile: its longest gap is about `pause` (its output comes every
+    20 ms otherwise), so a 1.5 s pause fails it and a 0.5 s pause passes (by hand: 1.5 > 1.0 > 0.5 + 0.02).
+    The fault's events name the pid they stopped and continued: the controller's, not the planner's."""
+    token = tester.token()
+    path = scenario(tmp_path, token, '  - {id: controller_proc, type: process, target: {node: /controller}}',
+                    f'  - {{id: hang, injector_id: controller_proc, start: 2.0, duration: {pause}, '
+                    'config: {pause: true}}',
+                    '  - {id: watchdog, type: topic_gap, topic: /controller/output, max_gap: 1.0}')
+    out = tmp_path / 'pause.mcap'
+    result = tester.run(str(path), str(short_bag), '-o', str(out), '--keep-logs', str(tmp_path / 'logs'))
+    assert result.code == (1 if verdict == 'failed' else 0), result.stdout + result.stderr
+    assert result.report is not None
+    states = {a['id']: a['state'] for a in result.report['assertions']}
+    assert states == {'system_alive': 'passed', 'watchdog': verdict}
+    topics = decoded(out)
+    output = seconds(topics, '/controller/output')
+    gap = longest_gap(output, 1.0, 6.0)
+    assert pause - 0.2 <= gap <= pause + 0.5, (gap, output)
+    events = [m for _, m in topics['/fault_injection/events']]
+    assert [(e.fault_id, e.state) for e in events] == [('hang', 'active'), ('hang', 'inactive')]
+    stopped = int(events[0].details.rsplit('SIGSTOP to pid ', 1)[1])
+    assert events[1].details.endswith(f'SIGCONT to pid {stopped}')
+    assert 'controller' in Path(f'/proc/{stopped}/cmdline').read_bytes().decode() if Path(
+        f'/proc/{stopped}').exists() else True
+    assert running_with(token) == []
+
+
+def test_a_killed_controller_restarts_and_the_loop_recovers(tester: LoopRunner, short_bag: Path,
+                                                            tmp_path: Path) -> None:
+    """SIGKILL to the controller at 2.0 s, restarted at 3.0 s with its own command line: nothing on its output
+    while it is down, output again within 3 s of the restart (a fresh rclpy process starts and is discovered in
+    about a second here); the kill was bagfault's, so system_alive passes; the restarted process's log lines go
+    to the system's log."""
+    token = tester.token()
+    path = scenario(tmp_path, token, '  - {id: controller_proc, type: process, target: {command: "rover_stack.py controller"}}',
+                    '  - {id: crash, injector_id: controller_proc, start: 2.0, duration: 1.0, '
+                    'config: {kill: true, restart: true}}')
+    out = tmp_path / 'kill.mcap'
+    logs = tmp_path / 'logs'
+    result = tester.run(str(path), str(short_bag), '-o', str(out), '--keep-logs', str(logs))
+    assert result.code == 0, result.stdout + result.stderr
+    assert result.report is not None
+    assert {a['id']: a['state'] for a in result.report['assertions']} == {'system_alive': 'passed'}
+    topics = decoded(out)
+    output = seconds(topics, '/controller/output')
+    assert not [t for t in output if 2.1 <= t < 3.0], output
+    after = [t for t in output if t >= 3.0]
+    assert after and after[0] <= 6.0, output
+    events = [m for _, m in topics['/fault_injection/events']]
+    killed = int(events[0].details.rsplit('SIGKILL to pid ', 1)[1])
+    restarted = int(events[1].details.rsplit('restarted as pid ', 1)[1])
+    assert killed != restarted
+    assert (logs / 'system.stderr.log').read_text().count('controller up') == 2
+    assert running_with(token) == []
+
+
+def test_a_backward_clock_jump_moves_a_timer_nodes_time_back_and_its_timer_goes_on(tester: LoopRunner,
+                                                                                    short_bag: Path,
+                                                                                    tmp_path: Path) -> None:
+    """/clock jumps back 2 s at 2.0 s and forward again at 4.0 s. rcl's timer (timer.c, `_rcl_timer_time_jump`)
+    answers a jump back of more than a period by calling next one period after the new time: the controller's
+    10 Hz timer keeps ticking every 0.1 s of bag time, its `now()` stamps 2 s behind bag time inside the window
+    and on bag time outside it. The recording's axis stays bag time, and /bagfault/clock holds what /clock said."""
+    token = tester.token()
+    path = scenario(tmp_path, token, '  - {id: clk, type: clock}',
+                    '  - {id: back, injector_id: clk, start: 2.0, duration: 2.0, config: {jump_s: -2.0}}')
+    out = tmp_path / 'jump.mcap'
+    result = tester.run(str(path), str(short_bag), '-o', str(out))
+    assert result.code == 0, result.stdout + result.stderr
+    topics = decoded(out)
+    origin = topics['/odom'][0][0]
+    ticks = [((t - origin) / NS, (m.stamp.sec * NS + m.stamp.nanosec - origin) / NS)
+             for t, m in topics['/controller/tick']]
+    inside = [(heard, said) for heard, said in ticks if 2.3 <= heard <= 3.8]
+    outside = [(heard, said) for heard, said in ticks if 0.5 <= heard <= 1.8 or 4.3 <= heard <= 5.8]
+    assert len(inside) >= 10 and len(outside) >= 20
+    assert all(abs(heard - said - 2.0) < 0.25 for heard, said in inside), inside
+    assert all(abs(heard - said) < 0.25 for heard, said in outside), outside
+    assert longest_gap([heard for heard, _ in ticks], 1.0, 5.5) < 0.35
+    said_at = {t - origin: m.clock.sec * NS + m.clock.nanosec - origin for t, m in topics['/bagfault/clock']}
+    assert said_at[2 * NS] == 0 and said_at[4 * NS] == 4 * NS  # the last word at each edge: the new clock
+    assert all(said == bag - 2 * NS for bag, said in said_at.items() if 2 * NS <= bag < 4 * NS)
+    assert all(said == bag for bag, said in said_at.items() if bag < 2 * NS or bag >= 4 * NS)
+    events = [m for _, m in topics['/fault_injection/events']]
+    assert events[0].details == f'config={{jump_s=-2.0}}; /clock jumps by -2 s to {origin / NS:.3f} s'
+    assert events[1].details == 'config={jump_s=-2.0}; /clock follows bag time again'
+
+
+def test_run_refuses_system_faults_in_one_line(short_bag: Path, tmp_path: Path) -> None:
+    """Offline there is no system to act on: `run` says so in one line, exit 2, writes nothing."""
+    import subprocess
+
+    path = scenario(tmp_path, 'x', '  - {id: controller_proc, type: process, target: system}',
+                    '  - {id: hang, injector_id: controller_proc, start: 1.0, duration: 1.0, config: {pause: true}}')
+    out = tmp_path / 'out.mcap'
+    done = subprocess.run([sys.executable, '-m', 'bagfault.cli', 'run', str(path), str(short_bag), '-o', str(out)],
+                          capture_output=True, text=True, check=False)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"bagfault: error: {path}: injector 'controller_proc' (process) needs a running system (`bagfault test`); "
+        '`run` has none']
+    assert not out.exists()
+
+
+def test_the_cpu_limit_holds_a_busy_process_to_its_share() -> None:
+    """A process spinning on one core, limited to 0.25 of a core for 2 s, uses at most 0.25 x 2 s of CPU (and
+    slack for the cycle's edges); on a machine without a writable cgroup v2 it is the duty cycle's doing."""
+    import os
+    import subprocess
+    import time
+
+    from bagfault.closedloop.actions import CpuLimit, writable_cgroup
+
+    burner = subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+    try:
+        time.sleep(0.3)
+
+        def used() -> float:
+            fields = Path(f'/proc/{burner.pid}/stat').read_text().rsplit(')', 1)[1].split()
+            return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+        before = used()
+        limit = CpuLimit([burner.pid], 0.25)
+        time.sleep(2.0)
+        limit.stop()
+        spent = used() - before
+        assert spent <= 0.25 * 2.0 + 0.15, spent
+        assert limit.how == ('cgroup v2 cpu.max' if writable_cgroup() is not None else 'SIGSTOP/SIGCONT duty cycle')
+        time.sleep(0.5)
+        free = used() - before - spent
+        assert free > 0.0  # running again after stop
+        state = Path(f'/proc/{burner.pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+        assert state != 'T'
+    finally:
+        burner.send_signal(signal.SIGKILL)
+        burner.wait()
+
+
+def test_a_clock_stall_holds_the_play_and_a_slow_clock_runs_at_its_rate(tester: LoopRunner, short_bag: Path,
+                                                                         tmp_path: Path) -> None:
+    """A stall at 1.0 s for 0.5 s: /clock stands still and nothing is played for 0.5 s of wall time, then the
+    play goes on where it was (every odometry message still played, none late on the bag's axis); the timer
+    node, on sim time, does not tick meanwhile. A rate of 0.5 from 3.0 s for 1.0 s: /clock says 3.0 + (t - 3.0)
+    x 0.5 inside, so the 10 Hz timer ticks every 0.2 s of bag time there; at 4.0 s /clock jumps from 3.5 to 4.0."""
+    token = tester.token()
+    path = scenario(tmp_path, token, '  - {id: clk, type: clock}',
+                    '  - {id: freeze, injector_id: clk, start: 1.0, duration: 0.5, config: {stall: true}}\n'
+                    '  - {id: slow, injector_id: clk, start: 3.0, duration: 1.0, config: {rate: 0.5}}')
+    out = tmp_path / 'stall.mcap'
+    result = tester.run(str(path), str(short_bag), '-o', str(out))
+    assert result.code == 0, result.stdout + result.stderr
+    assert result.report is not None
+    assert result.report['system_under_test']['played_per_topic']['/odom'] == 300  # 6 s at 50 Hz: all played
+    topics = decoded(out)
+    origin = topics['/odom'][0][0]
+    said_at = {t - origin: m.clock.sec * NS + m.clock.nanosec - origin for t, m in topics['/bagfault/clock']}
+    assert all(abs(said - (3 * NS + (bag - 3 * NS) / 2)) <= 1 for bag, said in said_at.items() if 3 * NS < bag < 4 * NS)
+    assert all(said == bag for bag, said in said_at.items() if bag < 3 * NS or bag >= 4 * NS)
+    events = {(m.fault_id, m.state): m.details for _, m in topics['/fault_injection/events']}
+    assert events['freeze', 'active'].endswith(f'/clock stood still at {(origin + NS) / NS:.3f} s for 0.5 s of '
+                                               'wall time')
+    ticks = [((t - origin) / NS, (m.stamp.sec * NS + m.stamp.nanosec - origin) / NS)
+             for t, m in topics['/controller/tick']]
+    slow = [said for heard, said in ticks if 3.2 <= heard <= 3.9]
+    assert all(3.0 <= said <= 3.5 for said in slow) and 2 <= len(slow) <= 6, ticks  # 0.7 s at 5 Hz of bag time
+
+
+@pytest.mark.slow
+def test_explore_finds_the_shortest_pause_that_fails_the_watchdog(short_bag: Path, tmp_path: Path) -> None:
+    """A process fault as an explore dimension: the controller paused from 2.0 s for [0.1, 2.5] s against the
+    1.0 s watchdog. The output comes every 20 ms, so a pause fails it when it is longer than about 1.0 s
+    (by hand: the gap is the pause, give or take one period): the shrunk minimal failure lies there, within
+    the resolution (10 % of the range: 0.24 s) and what a loaded machine adds to a pause's edges."""
+    from support.loop import rclpy_available
+
+    from bagfault import api
+
+    if not rclpy_available():
+        pytest.skip("rclpy not installed (pip install '.[live]')")
+    token = 'explore' + tmp_path.name[-6:]
+    path = scenario(tmp_path, token, '  - {id: controller_proc, type: process, target: {node: /controller}}',
+                    '  []', '  - {id: watchdog, type: topic_gap, topic: /controller/output, max_gap: 1.0}')
+    text = path.read_text().replace('faults:\n  []\n', '')
+    path.write_text(text + f"""bags: [{short_bag}]
+explore:
+  faults:
+    - {{id: hang, injector_id: controller_proc, start: 2.0, duration: [0.1, 2.5], config: {{pause: true}}}}
+  budget: 10
+  confirm: 1
+  batch: 2
+  resolution: 0.1
+""")
+    result = api.explore(path, directory=tmp_path / 'out', workers=2, rate=4.0, seed=1)
+    assert [r.outcome.status for r in result.runs].count('error') == 0, [r.outcome.message for r in result.runs]
+    assert result.runs[0].outcome.status == 'passed'  # no fault drawn: nothing fails
+    (failure,) = result.failures
+    assert failure.assertions == {'watchdog'}
+    duration = dict(failure.minimal.drawn('hang').values)['duration']
+    assert 0.8 <= duration <= 1.0 + 0.24 + 0.2, duration
