@@ -50,10 +50,10 @@ SEED_MAX = 2**64 - 1
 
 
 def scenario_of(scenario: Scenario | str | Path, *, space: bool = False, mode: str = '',
-                acts_on: Collection[str] = ()) -> Scenario:
+                offers: Collection[str] = ()) -> Scenario:
     """A loaded scenario, or the file loaded and validated; one with an `explore:` section only where `space`
     (its assertions name faults that only `bagfault explore` draws); injectors of the system or its clock only
-    where the `mode` has what they act on (`acts_on`: 'process', 'clock')."""
+    where the `mode` offers what they act on (`offers`: 'system', 'clock')."""
     loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if loaded.explore is not None and not space:
         raise UsageError(f'{loaded.source or loaded.name}: has an explore: section, a fault space: '
@@ -64,7 +64,7 @@ def scenario_of(scenario: Scenario | str | Path, *, space: bool = False, mode: s
 
         for injector in loaded.injectors:
             cls = get_injector_type(injector.type)
-            if cls is not None and issubclass(cls, SystemInjector) and injector.type not in acts_on:
+            if cls is not None and issubclass(cls, SystemInjector) and cls.acts_on not in offers:
                 raise UsageError(f'{loaded.source or loaded.name}: injector {injector.id!r} ({injector.type}) needs '
                                  f'{cls.needs}; `{mode}` has none')
     return loaded
@@ -243,7 +243,7 @@ def play(
     from bagfault.live.player import run_play  # noqa: PLC0415
 
     loaded = (scenario_of(scenario, mode='play' if clock else 'play without --clock',
-                          acts_on=('clock',) if clock else ())
+                          offers=('clock',) if clock else ())
               if scenario is not None else Scenario([], [], []))
     paths = _paths(inputs)
     if not (math.isfinite(rate) and rate > 0):
@@ -323,7 +323,7 @@ def test(
     from bagfault.closedloop.repeat import fold  # noqa: PLC0415
     from bagfault.closedloop.runner import run_test  # noqa: PLC0415
 
-    loaded = scenario_of(scenario, mode='test', acts_on=('process', 'clock'))
+    loaded = scenario_of(scenario, mode='test', offers=('system', 'clock'))
     paths = [Path(p) for p in inputs] or list(loaded.bags)
     if not paths:
         raise UsageError(f'{loaded.name}: no bag given, and the scenario names none under `bags:`')

@@ -178,16 +178,7 @@ class ProcessFaults:
 
     def resolve(self, target: str | dict[str, str] | None) -> list[int]:
         """The live pids a target names now (sorted)."""
-        tree = sorted(self.process.pids() - {os.getpid()})
-        alive = {p.pid for p in processes() if p.state != 'Z'}
-        tree = [pid for pid in tree if pid in alive]
-        if not isinstance(target, dict):
-            return tree
-        if 'command' in target:
-            pattern = re.compile(target['command'])
-            return [pid for pid in tree if pattern.search(command_of(pid))]
-        lows = node_pids(self.listener, target['node'])
-        return [pid for pid in tree if pid16(pid) in lows]
+        return resolve_target(target, self.process, self.listener)
 
     @staticmethod
     def _describe(target: str | dict[str, str] | None) -> str:
@@ -207,6 +198,20 @@ class ProcessFaults:
         for popen in self.restarted:
             with contextlib.suppress(OSError):
                 popen.poll()
+
+
+def resolve_target(target: str | dict[str, str] | None, process: SystemProcess, listener: Any) -> list[int]:
+    """The live pids of the system a target names now (sorted): 'system' all, {command} by command line,
+    {node} the process hosting the node."""
+    alive = {p.pid for p in processes() if p.state != 'Z'}
+    tree = [pid for pid in sorted(process.pids() - {os.getpid()}) if pid in alive]
+    if not isinstance(target, dict):
+        return tree
+    if 'command' in target:
+        pattern = re.compile(target['command'])
+        return [pid for pid in tree if pattern.search(command_of(pid))]
+    lows = node_pids(listener, target['node'])
+    return [pid for pid in tree if pid16(pid) in lows]
 
 
 def _parent(pid: int) -> int:

@@ -27,6 +27,7 @@ from bagfault.assertions.base import AssertionResult
 from bagfault.closedloop.actions import ProcessFaults
 from bagfault.closedloop.clocks import GRACE, HOLD, ClockCheck
 from bagfault.closedloop.isolation import NAME_POLL, NAME_WAIT, UNKNOWN, pid16, shared, shared_error
+from bagfault.closedloop.links import Links
 from bagfault.closedloop.process import describe_exit
 from bagfault.engine.run import OutputChannel
 from bagfault.engine.stop import Stopped
@@ -66,7 +67,7 @@ class SystemLink(LiveSink):
 
     def __init__(self, node: Any, listener: Any, executor: Any, *, system: SystemUnderTest,
                  process: SystemProcess, scenario: Scenario, catalog: TypeCatalog, rate: float, stop: StopFlag,
-                 recording: McapSink | None, watch: DomainWatch | None = None) -> None:
+                 recording: McapSink | None, watch: DomainWatch | None = None, seed: int = 0) -> None:
         super().__init__(node, rate=rate, clock=True, stop=stop, recording=recording)
         self.watch = watch
         self.clocks = ClockCheck(rate)
@@ -96,6 +97,8 @@ class SystemLink(LiveSink):
         self._last_look = 0.0
         self._unnamed_since: float | None = None  # when the system was first seen on a played topic, unnamed
         self.faults = ProcessFaults(scenario, process, listener)
+        self.links = Links(scenario, seed)
+        self.notes: list[str] = []  # what was done to the system before the bag played (links remapped)
 
     # -- before the first record --------------------------------------------------------------
     def prepare(self, routing: Routing) -> Mapping[str, Schema]:
@@ -108,6 +111,8 @@ class SystemLink(LiveSink):
         for condition in self.system.conditions():
             self._await(condition)
         self.ready_seconds = time.monotonic() - started
+        if self.links:
+            self.notes += self.links.remap(self.process, self.listener, self.node, self.system.stop_timeout)
         self._check_shared(wait=True)
         own = {*self.played, *NOT_RECORDED}
         watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
@@ -118,6 +123,11 @@ class SystemLink(LiveSink):
                                   exclude={*NOT_RECORDED, *self.played},
                                   every_excludes=(*NOT_RECORDED, *OWN_PREFIXES), count_lost=True)
         self._recorder.discover()
+        types = dict(self.listener.get_topic_names_and_types())
+        for topic, link in self.links.links.items():
+            if topic not in self._recorder.subscriptions:
+                self._recorder.subscribe(topic, types[topic][0])  # heard to be passed on, so recorded too
+            self._on_topic(link.remapped, types[topic][0], {})
         for topic, msgtype in watched.items():
             if topic not in self._recorder.subscriptions:
                 self._recorder.subscribe(topic, msgtype)  # advertised later (a monitor's first report)
@@ -222,8 +232,10 @@ class SystemLink(LiveSink):
 
     def _on_message(self, topic: str, data: bytes) -> None:
         now = time.monotonic()
+        passed = self.links.heard(topic, self.bag_time_now(), data) if topic in self.links.links else []
         with self._lock:
             self._queue.append((topic, now, data))
+            self._queue.extend((remapped, now, payload) for remapped, payload in passed)
             if self._hold[0] <= now <= self._hold[1]:
                 self.clocks.during_hold(topic)
 
@@ -238,6 +250,11 @@ class SystemLink(LiveSink):
 
     def _tick(self, bag_time: int) -> None:
         super()._tick(bag_time)
+        released = self.links.due(bag_time) if self.links else []
+        if released:
+            now = time.monotonic()
+            with self._lock:
+                self._queue.extend((remapped, now, payload) for remapped, payload in released)
         now = time.monotonic()
         if now - self._last_look >= DISCOVERY_PERIOD:
             self._last_look = now
@@ -288,7 +305,7 @@ class SystemLink(LiveSink):
 
     def act(self, event: FaultEvent) -> str:
         """A process fault's change is carried out on the system; a clock fault's on /clock."""
-        return self.faults.act(event) or super().act(event)
+        return self.faults.act(event) or self.links.act(event) or super().act(event)
 
     def _check_alive(self, bag_time: int) -> None:
         if self.died_at is not None or self.process.alive():

@@ -134,7 +134,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid, quiet_until=quiet_until,
                             on_quiet=announce)
         link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
-                          catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch)
+                          catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch, seed=seed)
         closing.callback(link.close)
         link.view = view
         run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output, hooks=link,
@@ -149,7 +149,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
             else:
                 run.close(ok=True)
     result = run.result('test', inputs, output, seed)
-    result.notes += view_notes
+    result.notes += view_notes + link.notes
     for described in link.watch.listeners.values() if link.watch is not None else ():
         result.notes.append(f'on ROS domain {lease.domain} too, not part of the system: {described}')
     if run.stats.input_messages == 0:

@@ -17,6 +17,7 @@ from bagfault.injectors.field import FieldInjector
 from bagfault.injectors.image import ImageInjector
 from bagfault.injectors.imu import ImuInjector
 from bagfault.injectors.joint_state import JointStateInjector
+from bagfault.injectors.link import LinkInjector
 from bagfault.injectors.odom import OdomInjector
 from bagfault.injectors.pointcloud2 import PointCloud2Injector
 from bagfault.injectors.scan import ScanInjector
@@ -42,6 +43,7 @@ BUILTIN: tuple[InjectorType, ...] = (
     ImageInjector,
     ProcessInjector,
     ClockInjector,
+    LinkInjector,
 )
 
 _BUILTIN_TYPES: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}

@@ -27,6 +27,7 @@ class SystemInjector:
     actions: ClassVar[tuple[str, ...]] = ()  # config keys of which a fault sets exactly one
     live_only: ClassVar[bool] = True
     message_types: ClassVar[tuple[str, ...]] = ()
+    acts_on: ClassVar[str] = 'system'  # what a mode must offer: 'system' (a running system) or 'clock' (its /clock)
     needs: ClassVar[str] = 'a running system (`bagfault test`)'
 
     @classmethod
@@ -99,6 +100,7 @@ class ClockInjector(SystemInjector):
                min=0.01, max=100.0),
     )
     actions = ('stall', 'jump_s', 'rate')
+    acts_on = 'clock'
     needs = 'a /clock bagfault publishes (`bagfault test`, `play --clock`)'
 
     @classmethod
@@ -107,3 +109,4 @@ class ClockInjector(SystemInjector):
         if config.get('stall') and not has_end:
             return 'a clock stall needs a duration (nothing is played while it lasts)'
         return None
+

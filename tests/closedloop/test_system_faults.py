@@ -278,3 +278,31 @@ explore:
     assert failure.assertions == {'watchdog'}
     duration = dict(failure.minimal.drawn('hang').values)['duration']
     assert 0.8 <= duration <= 1.0 + 0.24 + 0.2, duration
+
+
+def test_a_link_delay_between_planner_and_controller_shows_in_their_latency(tester: LoopRunner, short_bag: Path,
+                                                                            tmp_path: Path) -> None:
+    """The controller is started again with /cmd_vel remapped to /bagfault/link/cmd_vel; bagfault passes the
+    planner's commands on through a 250 ms delay from 2.0 s for 2.0 s. Measured from the recording (each command
+    numbered by the planner, the number kept by the controller): planner-to-controller latency about 250 ms
+    inside the window, a few ms outside it; every command reaches the controller (none dropped by the link)."""
+    token = tester.token()
+    path = scenario(tmp_path, token, '  - {id: cmd_link, type: link, link_topic: /cmd_vel, '
+                                     'subscriber: {node: /controller}}',
+                    '  - {id: lag, injector_id: cmd_link, start: 2.0, duration: 2.0, config: {delay_ms: 250}}')
+    out = tmp_path / 'link.mcap'
+    result = tester.run(str(path), str(short_bag), '-o', str(out), '--keep-logs', str(tmp_path / 'logs'))
+    assert result.code == 0, result.stdout + result.stderr
+    topics = decoded(out)
+    origin = topics['/odom'][0][0]
+    sent = {round(m.linear.y): (t - origin) / NS for t, m in topics['/cmd_vel']}
+    answered = {round(m.linear.y): (t - origin) / NS for t, m in topics['/controller/output']}
+    passed = {round(m.linear.y) for _, m in topics['/bagfault/link/cmd_vel']}
+    assert set(sent) <= passed  # the link passed every command the planner sent
+    latency = {n: answered[n] - sent[n] for n in sent if n in answered}
+    inside = [v for n, v in latency.items() if 2.05 <= sent[n] <= 3.7]
+    outside = [v for n, v in latency.items() if 0.5 <= sent[n] <= 1.9 or 4.3 <= sent[n] <= 5.5]
+    assert len(inside) >= 60 and len(outside) >= 100
+    assert all(0.22 <= v <= 0.32 for v in inside), sorted(inside)
+    assert sorted(outside)[len(outside) // 2] <= 0.03, sorted(outside)
+    assert "link 'cmd_link': pid" in result.stdout and 'remapped to /bagfault/link/cmd_vel' in result.stdout

@@ -1,7 +1,8 @@
 """A system of two rclpy processes for the process and clock fault tests, started as a launch file starts them.
 
     python rover_stack.py [--ros-args ...]      the launcher: starts planner and controller, stops them on SIGINT
-    python rover_stack.py planner               /planner: each /odom -> /cmd_vel (geometry_msgs/Twist)
+    python rover_stack.py planner               /planner: each /odom -> /cmd_vel (geometry_msgs/Twist, numbered
+                                                in linear.y)
     python rover_stack.py controller            /controller: each /cmd_vel -> /controller/output (Twist, x2);
                                                 a 10 Hz sim-time timer -> /controller/tick (std_msgs/Header, now())
 
@@ -46,12 +47,15 @@ def node(role: str) -> None:
     node = rclpy.create_node(role)
     if role == 'planner':
         publisher = node.create_publisher(Twist, '/cmd_vel', 10)
+        sent = [0]
 
         def plan(odom: Odometry) -> None:
             command = Twist()
             command.linear.x = odom.twist.twist.linear.x
+            command.linear.y = float(sent[0])  # a number per command, kept by the controller: pairs them up
             command.angular.z = odom.twist.twist.angular.z
             publisher.publish(command)
+            sent[0] += 1
 
         node.create_subscription(Odometry, '/odom', plan, 10)
     else:
