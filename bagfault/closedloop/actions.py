@@ -139,6 +139,8 @@ class ProcessFaults:
                 if not has_end:
                     return f'{said}; {self._end(event.fault_id)}'
             return said
+        if float(config['cpu_limit']) >= 1.0:
+            return 'cpu_limit 1.0: a whole core, no limit'
         throttle = CpuLimit(pids, float(config['cpu_limit']))
         self.held[event.fault_id] = Held(pids, 'limited', throttle=throttle)
         return f'at most {float(config["cpu_limit"]):g} of a core for pid {_pids(pids)} ({throttle.how})'

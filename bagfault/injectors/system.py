@@ -70,7 +70,7 @@ class ProcessInjector(SystemInjector):
         boolean('restart', 'A killed process starts again at the end of the window (at once without one), with its '
                 'command line, environment and working directory.'),
         double('cpu_limit', 'At most this fraction of one core for the window (cgroup v2 cpu.max where writable, '
-               'else a SIGSTOP/SIGCONT duty cycle).', 1.0, min=0.01, max=0.99),
+               'else a SIGSTOP/SIGCONT duty cycle; 1.0: no limit).', 1.0, min=0.01, max=1.0),
     )
     actions = ('pause', 'kill', 'cpu_limit')
 

@@ -21,11 +21,16 @@ from bagfault.scenario import parse_scenario
 pytestmark = pytest.mark.live  # needs rclpy
 
 
+SYSTEM_TYPES = {'process': ', target: system', 'clock': '', 'link': ', link_topic: /a, subscriber: {node: /b}'}
+
+
 def scenario_with_every_type() -> str:
     injectors, faults = [], []
     for name in injector_types():
         if name == 'trigger_service':
             injectors.append(f'  - {{id: {name}, type: {name}, proxy_service: /s, target_service: /s_raw}}')
+        elif name in SYSTEM_TYPES:  # they act on a running system: no topics
+            injectors.append(f'  - {{id: {name}, type: {name}{SYSTEM_TYPES[name]}}}')
         else:
             injectors.append(f'  - {{id: {name}, type: {name}, input_topic: /{name}_raw, output_topic: /{name}}}')
         config = '{parent_frame: odom, child_frame: base_link}' if name == 'tf' else '{}'
