@@ -86,7 +86,7 @@ def test_a_system_fault_sets_exactly_one_action(kind: str, data: st.DataObject) 
     ('injectors:\n  - {id: c, type: clock, input_topic: /a, output_topic: /b}\nfaults: []\n',
      "injector type 'clock' acts on the running system; it takes no input_topic"),
     ('injectors:\n  - {id: l, type: link, link_topic: /a, subscriber: system}\nfaults: []\n',
-     "subscriber: name one process"),
+     'subscriber: name one process'),
     ('injectors:\n  - {id: p, type: process}\nfaults: []\n', "missing required key 'target'"),
 ])
 def test_what_a_system_injector_refuses_is_one_line_naming_it(text: str, said: str) -> None:
