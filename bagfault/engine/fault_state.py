@@ -23,13 +23,14 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.engine.build import build_injector
 from bagfault.errors import FieldValueError, InjectorConfigError, MalformedMessageError
+from bagfault.events import FaultEvent
 from bagfault.injectors.registry import get_injector_type
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
     from bagfault.engine.scheduler import FaultScheduler
-    from bagfault.events import FaultEvent, FaultSource
+    from bagfault.events import FaultSource
     from bagfault.faults.active import ActiveFault
     from bagfault.injectors.base import Injector, RawMessage
     from bagfault.io.types import TypeCatalog
@@ -133,13 +134,77 @@ class FaultState:
             assert self.scheduler is not None
             return self.scheduler.set_state(fault_id, on, time, source)
 
-    def rebase(self, scenario: Scenario, keep: dict[str, dict[str, Any]]) -> FaultState:
-        """A state for a reloaded scenario that keeps the given run-time values (`keep`: fault -> key -> value)."""
-        state = FaultState(scenario)
-        for fault_id, values in keep.items():
-            for key, value in values.items():
-                state.configure(fault_id, key, value)
-        return state
+    def start(self, origin: int, seed: int) -> list[FaultEvent]:
+        """A live pass starts at bag time `origin`: its scheduler, and the events due then (startup faults)."""
+        from bagfault.engine.scheduler import FaultScheduler  # noqa: PLC0415
+
+        with self.lock:
+            self.scheduler = FaultScheduler(self.scenario, origin, seed)
+            return self.scheduler.advance(origin)
+
+    def advance(self, now: int) -> list[FaultEvent]:
+        """The scheduled changes due by `now`, applied; their events (none before the pass starts)."""
+        with self.lock:
+            if self.scheduler is None:
+                return []
+            due = self.scheduler.next_time()
+            return self.scheduler.advance(now) if due is not None and due <= now else []
+
+    @property
+    def started(self) -> bool:
+        """True once a pass started (a scheduler switches the faults)."""
+        return self._scheduler is not None
+
+    def active(self) -> dict[str, int]:
+        """Faults on now, with the bag time each switched on (a copy)."""
+        with self.lock:
+            return dict(self.scheduler.active) if self.scheduler is not None else {}
+
+    def reloaded(self, scenario: Scenario, now: int, seed: int,
+                 manual: dict[str, bool]) -> tuple[FaultState, list[FaultEvent], list[str], dict[str, bool]]:
+        """The state of a reloaded scenario at bag time `now`, what a live pass kept from this one.
+
+        A config value set at run time stays unless the file now gives that key another value; a fault switched
+        from outside (`manual`: fault -> state) keeps its state while that state still holds. Returns the new
+        state, the events of the change (`reload`), what was kept ('fault.key=value') and the switches kept."""
+        with self.lock:
+            assert self.scheduler is not None
+            old_active = set(self.scheduler.active)
+            keep: dict[str, dict[str, Any]] = {}
+            kept: list[str] = []
+            for fault in scenario.faults:
+                loaded = self.scenario.fault(fault.id)
+                for key, value in self.changed.get(fault.id, {}).items():
+                    if loaded is not None and fault.config.get(key) == loaded.config.get(key):
+                        keep.setdefault(fault.id, {})[key] = value
+                        kept.append(f'{fault.id}.{key}={value}')
+            state = FaultState(scenario)
+            for fault_id, values in keep.items():
+                for key, value in values.items():
+                    state.configure(fault_id, key, value)
+            state.start(self.scheduler.origin, seed)
+            assert state.scheduler is not None
+            state.scheduler.advance(now)
+            switched = {}
+            for fault_id, on in manual.items():
+                still = (fault_id in old_active) == on  # nothing has switched it since
+                if still and scenario.fault(fault_id) is not None:
+                    state.scheduler.set_state(fault_id, on, self.scheduler.active.get(fault_id, now), 'manual')
+                    switched[fault_id] = on
+                    kept.append(f'{fault_id}.active={"true" if on else "false"}')
+            before = {f.id: f for f in self.faults()}
+            events = [FaultEvent(now, f.id, f.injector_id, 'inactive', 'reload', f.describe_config())
+                      for f in self.faults() if f.id in old_active and f.id not in state.scheduler.active]
+            for fault in state.faults():
+                old = before.get(fault.id)
+                if old is None or old.config != fault.config:
+                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'config_updated', 'reload',
+                                             fault.describe_config()))
+                if fault.id in state.scheduler.active and fault.id not in old_active:
+                    state.scheduler.active[fault.id] = now
+                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'active', 'reload',
+                                             fault.describe_config()))
+            return state, events, kept, switched
 
 
 def inject(injector: Injector, active: Sequence[ActiveFault], messages: list[RawMessage], *, batch: bool,

@@ -1,4 +1,4 @@
-"""A live session: the offline scheduler, injectors and run loop (oracles, sink) on a live clock.
+"""A live session: the offline fault state, injectors and run loop (oracles, sink) on a live clock.
 
 No rclpy here. The proxy node hands each received message (serialized
 bytes) with the ROS time to `receive`, publishes what comes back (now, or
@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Any
 
 from bagfault.engine.fault_state import FaultState, inject
 from bagfault.engine.run import NullSink, Run
-from bagfault.engine.scheduler import FaultScheduler
 from bagfault.errors import (
     EngineError,
     LiveError,
@@ -152,11 +151,6 @@ class LiveSession:
         return self.state.scenario
 
     @property
-    def scheduler(self) -> FaultScheduler | None:
-        """The fault state's scheduler, once the session started."""
-        return self.state.scheduler
-
-    @property
     def stats(self) -> RunStats:
         """Counts and times of the session so far."""
         return self.run.stats
@@ -166,7 +160,7 @@ class LiveSession:
         return self.state.injector(spec, msgtype, self.catalog)
 
     def _refresh_active(self) -> None:
-        assert self.scheduler is not None
+        assert self.state.started
         for topic in self.topics:
             topic.active = self.state.active_of(topic.spec.id)
 
@@ -185,34 +179,25 @@ class LiveSession:
         with self.lock:
             now = self.clock()
             self.run.begin(now)
-            self.state.scheduler = FaultScheduler(self.scenario, now, self.seed)
-            self._publish_events(self.state.scheduler.advance(now))
+            self._publish_events(self.state.start(now, self.seed))
             self._refresh_active()
 
     @property
     def started(self) -> bool:
         """True after `start`."""
-        return self.scheduler is not None
+        return self.state.started
 
     def advance(self) -> None:
         """Apply scheduled changes due by now."""
         with self.lock:
-            if self.scheduler is None:
-                return
-            now = self.clock()
-            due = self.scheduler.next_time()
-            if due is not None and due <= now:
-                self._publish_events(self.scheduler.advance(now))
+            self._publish_events(self.state.advance(self.clock()))
 
     # -- messages ---------------------------------------------------------------------
     def receive(self, topic: LiveTopic, data: bytes) -> list[RawMessage]:
         """A message arrived on the input topic: record it and return what to publish, with due times."""
         with self.lock:
             now = self.clock()
-            if self.scheduler is not None:
-                due = self.scheduler.next_time()
-                if due is not None and due <= now:
-                    self._publish_events(self.scheduler.advance(now))
+            self._publish_events(self.state.advance(now))
             topic.received += 1
             self.run.read(1, now)
             self.run.message(self._channel(topic.input_topic, topic.msgtype), now, now, data)
@@ -261,7 +246,7 @@ class LiveSession:
     def set_active(self, fault_id: str, active: bool, source: FaultSource = 'manual') -> None:
         """Switch a fault on or off now (a parameter or service call)."""
         with self.lock:
-            if self.scheduler is None:
+            if not self.state.started:
                 raise LiveError('the proxy has not started yet')
             if self.state.fault(fault_id) is None:
                 raise LiveError(f'no fault {fault_id!r}')
@@ -297,38 +282,16 @@ class LiveSession:
     def reload(self, scenario: Scenario) -> tuple[list[tuple[LiveTopic, RawMessage]], list[str]]:
         """Take new fault definitions; the injector layout must stay as it is (anchor's rules).
 
-        What was changed at run time survives where the file did not change it: a fault switched by a
-        parameter keeps its state (while that state still holds), a config value set at run time stays
-        unless the file now gives that key another value. Returns the messages old injectors held and what
-        was kept.
+        What was changed at run time survives where the file did not change it (FaultState.reloaded).
+        Returns the messages old injectors held and what was kept.
         """
         with self.lock:
             if _layout(scenario) != _layout(self.scenario):
                 raise ReloadError('reload rejected: injector ids, types, endpoints, QoS and count must stay the same')
-            if self.scheduler is None:
+            if not self.state.started:
                 raise ReloadError('reload rejected: the proxy has not started yet')
-            now = self.clock()
-            old_active = set(self.scheduler.active)
             previous = self.state
-            keep: dict[str, dict[str, Any]] = {}
-            kept: list[str] = []
-            for fault in scenario.faults:  # a value set at run time stays unless the file changed that key
-                loaded = previous.scenario.fault(fault.id)
-                for key, value in previous.changed.get(fault.id, {}).items():
-                    if loaded is not None and fault.config.get(key) == loaded.config.get(key):
-                        keep.setdefault(fault.id, {})[key] = value
-                        kept.append(f'{fault.id}.{key}={value}')
-            state = previous.rebase(scenario, keep)
-            scheduler = FaultScheduler(scenario, self.scheduler.origin, self.seed)
-            scheduler.advance(now)
-            manual = {}
-            for fault_id, on in self.manual.items():
-                still = (fault_id in old_active) == on  # nothing has switched it since
-                if still and scenario.fault(fault_id) is not None:
-                    scheduler.set_state(fault_id, on, self.scheduler.active.get(fault_id, now), 'manual')
-                    manual[fault_id] = on
-                    kept.append(f'{fault_id}.active={"true" if on else "false"}')
-            state.scheduler = scheduler
+            state, events, kept, manual = previous.reloaded(scenario, self.clock(), self.seed, self.manual)
             self.state = state
             try:
                 held = [item for topic in self.topics for item in self._rebuild(topic.spec.id)]
@@ -338,28 +301,13 @@ class LiveSession:
                     topic.injector = self._build(topic.spec, topic.msgtype)
                 raise ReloadError(f'reload rejected: {exc}') from None
             self.manual = manual
-            before = {f.id: f for f in previous.faults()}
-            events = []
-            for fault in previous.faults():
-                if fault.id in old_active and fault.id not in scheduler.active:
-                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'inactive', 'reload',
-                                             fault.describe_config()))
-            for fault in state.faults():
-                old = before.get(fault.id)
-                if old is None or old.config != fault.config:
-                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'config_updated', 'reload',
-                                             fault.describe_config()))
-                if fault.id in scheduler.active and fault.id not in old_active:
-                    scheduler.active[fault.id] = now
-                    events.append(FaultEvent(now, fault.id, fault.injector_id, 'active', 'reload',
-                                             fault.describe_config()))
             self._publish_events(events)
             return held, kept
 
     def active_faults(self, injector_id: str) -> list[ActiveFault]:
         """Faults of one injector active now (service injectors ask per call)."""
         with self.lock:
-            if self.scheduler is None:
+            if not self.state.started:
                 return []
             return self.state.active_of(injector_id)
 
@@ -367,7 +315,7 @@ class LiveSession:
     def faults(self) -> list[FaultStatus]:
         """Every fault with its state and config, in file order."""
         with self.lock:
-            active = self.scheduler.active if self.scheduler is not None else {}
+            active = self.state.active()
             return [FaultStatus(f.id, f.injector_id, f.id in active, copy.deepcopy(f.config))
                     for f in self.state.faults()]
 

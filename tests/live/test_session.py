@@ -188,4 +188,4 @@ def test_reload_keeps_what_was_set_at_run_time_unless_the_file_changed_it() -> N
     session.advance()
     _, kept = session.reload(parse_scenario(SCENARIO))
     assert kept == ['bias.angular_velocity_z_bias=2.0', 'bias.active=false']
-    assert not session.scheduler.active
+    assert not session.state.active()
