@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from bagfault.explore.shrink import ShrinkMode
     from bagfault.io.leading_copy import LeadingCopy
     from bagfault.live.recorder import RecordResult
+    from bagfault.live.viewing import OpenView
     from bagfault.spec.yamlnodes import PathKey
 
 DEFAULT_SEED = 0
@@ -68,6 +69,15 @@ def scenario_of(scenario: Scenario | str | Path, *, space: bool = False, mode: s
                 raise UsageError(f'{loaded.source or loaded.name}: injector {injector.id!r} ({injector.type}) needs '
                                  f'{cls.needs}; `{mode}` has none')
     return loaded
+
+
+def _view(address: str | None) -> OpenView | None:
+    """The Foxglove view's opener for `--foxglove ADDRESS` (the live commands and the closed loop receive it)."""
+    if address is None:
+        return None
+    from bagfault.view.foxglove import opener  # noqa: PLC0415 - foxglove-sdk is an optional extra
+
+    return opener(address)
 
 
 def seed_of(scenario: Scenario, seed: int | None) -> int:
@@ -205,7 +215,7 @@ def proxy(
     if out is not None:
         _check_output(out, 'recording', [], loaded, force=force)
     return run_proxy(loaded, seed=seed_of(loaded, seed), record=out, use_sim_time=use_sim_time,
-                     stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args), foxglove=foxglove)
+                     stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args), view=_view(foxglove))
 
 
 def play(
@@ -264,7 +274,7 @@ def play(
                     wait_for=[t if t == 'all' or t.startswith('/') else '/' + t for t in wait_for],
                     topics=[t if t.startswith('/') else '/' + t for t in topics],
                     start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
-                    ros_args=[*mapped, *ros_args], foxglove=foxglove, ros=ros)
+                    ros_args=[*mapped, *ros_args], view=_view(foxglove), ros=ros)
 
 
 def record(
@@ -346,7 +356,8 @@ def test(
     for number, path in enumerate(outputs, 1):
         folder = logs if logs is None or repeat == 1 else logs / f'run{number}'
         results.append(run_test(loaded, paths, path, system=under_test, seed=seed_of(loaded, seed), rate=rate,
-                                logs=folder, stop=flag, foxglove=foxglove, observers=observers if number == 1 else ()))
+                                logs=folder, stop=flag, view=_view(foxglove),
+                                observers=observers if number == 1 else ()))
     return results[0] if repeat == 1 else fold(results)
 
 

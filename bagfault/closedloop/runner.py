@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from bagfault.engine.result import RunResult
     from bagfault.engine.run import Observer
     from bagfault.engine.stop import StopFlag
+    from bagfault.live.viewing import OpenView
     from bagfault.spec.model import Scenario
     from bagfault.spec.system import SystemUnderTest
 
@@ -57,7 +58,7 @@ ATTEMPTS = 3  # leased domains tried before giving up on finding one without oth
 
 
 def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *, system: SystemUnderTest,
-             seed: int, rate: float, logs: Path | None, stop: StopFlag, foxglove: str | None = None,
+             seed: int, rate: float, logs: Path | None, stop: StopFlag, view: OpenView | None = None,
              observers: Sequence[Observer] = (), **lease: int) -> RunResult:
     """One closed-loop run; the recording (if `output`) is complete on return, the system stopped; `observers`
     see every record of the run, the system's messages among them (report collectors). The system starts at
@@ -75,7 +76,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
         with held:
             try:
                 return _run_on(held, scenario, inputs, output, system=system, seed=seed, rate=rate, logs=logs,
-                               stop=stop, foxglove=foxglove, observers=observers)
+                               stop=stop, view=view, observers=observers)
             except CrowdedDomainError as exc:
                 crowded[exc.domain] = exc.found
                 log.info(f'ROS domain {exc.domain} has nodes of other processes '
@@ -87,7 +88,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
 
 def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
             system: SystemUnderTest, seed: int, rate: float, logs: Path | None, stop: StopFlag,
-            foxglove: str | None, observers: Sequence[Observer]) -> RunResult:
+            view: OpenView | None, observers: Sequence[Observer]) -> RunResult:
     """`run_test` on one leased domain (CrowdedDomainError when other processes show nodes there at first)."""
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.node import Node  # noqa: PLC0415
@@ -114,14 +115,12 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         executor = SingleThreadedExecutor(context=context)  # hands message info over: what was lost is counted
         closing.callback(executor.shutdown)
         executor.add_node(listener)
-        view = None
-        if foxglove is not None:
-            from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
-
-            view = FoxgloveView(foxglove, scenario)  # read-only: a test's faults are its scenario's
-            closing.callback(view.close)
-            closing.callback(lambda: view_notes.extend(view.notes() if view is not None else ()))
-            log.info(f'Foxglove view on {view.url}')
+        shown = None
+        if view is not None:
+            shown = view(scenario)  # read-only: a test's faults are its scenario's
+            closing.callback(shown.close)
+            closing.callback(lambda: view_notes.extend(shown.notes() if shown is not None else ()))
+            log.info(f'Foxglove view on {shown.url}')
         process = SystemProcess(command, env=system_env(system, lease.domain), cwd=system.cwd,
                                 shell=system.shell, logs=folder, scratch=None if logs is not None else Path(scratch))
         closing.callback(_stopped, process, system, report)
@@ -136,7 +135,7 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
                           catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch, seed=seed)
         closing.callback(link.close)
-        link.view = view
+        link.view = shown
         run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output, hooks=link,
                               observers=observers, withheld=frozenset(system.publishes))
         with run:  # its black boxes are dropped unless the recording is complete

@@ -44,6 +44,7 @@ from bagfault.scenario import load_scenario
 if TYPE_CHECKING:
     from bagfault.engine.stop import StopFlag
     from bagfault.events import FaultEvent
+    from bagfault.live.viewing import LiveView, OpenView
     from bagfault.spec.model import FaultSpec, Scenario
 
 NODE_NAME = 'bagfault'
@@ -66,11 +67,11 @@ class ProxyNode:
         record: Path | None = None,
         use_sim_time: bool = False,
         ros_args: list[str] | None = None,
-        foxglove: str | None = None,
+        view: OpenView | None = None,
     ) -> None:
         self.scenario = scenario
-        self.foxglove = foxglove
-        self.view: Any = None
+        self.open_view = view
+        self.view: LiveView | None = None
         self.anchor: Any = None
         self.stop = stop
         self.seed = seed
@@ -124,12 +125,11 @@ class ProxyNode:
                 'tool': 'bagfault', 'version': __version__, 'mode': 'proxy', 'seed': str(self.seed),
                 'scenario': self.scenario.name}, self.scenario, self.now())
         sink: Any = self.recording
-        if self.foxglove is not None:
+        if self.open_view is not None:
             from bagfault.engine.run import NullSink  # noqa: PLC0415
-            from bagfault.view.foxglove import FoxgloveView, ViewSink  # noqa: PLC0415
 
-            self.view = FoxgloveView(self.foxglove, self.scenario, reload=self.reload_scenario, editable=True)
-            sink = ViewSink(self.view, self.recording if self.recording is not None else NullSink())
+            self.view = self.open_view(self.scenario, reload=self.reload_scenario, editable=True)
+            sink = self.view.sink(self.recording if self.recording is not None else NullSink())
             self.logger.info(f'Foxglove view on {self.view.url}')
         self.session = LiveSession(self.scenario, catalog, types, self.now, seed=self.seed, sink=sink,
                                    blackbox_base=self.record_path, observed=watched, offers=self._offers)

@@ -38,8 +38,8 @@ if TYPE_CHECKING:
     from bagfault.engine.stop import StopFlag
     from bagfault.io.mcap_sink import McapSink
     from bagfault.live.params import FaultParameters
+    from bagfault.live.viewing import LiveView, OpenView
     from bagfault.spec.model import Scenario
-    from bagfault.view.foxglove import FoxgloveView
 
 LOOP_GAP = 1_000_000  # ns between the end of a pass and the start of the next
 ACK_WAIT = 5.0  # seconds after the last message for subscribers to acknowledge it (0.5 after a stop)
@@ -61,32 +61,30 @@ def run_play(
     start_offset: float = 0.0,
     clock_hz: float = 100.0,
     ros_args: list[str] | None = None,
-    foxglove: str | None = None,
+    view: OpenView | None = None,
     ros: bool = True,
 ) -> RunResult:
-    """Play until the end of the bag (or forever with `loop`, or until a stop with `foxglove`); the recording
+    """Play until the end of the bag (or forever with `loop`, or until a stop with a `view`); the recording
     is complete on return. `ros=False` plays into the Foxglove view only (no rclpy needed)."""
     total = RunStats()
     numbers: dict[str, int] = {}  # black box numbering continues across passes
     passes = 0
     last: Run | None = None
     first, end = _time_range(inputs)
-    control = FaultControl(scenario) if foxglove is not None or ros else None
+    control = FaultControl(scenario) if view is not None or ros else None
     view_notes: list[str] = []
     metadata = {**provenance(scenario, inputs, seed, (), 0.0), 'mode': 'play'}
     with _node(ros, stop, ros_args, control) as (node, start_values), \
             maybe_recording(record, metadata, scenario, first) as recording, contextlib.ExitStack() as closing:
         sink = _sink(node, rate=rate, clock=clock, stop=stop, recording=recording, delay=delay,
                      wait_for=wait_for, clock_hz=clock_hz, topics=topics, start_offset=start_offset)
-        view: FoxgloveView | None = None
-        if foxglove is not None:
-            from bagfault.view.foxglove import FoxgloveView  # noqa: PLC0415
-
-            view = FoxgloveView(foxglove, scenario, controls=control, playback=sink, time_range=(first, end))
-            closing.callback(view.close)
-            closing.callback(lambda: view_notes.extend(view.notes() if view is not None else ()))
-            sink.view = view
-            log.info(f'Foxglove view on {view.url} (open it in the Foxglove app: Open connection, '
+        shown: LiveView | None = None
+        if view is not None:
+            shown = view(scenario, controls=control, playback=sink, time_range=(first, end))
+            closing.callback(shown.close)
+            closing.callback(lambda: view_notes.extend(shown.notes() if shown is not None else ()))
+            sink.view = shown
+            log.info(f'Foxglove view on {shown.url} (open it in the Foxglove app: Open connection, '
                      'Foxglove WebSocket)')
         while True:
             if control is not None:  # -p values at the start of every pass, as manual switches
@@ -105,9 +103,9 @@ def run_play(
             if loop:
                 sink.offset += (run.stats.last_time or 0) - (run.stats.first_time or 0) + LOOP_GAP
                 continue
-            if view is None:
+            if shown is None:
                 break
-            view.ended(end)  # stay until Ctrl-C; a seek plays again
+            shown.ended(end)  # stay until Ctrl-C; a seek plays again
             while not stop.is_set() and not sink.seeking():
                 stop.wait(0.05)
             if not sink.seeking():

@@ -13,6 +13,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from bagfault.engine.stop import StopFlag
+    from bagfault.live.viewing import OpenView
     from bagfault.spec.model import Scenario
 
 
@@ -24,14 +25,14 @@ def run_proxy(
     record: Path | None = None,
     use_sim_time: bool = False,
     ros_args: list[str] | None = None,
-    foxglove: str | None = None,
+    view: OpenView | None = None,
 ) -> RunResult:
     """Proxy until `stop` is set (by a signal or the caller); the recording is complete on return."""
 
 
     with ros_context(stop) as context, ProxyNode(scenario, context, stop, seed=seed, record=record,
                                                  use_sim_time=use_sim_time, ros_args=ros_args,
-                                                 foxglove=foxglove) as proxy:
+                                                 view=view) as proxy:
         executor = make_executor(context, message_info=record is not None)
         executor.add_node(proxy.node)
         with contextlib.ExitStack() as spinning:

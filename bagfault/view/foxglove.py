@@ -27,9 +27,12 @@ from bagfault.injectors.registry import get_injector_type
 from bagfault.view.relay import Relay
 
 if TYPE_CHECKING:
-    from bagfault.engine.run import Run
+    from collections.abc import Callable
+
+    from bagfault.engine.run import Run, Sink
     from bagfault.events import Event
     from bagfault.live.pacer import Pacer
+    from bagfault.live.viewing import LiveView, OpenView
     from bagfault.spec.model import FaultSpec, Scenario
 
 DEFAULT_PORT = 8765
@@ -167,6 +170,10 @@ class FoxgloveView:
             status=PlaybackStatus.Ended, current_time=bag_time, playback_speed=self._rate(), did_seek=False,
             request_id=None))
 
+    def sink(self, inner: Sink) -> Sink:
+        """A sink that writes to `inner` and shows every record here (the proxy's run)."""
+        return ViewSink(self, inner)
+
     def close(self) -> None:
         """Stop the server (and its relay)."""
         self.relay.close()
@@ -281,3 +288,15 @@ class ViewSink:
         """Written and shown."""
         self.inner.write(channel_id, log_time, publish_time, data)
         self.view.write(self._shown[channel_id], log_time, data)
+
+
+def opener(address: str) -> OpenView:
+    """The view's opener for `--foxglove ADDRESS`, which the API hands to the live commands and the closed loop."""
+
+    def open_view(scenario: Scenario, *, controls: Any = None, playback: Any = None,
+                  time_range: tuple[int, int] | None = None, reload: Callable[[], tuple[bool, str]] | None = None,
+                  editable: bool | None = None) -> LiveView:
+        return FoxgloveView(address, scenario, controls=controls, playback=playback, time_range=time_range,
+                            reload=reload, editable=editable)
+
+    return open_view
