@@ -187,9 +187,9 @@ class ProcessFaults:
         return str(target) if not isinstance(target, dict) else ', '.join(f'{k}: {v}' for k, v in target.items())
 
     def died_by_us(self, pid: int, returncode: int | None) -> bool:
-        """True when the process `pid` ended by a signal bagfault sent it."""
-        number = self.caused.get(pid)
-        return number is not None and returncode is not None and returncode in (-number, 128 + number)
+        """True when the process `pid` ended after bagfault sent it a kill: by the signal, or on its own after
+        handling it (a node stops cleanly on SIGINT or SIGTERM and exits with 0)."""
+        return pid in self.caused and returncode is not None
 
     def close(self) -> None:
         """The end of the run: paused processes go on and throttles stop (the system is stopped next)."""

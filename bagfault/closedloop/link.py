@@ -348,7 +348,9 @@ class SystemLink(LiveSink):
         self._check_shared(wait=True)
         self._hand_over(end)
         self._check_alive(end)
-        if self.died_at is None:
+        if self.died_at is None and not self.process.alive():  # a process fault's kill without restart
+            self._verdict('passed', end, 'the system under test ran until a process fault killed it (not a crash)')
+        elif self.died_at is None:
             self._verdict('passed', end, 'the system under test ran until the end of the bag and its tail')
 
     def lost(self) -> dict[str, int]:

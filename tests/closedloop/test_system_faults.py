@@ -306,3 +306,19 @@ def test_a_link_delay_between_planner_and_controller_shows_in_their_latency(test
     assert all(0.22 <= v <= 0.32 for v in inside), sorted(inside)
     assert sorted(outside)[len(outside) // 2] <= 0.03, sorted(outside)
     assert "link 'cmd_link': pid" in result.stdout and 'remapped to /bagfault/link/cmd_vel' in result.stdout
+
+
+def test_a_kill_without_restart_is_not_a_crash(tester: LoopRunner, short_bag: Path, tmp_path: Path) -> None:
+    """SIGTERM to the stack's launcher (the system's main process, found by its command line) at 2.0 s, no
+    restart: the main process is gone by bagfault's hand, so system_alive passes and says so; its nodes, left
+    running, are still stopped at the end (nothing of the system survives the run)."""
+    token = tester.token()
+    path = scenario(tmp_path, token, f'  - {{id: launcher, type: process, target: {{command: "{token}"}}}}',
+                    '  - {id: down, injector_id: launcher, start: 2.0, config: {kill: true, signal: SIGTERM}}')
+    result = tester.run(str(path), str(short_bag), '-o', str(tmp_path / 'down.mcap'))
+    assert result.code == 0, result.stdout + result.stderr
+    assert result.report is not None
+    [alive] = [a for a in result.report['assertions'] if a['id'] == 'system_alive']
+    assert alive['state'] == 'passed' and 'until a process fault killed it' in alive['message']
+    assert result.report['system_under_test']['leftover_pids'] == []
+    assert running_with(token) == []
