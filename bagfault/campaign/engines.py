@@ -94,7 +94,11 @@ def _die_with_parent() -> None:
 
 
 def _job_process(spec: Spec, log: str, conn: Connection) -> None:
-    """The job process: its own session, its output in `log`, its result sent back on `conn`."""
+    """The job process: its own session, its output in `log`, its result sent back on `conn`. A stop that comes
+    before its output goes to the log ends it quietly (the default actions): a traceback of an interrupted job
+    never reaches the command's stderr."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
     _die_with_parent()
     os.setsid()
     with contextlib.suppress(OSError):  # a Ray worker runs at nice 15; a job is the work, not housekeeping
@@ -103,11 +107,11 @@ def _job_process(spec: Spec, log: str, conn: Connection) -> None:
     def interrupt(number: int, _frame: object) -> None:  # the engine's timeout: stop what the run started
         raise KeyboardInterrupt(signal.Signals(number).name)
 
-    signal.signal(signal.SIGTERM, interrupt)
-    signal.signal(signal.SIGINT, interrupt)
     handle = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     os.dup2(handle, 1)
     os.dup2(handle, 2)
+    signal.signal(signal.SIGTERM, interrupt)
+    signal.signal(signal.SIGINT, interrupt)
     conn.send(run_job(spec))
     conn.close()
 

@@ -41,7 +41,7 @@ def test_battery_scenario_names_the_unknown_type_and_skips_it(scenarios):
                                          "(battery_voltage_bias) are skipped and the others run, as the anchor does "
                                          "(\"assuming external "
                                          "plugin\"; known: clock, compressed_image, field, image, imu, joint_state, "
-                                         "odom, pointcloud2, process, scan, tf, topic, trigger_service)")
+                                         "link, odom, pointcloud2, process, scan, tf, topic, trigger_service)")
     assert ':4:11: ' in scenario.warnings[0] and len(scenario.warnings) == 1
 
 
