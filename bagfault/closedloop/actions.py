@@ -107,7 +107,7 @@ class ProcessFaults:
         self.listener = listener
         self.held: dict[str, Held] = {}
         self.caused: dict[int, int] = {}  # pid -> signal bagfault killed it with
-        self.restarted: list[subprocess.Popen[bytes]] = []
+        self.restarted: list[subprocess.Popen[bytes]] = []  # held so they are reaped with this run
 
     def act(self, event: FaultEvent) -> str:
         """Carry out a change of a process fault; what was done ('' for other faults or nothing to do)."""
@@ -197,9 +197,6 @@ class ProcessFaults:
             held = self.held[fault_id]
             if held.action != 'killed':
                 self._end(fault_id)
-        for popen in self.restarted:
-            with contextlib.suppress(OSError):
-                popen.poll()
 
 
 def resolve_target(target: str | dict[str, str] | None, process: SystemProcess, listener: Any) -> list[int]:

@@ -14,6 +14,7 @@ at a time: refused before the run.
 from __future__ import annotations
 
 import heapq
+import os
 import signal
 import subprocess
 import threading
@@ -22,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from bagfault.closedloop.actions import command_of, launch_of, resolve_target
+from bagfault.closedloop.process import processes
 from bagfault.errors import ClosedLoopError
 from bagfault.faults.active import ActiveFault
 from bagfault.faults.rng import FaultRandom
@@ -188,10 +190,6 @@ def _describe(target: str | dict[str, str]) -> str:
 
 def _stop(pid: int, timeout: float) -> None:
     """SIGINT (a node's clean stop), SIGKILL after `timeout`; returns once the process has ended."""
-    import os  # noqa: PLC0415
-
-    from bagfault.closedloop.process import processes  # noqa: PLC0415
-
     for number, wait in ((signal.SIGINT, timeout), (signal.SIGKILL, 5.0)):
         try:
             os.kill(pid, number)

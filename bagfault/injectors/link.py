@@ -27,7 +27,6 @@ class LinkInjector(SystemInjector):
                     'plays).', required=True),
     )
     fields = TopicInjector.fields
-    stream_keys = TopicInjector.stream_keys
 
     @classmethod
     def check_options(cls, options: dict[str, Any]) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import signal
+import statistics
 import sys
 from pathlib import Path
 
@@ -282,8 +283,9 @@ def test_a_link_delay_between_planner_and_controller_shows_in_their_latency(test
                                                                             tmp_path: Path) -> None:
     """The controller is started again with /cmd_vel remapped to /bagfault/link/cmd_vel; bagfault passes the
     planner's commands on through a 250 ms delay from 2.0 s for 2.0 s. Measured from the recording (each command
-    numbered by the planner, the number kept by the controller): planner-to-controller latency about 250 ms
-    inside the window, a few ms outside it; every command reaches the controller (none dropped by the link)."""
+    numbered by the planner, the number kept by the controller): planner-to-controller latency never under
+    250 ms inside the window, its median 250 ms above the median outside it (a few ms); every command reaches
+    the controller (none dropped by the link)."""
     token = tester.token()
     path = scenario(tmp_path, token, '  - {id: cmd_link, type: link, link_topic: /cmd_vel, '
                                      'subscriber: {node: /controller}}',
@@ -301,8 +303,11 @@ def test_a_link_delay_between_planner_and_controller_shows_in_their_latency(test
     inside = [v for n, v in latency.items() if 2.05 <= sent[n] <= 3.7]
     outside = [v for n, v in latency.items() if 0.5 <= sent[n] <= 1.9 or 4.3 <= sent[n] <= 5.5]
     assert len(inside) >= 60 and len(outside) >= 100
-    assert all(0.22 <= v <= 0.32 for v in inside), sorted(inside)
-    assert sorted(outside)[len(outside) // 2] <= 0.03, sorted(outside)
+    # the delay is a floor inside the window; the medians differ by it (a loaded machine adds to single ones)
+    median_inside, median_outside = statistics.median(inside), statistics.median(outside)
+    assert min(inside) >= 0.24, sorted(inside)
+    assert 0.245 <= median_inside <= 0.30 and median_outside <= 0.03, (sorted(inside), sorted(outside))
+    assert 0.22 <= median_inside - median_outside <= 0.28
     assert "link 'cmd_link': pid" in result.stdout and 'remapped to /bagfault/link/cmd_vel' in result.stdout
 
 
