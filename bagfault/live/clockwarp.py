@@ -9,12 +9,25 @@ window's start; at the window's end it is bag time again (a jump back).
 from __future__ import annotations
 
 import struct
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bagfault.units import NS
 
+if TYPE_CHECKING:
+    from bagfault.spec.model import FaultSpec
+
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 CLOCK_TRACE = '/bagfault/clock'  # what /clock said, recorded at the bag time it said it
+
+
+def stall_seconds(fault: FaultSpec) -> float:
+    """How long one activation of a stall lasts in bag seconds: a repeat's `on` (when it is shorter than the
+    period), a random activation's `hold`, else the fault's `duration` (0 without one: a switch from outside)."""
+    if fault.repeat is not None and fault.repeat.on < fault.repeat.period:
+        return fault.repeat.on
+    if fault.probability_per_second is not None and fault.hold is not None:
+        return fault.hold
+    return fault.duration or 0.0
 
 
 def clock_cdr(value: int) -> bytes:

@@ -17,7 +17,7 @@ from rclpy.exceptions import InvalidTopicNameException
 
 from bagfault.engine.stop import Stopped
 from bagfault.errors import LiveError
-from bagfault.live.clockwarp import CLOCK_TRACE, CLOCK_TYPE, ClockWarps, clock_cdr
+from bagfault.live.clockwarp import CLOCK_TRACE, CLOCK_TYPE, ClockWarps, clock_cdr, stall_seconds
 from bagfault.live.pacer import CLOCK_PERIOD, CLOCK_TOPIC, Pacer
 from bagfault.live.ros import has_interface, interface_class, qos, recorded_qos, unacknowledged
 from bagfault.units import NS
@@ -172,7 +172,7 @@ class LiveSink(Pacer):
             said = self.warps.start(event.fault_id, event.time, fault.config)
             self._publish_clock(event.time)
             return said
-        seconds = (fault.duration or 0.0) / self.rate
+        seconds = stall_seconds(fault) / self.rate
         self.pause()
         try:
             self._stall(time.monotonic() + seconds)

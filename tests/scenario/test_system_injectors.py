@@ -93,3 +93,19 @@ def test_what_a_system_injector_refuses_is_one_line_naming_it(text: str, said: s
     with pytest.raises(ScenarioError) as caught:
         parse_scenario(text)
     assert said in str(caught.value)
+
+
+@pytest.mark.parametrize(('schedule', 'seconds'), [
+    ('start: 1.0, duration: 0.5', 0.5),
+    ('start: 1.0, duration: 10.0, repeat: {period: 2.0, on: 0.3}', 0.3),  # each activation lasts `on`
+    ('start: 1.0, duration: 10.0, repeat: {period: 2.0, on: 2.0}', 10.0),  # on = period: one window
+    ('start: 1.0, duration: 10.0, probability_per_second: 0.5, hold: 0.2', 0.2),
+])
+def test_a_stall_lasts_one_activation_of_its_schedule(schedule: str, seconds: float) -> None:
+    """A stall holds /clock for one activation: with a repeat it lasts `on`, with random activations `hold`
+    (by hand from the scheduler's rules: a repeat is on for `on` every `period`, whole when on >= period)."""
+    from bagfault.live.clockwarp import stall_seconds
+
+    scenario = parse_scenario('injectors:\n  - {id: c, type: clock}\n'
+                              f'faults:\n  - {{id: f, injector_id: c, {schedule}, config: {{stall: true}}}}\n')
+    assert stall_seconds(scenario.faults[0]) == seconds
