@@ -207,6 +207,30 @@ def ensure_bag(kind: str, seconds: float) -> Path:
     return path
 
 
+def plain_copy(bag: Path) -> Path:
+    """The bag as the plain `mcap` writer writes it (as Foxglove and converters do): the same messages and schemas,
+    channels without rosbag2's metadata (no offered_qos_profiles), no rosbag2 metadata record."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    path = bag.with_name(bag.stem + '-plain.mcap')
+    if path.exists():
+        return path
+    with bag.open('rb') as src, path.open('wb') as dst:
+        reader = make_reader(src)
+        writer = Writer(dst, compression=CompressionType.ZSTD)
+        writer.start(profile='ros2', library='plain')
+        ids: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.id not in ids:
+                schema_id = writer.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = writer.register_channel(channel.topic, channel.message_encoding, schema_id, {})
+            writer.add_message(ids[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+        writer.finish()
+    return path
+
+
 def count_messages(path: Path) -> int:
     """Message count from the MCAP summary."""
     from mcap.reader import make_reader
@@ -254,6 +278,10 @@ def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[st
         'cp': (CP, {}, {}), 'kernel copy moved 8120 bytes': (SHIFTED, {'SHIFT': '8120'}, {}),
         'kernel copy moved 64 KiB': (SHIFTED, {'SHIFT': '65536'}, {}),
         'start and import only': (IMPORT_ONLY, {}, {})}
+    plain = plain_copy(bag)  # the same content from the plain mcap writer: no rosbag2 QoS metadata
+    jobs['cp (plain writer)'] = (CP, {'SRC': str(plain)}, {})
+    jobs['none active (plain writer)'] = (BAGFAULT, {'SCENARIO': scenario('sensor-heavy', 'a'), 'CHUNK_COPY': 'yes',
+                                                     'SRC': str(plain)}, {})
     for case, what in (('a', 'none active'), ('w', 'IMU bias 10 s')):
         scenario_file = DATA / f'copy-{case}.yaml'
         scenario_file.write_text(scenario('sensor-heavy', case))
@@ -275,7 +303,7 @@ def measure_copy(seconds: float, repeat: int, reference: bool = True) -> dict[st
     for _ in range(repeat):
         for name in order.sample(list(jobs), len(jobs)):
             code, values, env = jobs[name]
-            samples[name].append(run_job(code, env, SRC=str(bag), DST=str(out), **values))
+            samples[name].append(run_job(code, env, **{'SRC': str(bag), 'DST': str(out), **values}))
             reads[name].append(READS[-1])
             out.unlink(missing_ok=True)
     cp = statistics.median(t for t, _, _ in samples['cp'])
