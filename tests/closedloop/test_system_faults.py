@@ -212,7 +212,8 @@ def test_clock_faults_stall_jump_back_and_slow_the_clock_the_system_follows(test
                     '  - {id: back, injector_id: clk, start: 1.5, duration: 1.5, config: {jump_s: -1.0}}\n'
                     '  - {id: slow, injector_id: clk, start: 3.8, duration: 1.0, config: {rate: 0.5}}')
     out = tmp_path / 'clock.mcap'
-    result = tester.run(str(path), str(short_bag), '-o', str(out))
+    report = tmp_path / 'clock.md'
+    result = tester.run(str(path), str(short_bag), '-o', str(out), '--report', str(report))
     assert result.code == 0, result.stdout + result.stderr
     assert result.report is not None
     assert result.report['system_under_test']['played_per_topic']['/odom'] == 300  # 6 s at 50 Hz: all played
@@ -233,6 +234,9 @@ def test_clock_faults_stall_jump_back_and_slow_the_clock_the_system_follows(test
                                                'of wall time')
     assert events['back', 'active'] == f'config={{jump_s=-1.0}}; /clock jumps by -1 s to {(origin + 500 * ms) / NS:.3f} s'
     assert events['back', 'inactive'] == 'config={jump_s=-1.0}; /clock follows bag time again'
+    timeline = report.read_text()  # the report's fault timeline is the clock's trace of changes
+    assert '| 1.500 | back | clk | active | scheduled | `config={jump_s=-1.0}; /clock jumps by -1 s to' in timeline
+    assert '| 3.800 | slow | clk | active | scheduled | `config={rate=0.5}; /clock runs at 0.5 x bag time' in timeline
     ticks = [((t - origin) / NS, (m.stamp.sec * NS + m.stamp.nanosec - origin) / NS)
              for t, m in topics['/controller/tick']]
     back = [(heard, said) for heard, said in ticks if 1.8 <= heard <= 2.8]

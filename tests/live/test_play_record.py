@@ -229,3 +229,29 @@ def test_record_counts_what_it_lost_and_says_so(graph, tmp_path: Path) -> None:
     err = recorder.err_path.read_text()  # type: ignore[attr-defined]
     assert f'{kept:>9}  /burst  (lost {lost})' in out
     assert f'bagfault: warning: the recording lost {lost} messages ({lost} of /burst)' in err
+
+
+def test_play_with_clock_carries_out_a_clock_fault_and_records_what_clock_said(graph, tmp_path: Path) -> None:
+    """`play --clock` with a clock fault: /clock runs 1 s behind bag time from 1.0 s to 2.0 s (its trace in the
+    recording's /bagfault/clock, at the bag time it was said), the played messages keep their stamps (the
+    recorded streams are the bag's), the fault's events say what /clock did."""
+    from support.helpers import decoded
+
+    bag = make_bag(tmp_path / 'rover.mcap', STREAMS, 3.0)
+    scenario = tmp_path / 'clock.yaml'
+    scenario.write_text('injectors:\n  - {id: clk, type: clock}\nfaults:\n'
+                        '  - {id: back, injector_id: clk, start: 1.0, duration: 1.0, config: {jump_s: -1.0}}\n')
+    played = tmp_path / 'played.mcap'
+    play = graph.bagfault('play', str(scenario), str(bag), '--clock', '--record', str(played), '--delay', '0.5',
+                          name='play')
+    assert play.wait(timeout=60) == 0, play.err_path.read_text()  # type: ignore[attr-defined]
+    origin = min(t for t, _, _ in raw_messages(bag)['/sensors/imu_raw'])
+    said_at = {t - origin: m.clock.sec * NS + m.clock.nanosec - origin
+               for t, m in decoded(played, ['/bagfault/clock'])['/bagfault/clock']}
+    assert said_at[NS] == 0 and said_at[2 * NS] == 2 * NS  # the last word at each edge: the new clock
+    assert all(said == bag_time - NS for bag_time, said in said_at.items() if NS <= bag_time < 2 * NS)
+    assert all(said == bag_time for bag_time, said in said_at.items() if bag_time < NS or bag_time >= 2 * NS)
+    assert raw_messages(played)['/sensors/imu_raw'] == raw_messages(bag)['/sensors/imu_raw']  # as in the bag
+    events = [m.details for _, m in decoded(played, ['/fault_injection/events'])['/fault_injection/events']]
+    assert events == [f'config={{jump_s=-1.0}}; /clock jumps by -1 s to {origin / NS:.3f} s',
+                      'config={jump_s=-1.0}; /clock follows bag time again']
