@@ -329,3 +329,26 @@ def test_a_kill_without_restart_is_not_a_crash(tester: LoopRunner, short_bag: Pa
     assert alive['state'] == 'passed' and 'until a process fault killed it' in alive['message']
     assert result.report['system_under_test']['leftover_pids'] == []
     assert running_with(token) == []
+
+
+def test_a_link_into_a_composable_node_container_is_refused_before_the_bag_plays(tester: LoopRunner,
+                                                                                  short_bag: Path,
+                                                                                  tmp_path: Path) -> None:
+    """A remap of a container's command line would move every node it hosts: a subscriber whose process runs a
+    component container is refused in one line, exit 2, before anything is played (the stack started here
+    under a container's name stands in for one: rclcpp_components' `component_container`)."""
+    import shutil
+
+    container = tmp_path / 'component_container_stack.py'
+    shutil.copy(STACK, container)
+    token = tester.token()
+    path = scenario(tmp_path, token, '  - {id: cmd_link, type: link, link_topic: /cmd_vel, '
+                                     'subscriber: {node: /controller}}',
+                    '  - {id: lag, injector_id: cmd_link, start: 2.0, duration: 2.0, config: {delay_ms: 250}}')
+    path.write_text(path.read_text().replace(str(STACK), str(container)))
+    result = tester.run(str(path), str(short_bag))
+    assert result.code == 2, result.stdout + result.stderr
+    [line] = [x for x in result.stderr.splitlines() if x.startswith('bagfault: error:')]
+    assert line.startswith("bagfault: error: link 'cmd_link': the subscriber runs in a composable node container")
+    assert 'Traceback' not in result.stderr
+    assert running_with(token) == []
