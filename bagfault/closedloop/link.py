@@ -113,6 +113,8 @@ class SystemLink(LiveSink):
         self.ready_seconds = time.monotonic() - started
         if self.links:
             self.notes += self.links.remap(self.process, self.listener, self.node, self.system.stop_timeout)
+            for condition in self.system.conditions():  # the restarted subscriber is ready as the system was
+                self._await(condition)
         self._check_shared(wait=True)
         own = {*self.played, *NOT_RECORDED}
         watched, self.unwatched = watched_topics(self.listener, self.scenario, self.stop, own=own, wait=WATCH_WAIT)
