@@ -216,7 +216,6 @@ class Explorer:
         with contextlib.closing(engine), contextlib.closing(self.progress), \
                 tempfile.TemporaryDirectory(prefix='bagfault-explore-') as scratch:
             self.folder.open()
-            stored = {i: stored[i] for i in range(len(stored)) if i in stored}  # up to the first gap
             try:
                 while True:
                     requests = self._round()
@@ -255,6 +254,7 @@ class Explorer:
     def _run_round(self, engine: Any, requests: list[_Request], stored: dict[int, RunRecord],
                    scratch: Path) -> dict[int, RunRecord]:
         first = len(self.runs)
+        last = first + len(requests)  # a stopped round's log may hold any of its runs, in the order they ended
         specs: dict[int, dict[str, Any]] = {}
         texts: list[tuple[str, Path]] = []
         for number, request in enumerate(requests):
@@ -264,9 +264,9 @@ class Explorer:
             kept = stored.get(index)
             if kept is not None and (kept.scenario_sha256, kept.purpose) == (digest(text), request.purpose):
                 continue
-            if any(i >= index for i in stored):  # the resumed log diverges here: what follows is run again
-                stored = {i: r for i, r in stored.items() if i < index}
-                self.folder.keep([*self.runs, *(stored[i] for i in range(first, index))])
+            if kept is not None or any(i >= last for i in stored):  # the resumed log diverges here: what
+                stored = {i: r for i, r in stored.items() if i < index}  # follows is run again
+                self.folder.keep([*self.runs, *(stored[i] for i in range(first, index) if i in stored)])
             specs[index] = self._spec(text, source, self._output(request, index, scratch))
         results: dict[int, dict[str, Any]] = {}
 
