@@ -2,22 +2,16 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
-from support.loop import EXAMPLE, LoopRunner, rclpy_available
+from support.loop import LoopRunner, rclpy_available, rover_bag
 
 
 @pytest.fixture(scope='session')
 def example_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The example's rover bag, written by its own make_bag.py."""
-    sys.path.insert(0, str(EXAMPLE))
-    try:
-        import make_bag
-    finally:
-        sys.path.remove(str(EXAMPLE))
-    return make_bag.write(tmp_path_factory.mktemp('closed_loop') / 'rover.mcap')
+    return rover_bag(tmp_path_factory.mktemp('closed_loop') / 'rover.mcap')
 
 
 @pytest.fixture

@@ -15,9 +15,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
-from support.loop import EXAMPLE, LoopRunner, running_with
+from support.helpers import decoded
+from support.loop import LoopRunner, rover_bag, running_with
 
 NS = 1_000_000_000
 STACK = Path(__file__).resolve().parent / 'systems' / 'rover_stack.py'
@@ -26,12 +25,7 @@ STACK = Path(__file__).resolve().parent / 'systems' / 'rover_stack.py'
 @pytest.fixture(scope='module')
 def short_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The example's rover bag, 6 s long."""
-    sys.path.insert(0, str(EXAMPLE))
-    try:
-        import make_bag
-    finally:
-        sys.path.remove(str(EXAMPLE))
-    return make_bag.write(tmp_path_factory.mktemp('system_faults') / 'rover6.mcap', duration=6.0)
+    return rover_bag(tmp_path_factory.mktemp('system_faults') / 'rover6.mcap', duration=6.0)
 
 
 def scenario(tmp_path: Path, token: str, injectors: str, faults: str, assertions: str = '') -> Path:
@@ -54,15 +48,6 @@ assertions:
 {assertions or '  []'}
 """)
     return path
-
-
-def decoded(path: Path) -> dict[str, list[tuple[int, object]]]:
-    topics: dict[str, list[tuple[int, object]]] = {}
-    with path.open('rb') as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for _, channel, message, value in reader.iter_decoded_messages(log_time_order=True):
-            topics.setdefault(channel.topic, []).append((message.log_time, value))
-    return topics
 
 
 def seconds(topics: dict[str, list[tuple[int, object]]], topic: str) -> list[float]:

@@ -207,15 +207,7 @@ def test_record_counts_what_it_lost_and_says_so(graph, tmp_path: Path) -> None:
     recorded = tmp_path / 'burst.mcap'
     recorder = graph.bagfault('record', '/burst', '-o', str(recorded), '--duration', '25', name='record')
     graph.wait_for(recorder, 'bagfault record ready')
-    publisher = graph.peer('publish-imu', '/burst', '--rate', '50000', '--seconds', '3', '--best-effort',
-                           '--wait-subscriber', '--pause-after-first', '1', name='burst')
-    graph.wait_for(publisher, 'first sent')
-    time.sleep(0.5)  # the recorder takes the first message; then it stands still while the burst goes by
-    recorder.send_signal(signal.SIGSTOP)
-    time.sleep(2.0)
-    recorder.send_signal(signal.SIGCONT)
-    publisher.wait(timeout=60)
-    published = graph.lines(publisher)[-1]['published']
+    published = graph.burst_past_a_stopped_listener(recorder, '/burst')
     assert recorder.wait(timeout=60) == 0, recorder.err_path.read_text()  # type: ignore[attr-defined]
     with recorded.open('rb') as stream:
         reader = make_reader(stream)

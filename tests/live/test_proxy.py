@@ -317,15 +317,7 @@ def test_a_recording_proxy_counts_what_its_input_lost_and_says_so(graph, scenari
     record = tmp_path / 'proxy.mcap'
     proxy = graph.bagfault('proxy', str(scenarios / 'imu.yaml'), '--record', str(record), name='proxy')
     graph.wait_for(proxy, 'bagfault proxy ready')
-    publisher = graph.peer('publish-imu', '/sensors/imu_raw', '--rate', '50000', '--seconds', '3', '--best-effort',
-                           '--wait-subscriber', '--pause-after-first', '1', name='burst')
-    graph.wait_for(publisher, 'first sent')
-    time.sleep(0.5)  # the proxy takes the first message; then it stands still while the burst goes by
-    proxy.send_signal(signal.SIGSTOP)
-    time.sleep(2.0)
-    proxy.send_signal(signal.SIGCONT)
-    publisher.wait(timeout=60)
-    published = graph.lines(publisher)[-1]['published']
+    published = graph.burst_past_a_stopped_listener(proxy, '/sensors/imu_raw')
     time.sleep(1.0)
     assert graph.stop(proxy, signal.SIGINT) == 0, proxy.err_path.read_text()
     with record.open('rb') as stream:

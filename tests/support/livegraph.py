@@ -91,6 +91,19 @@ class Graph:
                 raise AssertionError(f'no line from the peer; stderr:\n{process.err_path.read_text()}')  # type: ignore[attr-defined]
             time.sleep(0.02)
 
+    def burst_past_a_stopped_listener(self, listener: subprocess.Popen[str], topic: str) -> int:
+        """A best-effort burst on `topic` (50 kHz for 3 s) while `listener` stands still (SIGSTOP for 2 s after
+        it took the first message): more than it can take on any machine. How many the publisher sent."""
+        publisher = self.peer('publish-imu', topic, '--rate', '50000', '--seconds', '3', '--best-effort',
+                              '--wait-subscriber', '--pause-after-first', '1', name='burst')
+        self.wait_for(publisher, 'first sent')
+        time.sleep(0.5)  # the listener takes the first message; then it stands still while the burst goes by
+        listener.send_signal(signal.SIGSTOP)
+        time.sleep(2.0)
+        listener.send_signal(signal.SIGCONT)
+        publisher.wait(timeout=60)
+        return int(self.lines(publisher)[-1]['published'])
+
     @staticmethod
     def stop(process: subprocess.Popen[str], sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
         """Signal a process and wait for its exit code."""

@@ -16,6 +16,16 @@ EXAMPLE = ROOT / 'examples' / 'closed_loop'
 SCENARIO = EXAMPLE / 'test_imu_drift.bagfault.yaml'
 
 
+def rover_bag(path: Path, duration: float = 12.0) -> Path:
+    """The closed-loop example's rover bag at `path`, written by its own make_bag.py (`duration` seconds)."""
+    sys.path.insert(0, str(EXAMPLE))
+    try:
+        import make_bag
+    finally:
+        sys.path.remove(str(EXAMPLE))
+    return Path(make_bag.write(path, duration=duration))
+
+
 def rclpy_available() -> bool:
     try:
         import rclpy  # noqa: F401
