@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from bagfault.closedloop.isolation import EPROSIMA, pid16
-from bagfault.closedloop.process import processes
+from bagfault.closedloop.isolation import gid_pid16, pid16
+from bagfault.closedloop.process import Launch, command_of, launch_of, processes
 
 if TYPE_CHECKING:
     from bagfault.closedloop.process import SystemProcess
@@ -41,36 +41,6 @@ CGROUP_PERIOD = 100_000  # µs, cpu.max's period
 Throttle = Literal['cgroup v2 cpu.max', 'SIGSTOP/SIGCONT duty cycle']
 
 
-@dataclass(frozen=True)
-class Launch:
-    """How to start a process again: what it ran, where, with which environment."""
-
-    argv: list[str]
-    env: dict[str, str]
-    cwd: str
-    pid: int
-
-
-def launch_of(pid: int) -> Launch | None:
-    """A running process's command line, environment and working directory (None once it is gone)."""
-    try:
-        argv = Path(f'/proc/{pid}/cmdline').read_bytes().split(b'\0')[:-1]
-        environ = Path(f'/proc/{pid}/environ').read_bytes().split(b'\0')
-        cwd = os.readlink(f'/proc/{pid}/cwd')
-    except OSError:
-        return None
-    env = dict(item.decode(errors='surrogateescape').split('=', 1) for item in environ if b'=' in item)
-    return Launch([a.decode(errors='surrogateescape') for a in argv], env, cwd, pid)
-
-
-def command_of(pid: int) -> str:
-    """A process's command line as one string ('' once it is gone)."""
-    try:
-        return Path(f'/proc/{pid}/cmdline').read_bytes().rstrip(b'\0').replace(b'\0', b' ').decode(errors='replace')
-    except OSError:
-        return ''
-
-
 def node_pids(listener: Any, name: str) -> set[int]:
     """The low 16 bits of the pids whose participants host node `name` (from its publishers on the graph)."""
     found: set[int] = set()
@@ -79,9 +49,9 @@ def node_pids(listener: Any, name: str) -> set[int]:
         for info in listener.get_publishers_info_by_topic(topic):
             if f'{info.node_namespace.rstrip("/")}/{info.node_name}' != name:
                 continue
-            gid = bytes(info.endpoint_gid)
-            if gid[:2] == EPROSIMA:
-                found.add(int.from_bytes(gid[4:6], 'little'))
+            low = gid_pid16(bytes(info.endpoint_gid))
+            if low is not None:
+                found.add(low)
         if found:
             return found
     return found
@@ -129,7 +99,9 @@ class ProcessFaults:
         if config.get('kill'):
             number = signal.Signals[config.get('signal', 'SIGKILL')]
             killed = set(pids)
-            roots = [launch for pid in pids if (launch := launch_of(pid)) is not None and _parent(pid) not in killed]
+            parents = {p.pid: p.ppid for p in processes()}
+            roots = [launch for pid in pids
+                     if parents.get(pid) not in killed and (launch := launch_of(pid)) is not None]
             for pid in pids:
                 self.caused[pid] = number
             _send(pids, number)
@@ -165,16 +137,9 @@ class ProcessFaults:
         return '; '.join([*said, *(f'could not restart {text}' for text in failed)]) or 'nothing to restart'
 
     def _restart(self, launch: Launch) -> int:
-        """Start a killed process again in a session of its own (a process group of another session cannot be
-        joined; its environment carries the run's mark, so the stop and the watchdog find it), output to the
-        system's logs; a restarted main process becomes the system's main process."""
-        main = launch.pid == self.process.pid
-        with open(self.process.stdout_path, 'ab') as out, open(self.process.stderr_path, 'ab') as err:
-            popen = subprocess.Popen(launch.argv, env=launch.env, cwd=launch.cwd, stdin=subprocess.DEVNULL,
-                                     stdout=out, stderr=err, start_new_session=True)
-        if main:
-            self.process.replace_main(popen)
-        else:
+        """Start a killed process again (SystemProcess.start_again); its pid."""
+        popen = self.process.start_again(launch)
+        if launch.pid != self.process.pid:
             self.restarted.append(popen)
         return popen.pid
 
@@ -211,10 +176,6 @@ def resolve_target(target: str | dict[str, str] | None, process: SystemProcess, 
         return [pid for pid in tree if pattern.search(command_of(pid))]
     lows = node_pids(listener, target['node'])
     return [pid for pid in tree if pid16(pid) in lows]
-
-
-def _parent(pid: int) -> int:
-    return next((p.ppid for p in processes() if p.pid == pid), 0)
 
 
 def _pids(pids: list[int]) -> str:

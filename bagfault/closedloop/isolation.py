@@ -32,6 +32,11 @@ UNKNOWN = '_NODE_NAME_UNKNOWN_'  # rmw's name of a node whose participant has no
 PRESTART = 0.4  # seconds a fresh participant looks for others before the system starts (discovery: ~0.2 s)
 
 
+def gid_pid16(gid: bytes) -> int | None:
+    """The low 16 bits of the pid in a Fast DDS endpoint gid; None for another vendor's."""
+    return int.from_bytes(gid[4:6], 'little') if gid[:2] == EPROSIMA else None
+
+
 def pid16(pid: int) -> int:
     """The part of a process id Fast DDS puts into its GUIDs."""
     return pid & 0xFFFF
@@ -65,11 +70,8 @@ def strangers(node: Any, ours: Callable[[int], bool]) -> list[Stranger]:
     found: dict[tuple[int, str], Stranger] = {}
     for topic, _types in node.get_topic_names_and_types():
         for info in node.get_publishers_info_by_topic(topic):
-            gid = bytes(info.endpoint_gid)
-            if gid[:2] != EPROSIMA:
-                continue
-            low = int.from_bytes(gid[4:6], 'little')
-            if ours(low):
+            low = gid_pid16(bytes(info.endpoint_gid))
+            if low is None or ours(low):
                 continue
             namespace = info.node_namespace.rstrip('/')
             name = f'{namespace}/{info.node_name}'
@@ -85,9 +87,8 @@ def shared(node: Any, topics: Iterable[str], family: set[int], own_pid: int) -> 
     own = pid16(own_pid)
     for topic in sorted(set(topics) - QUIET_TOPICS):  # every node publishes those: the bag's are not its data
         for info in node.get_publishers_info_by_topic(topic):
-            gid = bytes(info.endpoint_gid)
-            low = int.from_bytes(gid[4:6], 'little')
-            if gid[:2] != EPROSIMA or low == own or low not in family:
+            low = gid_pid16(bytes(info.endpoint_gid))
+            if low is None or low == own or low not in family:
                 continue
             return topic, f'{info.node_namespace.rstrip("/")}/{info.node_name}', low
     return None

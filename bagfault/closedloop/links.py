@@ -16,14 +16,13 @@ from __future__ import annotations
 import heapq
 import os
 import signal
-import subprocess
 import threading
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from bagfault.closedloop.actions import command_of, launch_of, resolve_target
-from bagfault.closedloop.process import processes
+from bagfault.closedloop.actions import resolve_target
+from bagfault.closedloop.process import command_of, launch_of, processes
 from bagfault.errors import ClosedLoopError
 from bagfault.faults.active import ActiveFault
 from bagfault.faults.rng import FaultRandom
@@ -115,12 +114,7 @@ class Links:
             if launch is None:
                 raise ClosedLoopError(f'link {link.id!r}: the subscriber (pid {pid}) ended before it was remapped')
             _stop(pid, stop_timeout)
-            argv = [*launch.argv, '--ros-args', '-r', f'{link.topic}:={link.remapped}']
-            with open(process.stdout_path, 'ab') as out, open(process.stderr_path, 'ab') as err:
-                popen = subprocess.Popen(argv, env=launch.env, cwd=launch.cwd, stdin=subprocess.DEVNULL,
-                                         stdout=out, stderr=err, start_new_session=True)
-            if pid == process.pid:
-                process.replace_main(popen)
+            popen = process.start_again(launch, ['--ros-args', '-r', f'{link.topic}:={link.remapped}'])
             deadline = time.monotonic() + REMAP_WAIT
             while link.publisher.get_subscription_count() == 0:
                 if popen.poll() is not None:

@@ -56,6 +56,36 @@ def processes() -> list[ProcessStat]:
     return found
 
 
+@dataclass(frozen=True)
+class Launch:
+    """How to start a process again: what it ran, where, with which environment."""
+
+    argv: list[str]
+    env: dict[str, str]
+    cwd: str
+    pid: int
+
+
+def launch_of(pid: int) -> Launch | None:
+    """A running process's command line, environment and working directory (None once it is gone)."""
+    try:
+        argv = Path(f'/proc/{pid}/cmdline').read_bytes().split(b'\0')[:-1]
+        environ = Path(f'/proc/{pid}/environ').read_bytes().split(b'\0')
+        cwd = os.readlink(f'/proc/{pid}/cwd')
+    except OSError:
+        return None
+    env = dict(item.decode(errors='surrogateescape').split('=', 1) for item in environ if b'=' in item)
+    return Launch([a.decode(errors='surrogateescape') for a in argv], env, cwd, pid)
+
+
+def command_of(pid: int) -> str:
+    """A process's command line as one string ('' once it is gone)."""
+    try:
+        return Path(f'/proc/{pid}/cmdline').read_bytes().rstrip(b'\0').replace(b'\0', b' ').decode(errors='replace')
+    except OSError:
+        return ''
+
+
 def describe_exit(code: int | None) -> str:
     """'code 3' or 'signal SIGSEGV' for a Popen return code."""
     if code is None:
@@ -160,13 +190,21 @@ class SystemProcess:
         """Remember the current descendants, so those that leave the group are still stopped."""
         self._known |= family(self.pid, self._known)
 
-    def replace_main(self, popen: subprocess.Popen[bytes]) -> None:
-        """A process fault restarted the main process: the new one is the system's main process (in a session of
-        its own, the group the stop signals), the processes seen so far stay known."""
-        self.popen.poll()  # the killed one reaped
-        self.popen = popen
-        self.pid = popen.pid
-        self._known |= family(self.pid, {})
+    def start_again(self, launch: Launch, extra: list[str] | None = None) -> subprocess.Popen[bytes]:
+        """A process of the system that ended (a process fault's kill, a link's remap) started again with its
+        command line (and `extra` arguments), environment and working directory, in a session of its own (a
+        group of another session cannot be joined; its environment carries the run's mark, so the stop and the
+        watchdog find it), its output appended to the system's logs. A new main process becomes the system's
+        main process: the group the stop signals; the processes seen so far stay known."""
+        with open(self.stdout_path, 'ab') as out, open(self.stderr_path, 'ab') as err:
+            popen = subprocess.Popen([*launch.argv, *(extra or [])], env=launch.env, cwd=launch.cwd,
+                                     stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True)
+        if launch.pid == self.pid:
+            self.popen.poll()  # the ended one reaped
+            self.popen = popen
+            self.pid = popen.pid
+            self._known |= family(self.pid, {})
+        return popen
 
     def _marked(self) -> set[int]:
         """Processes carrying the run's mark: a daemon that left the session and whose parent has gone."""
