@@ -12,22 +12,20 @@ are given is set, or on SIGINT/SIGTERM in the main thread.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bagfault.engine.activation import Activation
-from bagfault.engine.offline import check_recording, run_to_file
+from bagfault.engine.options import RunOptions
 from bagfault.engine.result import RunResult
 from bagfault.engine.stop import StopFlag
 from bagfault.errors import BagfaultError, OutputError, Problem, ScenarioError, UsageError
-from bagfault.io.mcap_sink import check_level
-from bagfault.io.objects import is_remote, staged_folder
-from bagfault.io.outputs import Protected, check_derived, check_output
-from bagfault.io.recover import Recovered, partial_of, requested_name
-from bagfault.io.recover import recover as copy_readable
+from bagfault.io.outputs import PartialFile, Protected, check_derived, check_output
 from bagfault.scenario import Scenario, load_scenario
+from bagfault.scenario.loader import build_scenario, read_scenario
 from bagfault.spec.system import SystemUnderTest, system_from
 from bagfault.spec.yamlnodes import format_path
 
@@ -42,6 +40,7 @@ if TYPE_CHECKING:
     from bagfault.explore.draw import Strategy
     from bagfault.explore.shrink import ShrinkMode
     from bagfault.io.leading_copy import LeadingCopy
+    from bagfault.io.recover import Recovered
     from bagfault.live.recorder import RecordResult
     from bagfault.live.viewing import OpenView
     from bagfault.spec.yamlnodes import PathKey
@@ -147,7 +146,7 @@ def run(
     chunk_copy: bool = True,
     force: bool = False,
     verify: bool = False,
-    lead: LeadingCopy | None = None,
+    strict: bool = False,
 ) -> RunResult:
     """Inject the scenario's faults into the inputs and write the output MCAP.
 
@@ -158,20 +157,55 @@ def run(
     and counts them on a second thread); False takes the reference path that decompresses and rewrites every
     chunk. An existing output (or black box) that bagfault did not write is refused unless `force`.
     `compression_level` applies to the chunks bagfault writes (copied chunks keep theirs); None: the MCAP C++
-    writer's default (zstd 1, lz4 0). `lead` is a leading copy the caller started before its imports
-    (`bagfault.engine.lead.start_lead`, which `bagfault run` calls first); the caller closes it.
+    writer's default (zstd 1, lz4 0). A scenario file is read once, with `strict` warnings as errors.
+
+    The input's leading chunks start copying into the output as soon as the scenario's YAML is read, on a
+    guess (`engine/lead.py`), beside the imports and the setup: this module imports the engine only then.
     """
-    loaded = scenario_of(scenario, mode='run')
-    paths = _paths(inputs)
-    out = Path(output)
-    if compression_level is not None:
-        check_level(out, compression, compression_level)
-    _check_output(out, 'output', paths, loaded, force=force, msg_paths=msg_paths)
-    return run_to_file(loaded, paths, out, seed=seed_of(loaded, seed), activations=_activations(loaded, activate),
-                       start_offset=_seconds('--start', start_offset), compression=compression,
-                       compression_level=compression_level, batch=batch,
-                       progress=progress, observers=observers, salvage=salvage,
-                       msg_paths=[Path(p) for p in msg_paths], chunk_copy=chunk_copy, verify=verify, lead=lead)
+    document = scenario if isinstance(scenario, Scenario) else read_scenario(scenario)
+    paths, out = _paths(inputs), Path(output)
+    with contextlib.ExitStack() as stack:
+        file, lead = _lead(document.located.data, paths, out, stack, start_offset=start_offset, activate=activate,
+                           observers=observers, copying=chunk_copy and batch)
+        from bagfault.engine.offline import run_to_file  # noqa: PLC0415 - after the leading copy started
+        from bagfault.io.mcap_sink import check_level  # noqa: PLC0415
+
+        built = document if isinstance(document, Scenario) else build_scenario(document, strict=strict)
+        loaded = scenario_of(built, mode='run')
+        if compression_level is not None:
+            check_level(out, compression, compression_level)
+        _check_output(out, 'output', paths, loaded, force=force, msg_paths=msg_paths)
+        options = RunOptions(seed=seed_of(loaded, seed), activations=tuple(_activations(loaded, activate)),
+                             start_offset=_seconds('--start', start_offset), compression=compression,
+                             compression_level=compression_level, batch=batch, salvage=salvage,
+                             msg_paths=tuple(Path(p) for p in msg_paths), chunk_copy=chunk_copy, verify=verify)
+        if file is None:
+            file = stack.enter_context(PartialFile(out))
+        return run_to_file(loaded, paths, file, options, progress=progress, observers=observers, lead=lead)
+
+
+def _lead(document: object, paths: Sequence[Path], out: Path, stack: contextlib.ExitStack[bool | None], *,
+          start_offset: float, activate: Sequence[str | Activation], observers: Sequence[Observer],
+          copying: bool) -> tuple[PartialFile | None, LeadingCopy | None]:
+    """The output's partial file and a leading copy into it, started before anything heavy is imported; (None,
+    None) when no copy is guessed useful, or the output or the options are wrong (said later, in their words)."""
+    from bagfault.engine.lead import start_lead, wanted_topics  # noqa: PLC0415 - imports nothing heavy
+
+    wanted = wanted_topics(observers)
+    if not copying or wanted is None or len(paths) != 1 or not paths[0].is_file() or \
+            not (math.isfinite(start_offset) and start_offset >= 0):
+        return None, None
+    try:
+        activations = [a if isinstance(a, Activation) else Activation.parse(a) for a in activate]
+        file = PartialFile(out)
+    except (ValueError, OutputError):
+        return None, None
+    stack.callback(file.close)
+    lead = start_lead(document, paths[0], file, start_offset=start_offset, activations=activations,
+                      observed=sorted(wanted))
+    if lead is not None:
+        stack.callback(lead.close)
+    return file, lead
 
 
 def check(
@@ -185,6 +219,8 @@ def check(
     msg_paths: Sequence[str | Path] = (),
 ) -> RunResult:
     """Evaluate the scenario's assertions (and fault manager) on an existing recording; inject nothing."""
+    from bagfault.engine.offline import check_recording  # noqa: PLC0415
+
     return check_recording(scenario_of(scenario), Path(recording), start_offset=_seconds('--start', start_offset),
                            observers=observers, progress=progress, salvage=salvage,
                            msg_paths=[Path(p) for p in msg_paths])
@@ -383,6 +419,9 @@ def system_of(scenario: Scenario, overrides: Mapping[str, object]) -> SystemUnde
 def recover(recording: str | Path, output: str | Path | None = None, *, force: bool = False) -> Recovered:
     """A live recording cut short by a kill made a valid MCAP: `recording` is the partial file or the name
     that was requested (its `.NAME.*.partial` is found); `output` defaults to that requested name."""
+    from bagfault.io.recover import partial_of, requested_name  # noqa: PLC0415
+    from bagfault.io.recover import recover as copy_readable  # noqa: PLC0415
+
     source = partial_of(Path(recording))
     out = Path(output) if output is not None else requested_name(source)
     check_output(out, 'output', [('the recording', source)], force=force)
@@ -397,6 +436,7 @@ def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int
     tasks; results, tables and report in `directory` (a folder, or a bucket prefix such as 's3://bucket/run1')."""
     from bagfault.campaign.loader import load_campaign  # noqa: PLC0415
     from bagfault.campaign.runner import TABLES, run_campaign  # noqa: PLC0415
+    from bagfault.io.objects import is_remote, staged_folder  # noqa: PLC0415
 
     if workers is not None and workers < 1:
         raise UsageError(f'--workers {workers}: must be 1 or more')

@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING
 from bagfault import __version__, settings
 from bagfault.errors import BagfaultError, UsageError
 from bagfault.io.outputs import PUBLISHED, check_output
-from bagfault.io.regular import read_text
 from bagfault.log import console
 
 if TYPE_CHECKING:
@@ -25,7 +24,6 @@ if TYPE_CHECKING:
 
     from bagfault.engine.result import RunResult
     from bagfault.engine.run import Observer
-    from bagfault.io.leading_copy import LeadingCopy
     from bagfault.report.files import ReportPaths
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
@@ -305,54 +303,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
     reports = _reports(args)
     reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output,
                              **{'--msg-path': args.msg_path}))
-    with _leading_copy(args) as lead:  # the leading chunks copy while the imports below run
-        from bagfault import api  # noqa: PLC0415
-        from bagfault.progress import ProgressBar  # noqa: PLC0415
+    from bagfault import api  # noqa: PLC0415 - it starts the leading copy before it imports the engine
+    from bagfault.progress import ProgressBar  # noqa: PLC0415
 
-        scenario = api.load_scenario(args.scenario, strict=args.strict)
-        bar = ProgressBar()
-        collectors = reports.collectors()
-        try:
-            result = api.run(
-                scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
-                start_offset=args.start, compression=args.compression,
-                compression_level=args.compression_level, progress=bar, observers=collectors,
-                salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy, force=args.force,
-                verify=args.verify, lead=lead,
-            )
-        finally:
-            bar.close()
+    bar = ProgressBar()
+    collectors = reports.collectors()
+    try:
+        result = api.run(
+            args.scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
+            start_offset=args.start, compression=args.compression, compression_level=args.compression_level,
+            progress=bar, observers=collectors, salvage=args.salvage, msg_paths=args.msg_path,
+            chunk_copy=not args.no_chunk_copy, force=args.force, verify=args.verify, strict=args.strict,
+        )
+    finally:
+        bar.close()
     return _finish(reports, result, collectors)
-
-
-@contextlib.contextmanager
-def _leading_copy(args: argparse.Namespace) -> Iterator[LeadingCopy | None]:
-    """`run`'s leading copy, started before anything heavy is imported (None when it cannot help)."""
-    if args.no_chunk_copy or args.salvage or args.html is not None or len(args.inputs) != 1 or \
-            not args.inputs[0].is_file():
-        yield None
-        return
-    from bagfault.engine.activation import Activation  # noqa: PLC0415 - these two import nothing heavy
-    from bagfault.engine.lead import start_lead  # noqa: PLC0415
-
-    try:
-        activations = [Activation.parse(text) for text in args.activate]
-    except ValueError:
-        yield None  # refused later, with its message
-        return
-    from bagfault.spec.yamlnodes import load_located  # noqa: PLC0415 - PyYAML only
-
-    try:
-        document = load_located(read_text(args.scenario)).data  # the loader's parse and limits: no bomb gets by
-    except (OSError, ValueError, RecursionError):
-        yield None  # said later, with the scenario's own message
-        return
-    lead = start_lead(document, args.inputs[0], args.output, start_offset=args.start, activations=activations)
-    if lead is None:
-        yield None
-        return
-    with lead:
-        yield lead
 
 
 def _cmd_check(args: argparse.Namespace) -> int:

@@ -17,6 +17,7 @@ from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING
 
+from bagfault.engine.lead import wanted_topics
 from bagfault.errors import InputError
 from bagfault.io.mcap_writer import CopiedChunk
 
@@ -178,18 +179,6 @@ class ChunkCopy:
             if due is not None and due <= ref.end:
                 return False
         return True
-
-
-def wanted_topics(observers: Sequence[Observer]) -> set[str] | None:
-    """The topics the observers need to see; None when one of them needs every topic."""
-    wanted: set[str] = set()
-    for observer in observers:
-        topics = getattr(observer, 'wanted_topics', None)
-        found = topics() if topics is not None else None
-        if found is None:
-            return None
-        wanted |= found
-    return wanted
 
 
 def _with_leaders(scenario: Scenario, faults: set[str]) -> set[str]:

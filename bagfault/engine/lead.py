@@ -35,17 +35,19 @@ if TYPE_CHECKING:
     from mcap.summary import Summary
 
     from bagfault.engine.activation import Activation
+    from bagfault.engine.run import Observer
+    from bagfault.io.outputs import PartialFile
 
 MARGIN = 2_000_000  # ns a guessed chunk ends before a fault can start (seconds become ns by rounding)
 SCHEDULED = ('active_on_startup', 'active', 'probability_per_second', 'repeat')  # keys of faults on from zero
 
 
-def start_lead(document: object, source: Path, output: Path, *, start_offset: float = 0.0,
+def start_lead(document: object, source: Path, output: PartialFile, *, start_offset: float = 0.0,
                activations: Sequence[Activation] = (), observed: Sequence[str] = ()) -> LeadingCopy | None:
-    """Start copying the input's leading chunks into a new partial output, or None when no chunk is guessed
-    copied (or the guess cannot be made: not an indexed MCAP file, a scenario that is no mapping).
-    `document` is the scenario as `load_located` parsed it (its `.data`: the loader's own parse and limits, done
-    once); `activations` are the `--activate` requests; `observed` topics that reports need."""
+    """Start copying the input's leading chunks into the output's partial file, or None when no chunk is
+    guessed copied (or the guess cannot be made: not an indexed MCAP file, a scenario that is no mapping).
+    `document` is the scenario's YAML as the loader parsed it (`ScenarioText.located.data`: parsed once);
+    `activations` are the `--activate` requests; `observed` topics that observers need."""
     try:
         with source.open('rb') as stream:
             magic = stream.read(len(MAGIC))
@@ -61,6 +63,18 @@ def start_lead(document: object, source: Path, output: Path, *, start_offset: fl
         return LeadingCopy(source, pieces, output)
     except (OSError, ValueError, struct.error, SummaryError, BagfaultError, RecursionError):
         return None
+
+
+def wanted_topics(observers: Sequence[Observer]) -> set[str] | None:
+    """The topics the observers need to see; None when one of them needs every topic."""
+    wanted: set[str] = set()
+    for observer in observers:
+        topics = getattr(observer, 'wanted_topics', None)
+        found = topics() if topics is not None else None
+        if found is None:
+            return None
+        wanted |= found
+    return wanted
 
 
 def leading_pieces(summary: Summary, document: object, start_offset: float,

@@ -15,9 +15,8 @@ from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from typing import TYPE_CHECKING, Protocol, cast
 
-from bagfault.engine.chunk_copy import ChunkCopy, chunk_copy_for, wanted_topics
+from bagfault.engine.chunk_copy import ChunkCopy, chunk_copy_for
 from bagfault.engine.fault_state import FaultState
-from bagfault.engine.lead import start_lead
 from bagfault.engine.pipeline import Pipeline
 from bagfault.engine.provenance import provenance
 from bagfault.engine.routing import build_routing
@@ -37,11 +36,13 @@ if TYPE_CHECKING:
 
     from bagfault.engine.activation import Activation
     from bagfault.engine.control import FaultControl
+    from bagfault.engine.options import RunOptions
     from bagfault.engine.oracles import Schema
     from bagfault.engine.result import RunResult
     from bagfault.engine.routing import Routing
     from bagfault.engine.run import Sink
     from bagfault.io.leading_copy import LeadingCopy
+    from bagfault.io.outputs import PartialFile
     from bagfault.spec.model import Scenario
 
 Progress = Callable[[int, int], None]
@@ -153,96 +154,49 @@ def replay(
 def run_to_file(
     scenario: Scenario,
     paths: Sequence[Path],
-    output: Path,
+    output: PartialFile,
+    options: RunOptions,
     *,
-    seed: int,
-    activations: Sequence[Activation] = (),
-    start_offset: float = 0.0,
-    compression: str = 'zstd',
-    compression_level: int | None = None,
-    batch: bool = True,
     progress: Progress | None = None,
     observers: Sequence[Observer] = (),
-    salvage: bool = False,
-    msg_paths: Sequence[Path] = (),
-    chunk_copy: bool = True,
-    verify: bool = False,
     lead: LeadingCopy | None = None,
 ) -> RunResult:
-    """Inject the scenario's faults into the inputs and write the output MCAP (all or nothing); with
-    `chunk_copy`, the untouched chunks of a single MCAP input are copied as they are (and with `verify`
-    read again, decompressed and checked on a second thread), the leading ones from the start, beside the
-    setup: by `lead` when the caller started it earlier (`bagfault run` does, before its imports; the caller
-    closes it), else by a leading copy of its own."""
-    with contextlib.ExitStack() as owned:
-        copying = chunk_copy and batch and len(paths) == 1 and paths[0].is_file()
-        if copying and lead is None:
-            lead = _own_lead(scenario, paths[0], output, start_offset, activations, observers)
-            if lead is not None:
-                owned.enter_context(lead)
-        return _run_to_file(scenario, paths, output, seed=seed, activations=activations, start_offset=start_offset,
-                            compression=compression, compression_level=compression_level, batch=batch,
-                            progress=progress, observers=observers, salvage=salvage, msg_paths=msg_paths,
-                            copying=copying, verify=verify, lead=lead)
-
-
-def _own_lead(scenario: Scenario, source: Path, output: Path, start_offset: float,
-              activations: Sequence[Activation], observers: Sequence[Observer]) -> LeadingCopy | None:
-    wanted = wanted_topics(observers)
-    if wanted is None:
-        return None  # an observer sees every topic: nothing is copied
-    return start_lead(scenario.located.data, source, output, start_offset=start_offset,
-                      activations=activations, observed=sorted(wanted))
-
-
-def _run_to_file(
-    scenario: Scenario,
-    paths: Sequence[Path],
-    output: Path,
-    *,
-    seed: int,
-    activations: Sequence[Activation],
-    start_offset: float,
-    compression: str,
-    compression_level: int | None,
-    batch: bool,
-    progress: Progress | None,
-    observers: Sequence[Observer],
-    salvage: bool,
-    msg_paths: Sequence[Path],
-    copying: bool,
-    verify: bool,
-    lead: LeadingCopy | None,
-) -> RunResult:
-    definitions = load_definitions([*msg_paths, *scenario.msg_paths])
+    """Inject the scenario's faults into the inputs and write the output MCAP into `output`, published when
+    complete (all or nothing); with `options.chunk_copy`, the untouched chunks of a single MCAP input are
+    copied as they are (and with `verify` read again, decompressed and checked on a second thread), the leading
+    ones by `lead`, which the caller started into `output` before its setup (`engine/lead.py`)."""
+    copying = options.chunk_copy and options.batch and len(paths) == 1 and paths[0].is_file()
+    seed, activations, start_offset = options.seed, options.activations, options.start_offset
+    definitions = load_definitions([*options.msg_paths, *scenario.msg_paths])
     stop = threading.Event()
     mark = ReadMark() if copying else None  # the hash follows the chunk copy's reading: the input is read once
     hashing = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bagfault-hash')
     try:  # the inputs' digests on the second core from the start, beside the setup, the run and the copy
         origin = hashing.submit(provenance, scenario, paths, seed, activations, start_offset, stop, mark)
         with lead.opening() if lead is not None else contextlib.nullcontext():
-            inputs = InputSet(paths, salvage=salvage)
+            inputs = InputSet(paths, salvage=options.salvage)
         with inputs:
             begin_progress(progress, inputs)
             catalog = TypeCatalog(inputs.channels, inputs.ros_distro, definitions)
-            chunks = chunk_copy_for(inputs, verify=verify, mark=mark) if copying else None
+            chunks = chunk_copy_for(inputs, verify=options.verify, mark=mark) if copying else None
             if chunks is None and mark is not None:
                 mark.release()
             if chunks is None and lead is not None:
-                lead.close()  # nothing is copied as it is: the guess was wrong, its file goes
+                lead.close()  # nothing is copied as it is: the guess was wrong, what it copied goes
+                output.clear()
                 lead = None
             if lead is not None and mark is not None:
                 lead.pace(mark)  # the hash follows what the leading copy has read, not what the run took from it
-            with McapSink(output, compression=compression, level=compression_level,
-                          ros_distro=inputs.ros_distro or '', lead=lead) as sink:
+            with McapSink(output.path, compression=options.compression, level=options.compression_level,
+                          ros_distro=inputs.ros_distro or '', output=output, lead=lead) as sink:
                 with chunks if chunks is not None else contextlib.nullcontext():
                     if chunks is not None:
                         chunks.reserve(sink)
                     run, _ = replay(inputs, scenario, catalog, sink, seed=seed, activations=activations,
-                                    start_offset=start_offset, batch=batch, progress=progress, observers=observers,
-                                    blackbox_base=output, chunks=chunks)
+                                    start_offset=start_offset, batch=options.batch, progress=progress,
+                                    observers=observers, blackbox_base=output.path, chunks=chunks)
                 with run:
-                    check_declared(inputs, run, paths, salvage=salvage)
+                    check_declared(inputs, run, paths, salvage=options.salvage)
                     sink.flush()  # the copied chunks go to the file while the hash completes, not after it
                     sink.add_attachment(scenario.name, 'application/yaml', scenario.text.encode(),
                                         inputs.start_time or 0)
@@ -255,7 +209,7 @@ def _run_to_file(
         hashing.shutdown(wait=True, cancel_futures=True)
     if run.stats.input_messages == 0:
         run.notes.append(EMPTY_INPUT)
-    return run.result('run', paths, output, seed)
+    return run.result('run', paths, output.path, seed)
 
 
 def check_declared(inputs: InputSet, run: Run, paths: Sequence[Path], *, salvage: bool) -> None:

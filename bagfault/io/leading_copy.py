@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from bagfault.io.file_copy import copy_range
-from bagfault.io.outputs import open_partial
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
@@ -28,6 +27,7 @@ if TYPE_CHECKING:
 
     from typing_extensions import Self
 
+    from bagfault.io.outputs import PartialFile
     from bagfault.io.sources import ReadMark
 
 PART = 64 << 20  # bytes per copy call: a stop waits for one part at most
@@ -44,22 +44,17 @@ class Piece:
 
 
 class LeadingCopy:
-    """Copies pieces of one input into a new partial output file, in order, until done or stopped.
+    """Copies pieces of one input into an output's partial file, in order, until done or stopped.
 
-    The file is its own until a sink adopts it (`adopt`); `close` removes it
-    unless it was adopted, so an error before the run starts leaves nothing.
+    The file is the `PartialFile`'s, which outlives the copy: the copy writes
+    into it and neither removes nor closes it.
     """
 
-    def __init__(self, source: Path, pieces: Sequence[Piece], output: Path) -> None:
-        """Open `source`, make the partial file of `output` (OSError, OutputError) and start copying (pieces as
-        far as the input goes)."""
+    def __init__(self, source: Path, pieces: Sequence[Piece], output: PartialFile) -> None:
+        """Open `source` (OSError) and start copying into `output` (pieces as far as the input goes)."""
         self._input = os.open(source, os.O_RDONLY)
-        try:
-            stat = os.fstat(self._input)
-            self.fd, self.partial = open_partial(output)
-        except BaseException:
-            os.close(self._input)
-            raise
+        self.fd = output.fd
+        stat = os.fstat(self._input)
         size = stat.st_size
         self.pieces = sorted((Piece(p.source, p.target, min(p.length, size - p.source)) for p in pieces
                               if p.source < size and p.length > 0), key=lambda p: p.target)
@@ -70,7 +65,6 @@ class LeadingCopy:
         self._limit = self.end  # copy up to here, then stop
         self._lock = threading.Lock()
         self._failure: tuple[int, OSError] | None = None  # where a copy failed, and why
-        self._adopted = False
         self._closed = False
         self._mark: ReadMark | None = None  # told how far the input was read (`pace`)
         self._copied = False  # the thread is done
@@ -178,14 +172,8 @@ class LeadingCopy:
         if failure is not None and failure[0] < keep:
             raise failure[1]
 
-    # -- ownership --------------------------------------------------------------------------------
-    def adopt(self) -> tuple[int, Path]:
-        """A sink takes the partial file (descriptor and name) and from then on removes it itself."""
-        self._adopted = True
-        return self.fd, self.partial
-
     def close(self) -> None:
-        """Stop copying; remove the partial file unless a sink adopted it (once; later calls do nothing)."""
+        """Stop copying and close the input (once; later calls do nothing). The output stays as it is."""
         if self._closed:
             return
         self._closed = True
@@ -195,10 +183,6 @@ class LeadingCopy:
         self._thread.join()
         with contextlib.suppress(OSError):
             os.close(self._input)
-        if not self._adopted:
-            with contextlib.suppress(OSError):
-                os.close(self.fd)
-            self.partial.unlink(missing_ok=True)
 
     def __enter__(self) -> Self:
         return self

@@ -27,7 +27,7 @@ from mcap.records import Schema as McapSchema
 from bagfault.errors import OutputError
 from bagfault.io.mcap_layout import header_library
 from bagfault.io.mcap_writer import LEVELS, CopiedChunk, McapWriter
-from bagfault.io.outputs import PUBLISHED, open_partial
+from bagfault.io.outputs import PartialFile
 from bagfault.io.qos import normalized
 
 if TYPE_CHECKING:
@@ -53,13 +53,14 @@ class McapSink:
     """Writes schemas, channels, messages, metadata and attachments.
 
     Nothing appears under the requested name until `finish` succeeds; `abort`
-    removes the partial file. With `lead`, the file is the one a leading copy
-    is filling (see `bagfault.io.leading_copy`).
+    removes the partial file. `output` is the file when the caller holds it
+    (`bagfault run`, whose leading copy `lead` fills it ahead of the run: see
+    `bagfault.io.leading_copy`); without it the sink makes and holds its own.
     """
 
     def __init__(self, path: Path, *, compression: str = 'zstd', chunk_size: int = 1 << 20,
                  ros_distro: str = '', flush_every: float | None = None, level: int | None = None,
-                 lead: LeadingCopy | None = None) -> None:
+                 output: PartialFile | None = None, lead: LeadingCopy | None = None) -> None:
         self.path = path
         self.ros_distro = ros_distro  # the input's or the recording rclpy's; '' when unknown, never guessed
         self.flush_every = flush_every  # live recordings: complete a chunk at least this often (seconds)
@@ -68,10 +69,10 @@ class McapSink:
             raise OutputError(f'{path}: unknown compression {compression!r} (none, lz4, zstd)')
         if level is not None:
             check_level(path, compression, level)
-        handle, self._tmp = lead.adopt() if lead is not None else open_partial(path)
+        self._file = output if output is not None else PartialFile(path)
         self._ended = False  # published or aborted: leaving a `with` then does nothing
-        self.partial = self._tmp  # where the file grows until `finish` (`bagfault recover` reads it after a kill)
-        self._stream = os.fdopen(handle, 'wb', buffering=1 << 20)
+        self.partial = self._file.partial  # where the file grows until `finish` (`bagfault recover` reads it)
+        self._stream = os.fdopen(self._file.fd, 'wb', buffering=1 << 20, closefd=False)
         self._writer = McapWriter(self._stream, chunk_size=chunk_size, compression=compression,
                                   library=header_library(), level=level, lead=lead)
         self._schemas: dict[tuple[str, str, str], int] = {}
@@ -205,12 +206,8 @@ class McapSink:
 
     def publish(self) -> None:
         """Move the completed file to its final name."""
-        try:
-            os.replace(self._tmp, self.path)
-        except OSError as exc:
-            raise self._failed(exc) from None
-        PUBLISHED.append(self.path)
         self._ended = True
+        self._file.publish()
 
     def abort(self) -> None:
         """Drop the partial output."""
@@ -218,7 +215,7 @@ class McapSink:
         self._writer.abandon()
         with contextlib.suppress(OSError):
             self._stream.close()
-        self._tmp.unlink(missing_ok=True)
+        self._file.close()
 
     def __enter__(self) -> Self:
         return self

@@ -16,7 +16,7 @@ import struct
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, BinaryIO
+from typing import TYPE_CHECKING, BinaryIO, Literal
 
 from bagfault.errors import OutputError
 from bagfault.io.marks import MCAP_RECORD, Kind, is_marked, mcap_mark, sidecar, stamp, table_mark
@@ -25,6 +25,8 @@ from bagfault.io.regular import read_bytes, read_text
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Sequence
+
+    from typing_extensions import Self
 
 SIDECARS = ('-wal', '-shm', '-journal')
 PUBLISHED: list[Path] = []  # every file this process has put under its final name, in order (what a stop says)
@@ -220,16 +222,62 @@ def _mcap_marked(stream: BinaryIO, size: int) -> bool:
     return record.name == MCAP_RECORD and record.metadata.get('mark') == mcap_mark(indexes[-1].offset, chunks)
 
 
-def open_partial(path: Path) -> tuple[int, Path]:
-    """A new file beside `path` for its output to grow in (descriptor, name), with the usual permissions."""
-    directory = path.parent if str(path.parent) else Path('.')
-    if path.is_dir():
-        raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
-    if not directory.is_dir():
-        raise OutputError(f'{path}: directory {directory} does not exist')
-    try:
-        handle, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=directory)
-    except OSError as exc:
-        raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
-    os.chmod(handle, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
-    return handle, Path(tmp)
+class PartialFile:
+    """An output file's one owner, from the command line to its last byte: its bytes grow under a new name
+    beside it (`.NAME.XXXX.partial`) until `publish` moves them under the name; `close` removes them unless
+    published. A leading copy writes into `fd`; the sink writes into it and publishes it or drops it through
+    this owner; nothing else makes, renames or removes the file."""
+
+    def __init__(self, path: Path) -> None:
+        """Make the partial file (OutputError when its folder is missing or not writable)."""
+        directory = path.parent if str(path.parent) else Path('.')
+        if path.is_dir():
+            raise OutputError(f'{path}: is a directory; give a file name such as out.mcap')
+        if not directory.is_dir():
+            raise OutputError(f'{path}: directory {directory} does not exist')
+        try:
+            self.fd, name = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.partial', dir=directory)
+        except OSError as exc:
+            raise OutputError(f'{path}: cannot write in {directory}: {exc.strerror}') from None
+        os.chmod(self.fd, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs get the usual permissions
+        self.path = path
+        self.partial = Path(name)  # where the file grows (`bagfault recover` reads it after a kill)
+        self.state: Literal['open', 'published', 'removed'] = 'open'
+
+    def clear(self) -> None:
+        """Empty the file (what a leading copy stopped before the run wrote in it is not the run's)."""
+        try:
+            os.ftruncate(self.fd, 0)
+        except OSError as exc:
+            raise OutputError(f'{self.path}: cannot write: {exc.strerror or exc}') from None
+
+    def publish(self) -> None:
+        """Close the file and move it under its name (OutputError when that fails: the file is removed)."""
+        try:
+            self._close_fd()
+            os.replace(self.partial, self.path)
+        except OSError as exc:
+            self.close()
+            raise OutputError(f'{self.path}: cannot write: {exc.strerror or exc}') from None
+        self.state = 'published'
+        PUBLISHED.append(self.path)
+
+    def close(self) -> None:
+        """Remove the file unless it was published (once; later calls do nothing)."""
+        if self.state != 'open':
+            return
+        self.state = 'removed'
+        with contextlib.suppress(OSError):
+            self._close_fd()
+        self.partial.unlink(missing_ok=True)
+
+    def _close_fd(self) -> None:
+        fd, self.fd = self.fd, -1  # closed once: the number may soon be another file's
+        if fd >= 0:
+            os.close(fd)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -51,9 +51,11 @@ class ReportPaths:
 
     def collectors(self) -> list[Observer]:
         """Observers the reports need during the run (topic rates for the HTML report)."""
-        from bagfault.report.rates import RateTracker  # noqa: PLC0415
+        if self.html is None:
+            return []  # (nothing imported: `bagfault run` starts its leading copy after this)
+        from bagfault.report.rates import RateTracker  # noqa: PLC0415 - numpy
 
-        return [RateTracker()] if self.html is not None else []
+        return [RateTracker()]
 
     def write(self, result: RunResult, collectors: Sequence[Observer] = ()) -> None:
         """Render and write every report asked for."""

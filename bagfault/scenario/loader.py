@@ -10,6 +10,7 @@ then checks values against the injector and assertion schemas.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -56,12 +57,27 @@ class _Collector:
         return Reader(self.add, self.ignored, self.located.raw_text)
 
 
-def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = False) -> Scenario:
-    """Load and (by default) validate a scenario file; raise ScenarioError listing all problems.
+@dataclass(frozen=True)
+class ScenarioText:
+    """A scenario's text and its YAML, parsed once (under the loader's limits): `build_scenario` makes the model
+    of it, and `bagfault run` guesses its leading copy from it before its heavy imports."""
 
-    With `strict`, warnings (what ros2_fault_injection accepts but ignores) are errors too.
-    """
+    text: str
+    located: LocatedYaml
+    source: Path | None = None
 
+    @classmethod
+    def parse(cls, text: str, source: Path | None = None) -> ScenarioText:
+        """ScenarioError when the YAML cannot be read (a syntax error, a document past the loader's limits)."""
+        try:
+            return cls(text, load_located(text), source)
+        except YamlSyntaxError as exc:
+            where, _, message = str(exc).partition(': ')
+            raise ScenarioError([Problem(str(source) if source else '<scenario>', where, '<top>', message)]) from None
+
+
+def read_scenario(path: str | Path) -> ScenarioText:
+    """A scenario file read and its YAML parsed; ScenarioError when it cannot be."""
     file = Path(path)
     try:
         text = read_text(file)
@@ -71,20 +87,30 @@ def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = Fal
         raise ScenarioError([Problem(str(file), '', '', 'is a directory, not a scenario file')]) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError([Problem(str(file), '', '', f'cannot read scenario file: {one_line(exc)}')]) from None
-    return parse_scenario(text, source=file, validate=validate, strict=strict)
+    return ScenarioText.parse(text, file)
+
+
+def load_scenario(path: str | Path, *, validate: bool = True, strict: bool = False) -> Scenario:
+    """Load and (by default) validate a scenario file; raise ScenarioError listing all problems.
+
+    With `strict`, warnings (what ros2_fault_injection accepts but ignores) are errors too.
+    """
+    return build_scenario(read_scenario(path), validate=validate, strict=strict)
 
 
 def parse_scenario(text: str, *, source: Path | None = None, validate: bool = True,
                    strict: bool = False) -> Scenario:
     """Parse scenario text; raise ScenarioError listing every problem found (and every warning with `strict`)."""
+    return build_scenario(ScenarioText.parse(text, source), validate=validate, strict=strict)
+
+
+def build_scenario(document: ScenarioText, *, validate: bool = True, strict: bool = False) -> Scenario:
+    """The model of a parsed scenario, validated unless not `validate`; ScenarioError listing every problem
+    (and every warning with `strict`)."""
     from bagfault.scenario.validator import validate_scenario  # noqa: PLC0415
 
+    source, located, text = document.source, document.located, document.text
     name = str(source) if source else '<scenario>'
-    try:
-        located = load_located(text)
-    except YamlSyntaxError as exc:
-        where, _, message = str(exc).partition(': ')
-        raise ScenarioError([Problem(name, where, '<top>', message)]) from None
     out = _Collector(name, located)
     scenario = _build(located, out)
     base = source.parent if source is not None else None

@@ -22,12 +22,13 @@ from support.helpers import EXTERNAL, chunk_indexes, third_party
 from bagfault import api
 from bagfault.cli import main
 from bagfault.demo.workloads import write_bag
-from bagfault.engine import offline
+from bagfault.engine import lead
 from bagfault.engine.activation import Activation
 from bagfault.engine.lead import leading_pieces, start_lead
 from bagfault.io.leading_copy import Piece
 from bagfault.io.mcap_summary import FOOTER_LENGTH, parse_summary, read_footer
 from bagfault.io.mcap_writer import McapWriter
+from bagfault.io.outputs import PartialFile
 from bagfault.scenario import parse_scenario
 
 IMU = """
@@ -66,7 +67,7 @@ def guess(bag: Path, text: str, **options: Any) -> list[Piece]:
 def run_alone(bag: Path, scenario: str | Path, out: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A run with no leading copy at all (seed 0, as `bagfault run`'s)."""
     with monkeypatch.context() as patch:
-        patch.setattr(offline, 'start_lead', lambda *args, **kwargs: None)
+        patch.setattr(lead, 'start_lead', lambda *args, **kwargs: None)
         api.run(scenario if isinstance(scenario, Path) else parse_scenario(scenario), [bag], out, seed=0)
 
 
@@ -153,24 +154,47 @@ def test_observers_name_topics_too(bag: Path) -> None:
 
 @pytest.mark.parametrize('document', [['not a mapping'], None, 'faults: ['])
 def test_no_guess_from_what_is_not_a_scenario(bag: Path, tmp_path: Path, document: object) -> None:
-    assert start_lead(document, bag, tmp_path / 'out.mcap') is None
+    with PartialFile(tmp_path / 'out.mcap') as file:
+        assert start_lead(document, bag, file) is None
+        assert file.partial.read_bytes() == b''
     assert list(tmp_path.iterdir()) == []
 
 
 def test_no_guess_from_what_is_not_an_indexed_mcap(tmp_path: Path) -> None:
     (tmp_path / 'bag.db3').write_bytes(b'SQLite format 3\x00' + bytes(200))
-    assert start_lead(yaml.safe_load(IMU), tmp_path / 'bag.db3', tmp_path / 'out.mcap') is None
-    assert start_lead(yaml.safe_load(IMU), tmp_path / 'missing.mcap', tmp_path / 'out.mcap') is None
+    with PartialFile(tmp_path / 'out.mcap') as file:
+        assert start_lead(yaml.safe_load(IMU), tmp_path / 'bag.db3', file) is None
+        assert start_lead(yaml.safe_load(IMU), tmp_path / 'missing.mcap', file) is None
+        assert file.partial.read_bytes() == b''
     assert sorted(p.name for p in tmp_path.iterdir()) == ['bag.db3']
 
 
-def test_the_guess_imports_nothing_heavy() -> None:
-    code = ('import sys, bagfault.cli, bagfault.engine.lead; '
-            "print(sorted({m.split('.')[0] for m in sys.modules} & {'numpy', 'rosbags', 'rclpy', 'jinja2', "
-            "'zstandard', 'lz4'}), "
-            "sorted(m for m in sys.modules if m.startswith(('bagfault.scenario', 'bagfault.injectors'))))")
-    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True)
-    assert done.stdout.split() == ['[]', '[]']
+HEAVY = "{'numpy', 'rosbags', 'rclpy', 'jinja2', 'zstandard', 'lz4'}"
+ENGINE = "('bagfault.scenario.validator', 'bagfault.injectors', 'bagfault.engine.offline', 'bagfault.io.mcap_writer')"
+
+
+@pytest.mark.parametrize('reports', [[], ['--json', 'report.json', '--junit', 'report.xml']])
+def test_bagfault_run_starts_its_leading_copy_before_anything_heavy_is_imported(
+        bag: Path, tmp_path: Path, reports: list[str]) -> None:
+    """What is imported when `bagfault run` starts its leading copy (seen from inside it, in a process of its
+    own): no numpy, no decoder, no compressor, no validator, no engine."""
+    (tmp_path / 'imu.yaml').write_text(IMU)
+    code = f"""
+import sys
+from bagfault.io import leading_copy
+seen = []
+start = leading_copy.LeadingCopy.__init__
+def watched(self, *args, **kwargs):
+    seen.append((sorted({{m.split('.')[0] for m in sys.modules}} & {HEAVY}),
+                 sorted(m for m in sys.modules if m.startswith({ENGINE}))))
+    start(self, *args, **kwargs)
+leading_copy.LeadingCopy.__init__ = watched
+from bagfault.cli import main
+code = main(['run', 'imu.yaml', {str(bag)!r}, '-o', 'out.mcap', *{reports!r}])
+print(code, seen)
+"""
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True, cwd=tmp_path)
+    assert done.stdout.splitlines()[-1] == '0 [([], [])]'
 
 
 def test_bagfault_run_with_its_leading_copy_writes_what_the_api_writes_alone(

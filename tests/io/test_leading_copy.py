@@ -1,7 +1,7 @@
 """A leading copy speeds a run up or costs it time, never a byte: right, wrong and far-fetched guesses alike.
 
 Each case runs the scenario once with no leading copy (the reference) and
-once with a `LeadingCopy` given guesses made here by hand; the two outputs
+once with a `LeadingCopy` of guesses made here by hand (in place of the guess); the two outputs
 must be the same bytes. Where the guess is right, the run's own copy thread
 must not copy those bytes again. What a right guess is comes from the
 reference output itself: the input chunks it holds byte for byte, from the
@@ -21,11 +21,13 @@ from mcap.reader import make_reader
 
 from bagfault import api
 from bagfault.demo.workloads import write_bag
+from bagfault.engine import lead as guesses
 from bagfault.engine import offline
 from bagfault.errors import EngineError
 from bagfault.io import file_copy
 from bagfault.io.leading_copy import LeadingCopy, Piece
 from bagfault.io.mcap_writer import McapWriter
+from bagfault.io.outputs import PartialFile
 from bagfault.scenario import parse_scenario
 
 WINDOW = """
@@ -108,13 +110,15 @@ def pace(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str
 
 def reference(bag: Path, text: str, out: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
     with monkeypatch.context() as patch:
-        patch.setattr(offline, 'start_lead', lambda *args, **kwargs: None)
+        patch.setattr(guesses, 'start_lead', lambda *args, **kwargs: None)
         return api.run(parse_scenario(text), [bag], out, seed=3)
 
 
-def with_lead(bag: Path, text: str, out: Path, pieces: list[Piece]) -> Any:
-    with LeadingCopy(bag, pieces, out) as lead:
-        return api.run(parse_scenario(text), [bag], out, seed=3, lead=lead)
+def with_lead(bag: Path, text: str, out: Path, pieces: list[Piece], monkeypatch: pytest.MonkeyPatch) -> Any:
+    """The run with a leading copy of `pieces` (the guess made so)."""
+    with monkeypatch.context() as patch:
+        patch.setattr(guesses, 'leading_pieces', lambda *args, **kwargs: pieces)
+        return api.run(parse_scenario(text), [bag], out, seed=3)
 
 
 def test_a_right_guess_is_taken_and_not_copied_again(bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -125,7 +129,7 @@ def test_a_right_guess_is_taken_and_not_copied_again(bag: Path, tmp_path: Path, 
     source, target, length = copied_prefix(bag, tmp_path / 'reference.mcap')
     assert 0 < length < copied_by_run  # chunks before the window, and after it
     count.bytes = 0
-    with_lead(bag, WINDOW, tmp_path / 'lead.mcap', [Piece(source, target, length)])
+    with_lead(bag, WINDOW, tmp_path / 'lead.mcap', [Piece(source, target, length)], monkeypatch)
     assert (tmp_path / 'lead.mcap').read_bytes() == (tmp_path / 'reference.mcap').read_bytes()
     assert count.bytes == copied_by_run - length
     assert sorted(p.name for p in tmp_path.iterdir()) == ['lead.mcap', 'reference.mcap']
@@ -148,28 +152,33 @@ def test_a_wrong_guess_costs_no_byte(bag: Path, tmp_path: Path, monkeypatch: pyt
     }[guess]
     if guess == 'too far and output smaller':
         assert (tmp_path / 'reference.mcap').stat().st_size < target + size - start
-    result = with_lead(bag, text, tmp_path / 'lead.mcap', pieces)
+    result = with_lead(bag, text, tmp_path / 'lead.mcap', pieces, monkeypatch)
     assert result.stats.output_messages > 0
     assert (tmp_path / 'lead.mcap').read_bytes() == (tmp_path / 'reference.mcap').read_bytes()
     assert sorted(p.name for p in tmp_path.iterdir()) == ['lead.mcap', 'reference.mcap']
 
 
-def test_a_lead_that_is_never_adopted_leaves_nothing(bag: Path, tmp_path: Path) -> None:
+def test_a_closed_lead_leaves_its_copy_to_the_file_s_owner_which_removes_it_unpublished(
+        bag: Path, tmp_path: Path) -> None:
     out = tmp_path / 'out.mcap'
-    with LeadingCopy(bag, [Piece(0, 0, bag.stat().st_size)], out) as lead:
-        assert lead.partial.parent == tmp_path and lead.partial.name.startswith('.out.mcap.')
+    with PartialFile(out) as file:
+        with LeadingCopy(bag, [Piece(0, 0, bag.stat().st_size)], file) as copy:
+            copy.stop(copy.end)
+        assert file.partial.parent == tmp_path and file.partial.name.startswith('.out.mcap.')
+        assert file.partial.read_bytes() == bag.read_bytes()
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_failed_run_removes_the_adopted_file(bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_failed_run_removes_the_file_its_leading_copy_filled(bag: Path, tmp_path: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
     def fails(*args: object, **kwargs: object) -> None:
-        raise EngineError('the run failed after the sink adopted the file')
+        raise EngineError('the run failed after the leading copy began')
 
     monkeypatch.setattr(offline, 'replay', fails)
     out = tmp_path / 'out.mcap'
     start, size = chunk_spans(bag)[0][0], bag.stat().st_size
-    with LeadingCopy(bag, [Piece(start, 8000, size - start)], out) as lead, pytest.raises(EngineError):
-        api.run(parse_scenario(WINDOW), [bag], out, seed=3, lead=lead)
+    with pytest.raises(EngineError):
+        with_lead(bag, WINDOW, out, [Piece(start, 8000, size - start)], monkeypatch)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -203,12 +212,13 @@ def test_a_slow_open_of_the_input_holds_the_copy_until_it_ends(tmp_path: Path, m
     monkeypatch.setattr(leading_copy, 'SLOW_OPEN', 0.05)
     source = tmp_path / 'input.bin'
     source.write_bytes(bytes(range(256)) * 800)  # 205 parts of 1000 bytes: a second at 5 ms each
-    with LeadingCopy(source, [Piece(0, 0, source.stat().st_size)], tmp_path / 'out.bin') as lead:
-        with lead.opening():
+    with PartialFile(tmp_path / 'out.bin') as file, LeadingCopy(source, [Piece(0, 0, source.stat().st_size)],
+                                                                 file) as copy:
+        with copy.opening():
             time.sleep(0.2)
             held = len(parts)
             time.sleep(0.3)
             assert len(parts) == held < 205  # nothing copied from 0.2 s to 0.5 s of a slow open
-        lead.stop(lead.end)
+        copy.stop(copy.end)
         assert len(parts) == 205
-        assert os.pread(lead.fd, source.stat().st_size, 0) == source.read_bytes()
+        assert os.pread(file.fd, source.stat().st_size, 0) == source.read_bytes()

@@ -231,6 +231,7 @@ def test_the_hash_keeps_pace_with_a_leading_copy_the_run_took_chunks_from(tmp_pa
 
     from bagfault.io import file_copy, leading_copy, sources
     from bagfault.io.leading_copy import LeadingCopy, Piece
+    from bagfault.io.outputs import PartialFile
 
     for run in ('took everything', 'is done with the file'):
         mark = sources.ReadMark(lead=0)
@@ -258,7 +259,7 @@ def test_the_hash_keeps_pace_with_a_leading_copy_the_run_took_chunks_from(tmp_pa
     caps: list[int | None] = []
     mark = sources.ReadMark()
     mark.cap = caps.append  # type: ignore[method-assign]
-    with LeadingCopy(source, [Piece(100, 50, 20_000)], tmp_path / 'out.bin') as lead:
+    with PartialFile(tmp_path / 'out.bin') as file, LeadingCopy(source, [Piece(100, 50, 20_000)], file) as lead:
         lead.pace(mark)  # before it has copied: the run counts up to where the copy starts
         assert caps == [100]
         go.set()
