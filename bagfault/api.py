@@ -16,7 +16,7 @@ import contextlib
 import glob
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from bagfault.engine.activation import Activation
 from bagfault.engine.options import RunOptions
@@ -444,13 +444,13 @@ def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int
     if is_remote(str(directory)):  # a bucket prefix: written here, uploaded at the end (and on a stop)
         with staged_folder(str(directory), resume=resume, guarded=TABLES) as staged:
             try:
-                return run_campaign(loaded, staged.path, workers=workers, ray=ray, resume=resume,
+                return run_campaign(loaded, staged.path, job=job, workers=workers, ray=ray, resume=resume,
                                     progress=progress, force=force,  # the prefix's tables came with their marks
                                     kept_elsewhere=staged.outputs)
             except OutputError as exc:  # named as the user knows it: the object in the bucket
                 raise OutputError(str(exc).replace(str(staged.path), str(directory).rstrip('/'))) from None
-    return run_campaign(loaded, Path(directory), workers=workers, ray=ray, resume=resume, progress=progress,
-                        force=force)
+    return run_campaign(loaded, Path(directory), job=job, workers=workers, ray=ray, resume=resume,
+                        progress=progress, force=force)
 
 
 def explore(space: Scenario | str | Path, inputs: Sequence[str | Path] = (), directory: str | Path = 'explore',
@@ -485,7 +485,16 @@ def explore(space: Scenario | str | Path, inputs: Sequence[str | Path] = (), dir
 
         require_rclpy()
         system_of(loaded, {})
-    return run_explore(loaded, paths, Path(directory), options, progress)
+    return run_explore(loaded, paths, Path(directory), options, progress, job=job)
+
+
+def job(spec: dict[str, Any]) -> dict[str, Any]:
+    """One job of a campaign or an exploration, in the process its engine made for it: `run` or `test` as the
+    spec says, its result as a row (`campaign/job.py`). The engines are handed this function, so the job calls
+    the API as the command line does and nothing below the API imports it."""
+    from bagfault.campaign.job import run_job  # noqa: PLC0415
+
+    return run_job(spec, run, test)
 
 
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:

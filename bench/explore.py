@@ -100,6 +100,7 @@ def _off(minimal: Any, known: dict[str, dict[str, float]], slack: dict[str, floa
 
 def replay(result: Any, rows: list[dict[str, Any]], times: int, args: argparse.Namespace) -> None:
     """Each found bug's minimal scenario run `times` times as `bagfault test` does: how many fail its way."""
+    from bagfault.api import job
     from bagfault.campaign.engines import LocalEngine
 
     specs, owners = [], []
@@ -123,7 +124,7 @@ def replay(result: Any, rows: list[dict[str, Any]], times: int, args: argparse.N
     def done(index: int, outcome: dict[str, Any]) -> None:
         failing[index] = {k for k, a in (outcome.get('assertions') or {}).items() if a.get('state') != 'passed'}
 
-    engine = LocalEngine(args.workers)
+    engine = LocalEngine(args.workers, job)
     try:
         engine.run(specs, done)
     finally:

@@ -1,7 +1,7 @@
 """Where jobs run: a local pool of job processes, or Ray tasks (a local Ray instance or a cluster).
 
-Both run the same thing, `execute(spec)`: one process per job (forked from
-a server that has bagfault imported) with the job's timeout, so a result
+Both run the same thing, `execute(job, spec)`: one process per job (forked
+from a server that has the job's module imported) with the job's timeout, so a result
 never depends on the engine or on which worker ran it. A job that crashes, hangs or is killed is
 a result with status `error`, never an exception here.
 """
@@ -24,7 +24,6 @@ from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
-from bagfault.campaign.job import run_job
 from bagfault.errors import CampaignError
 
 if TYPE_CHECKING:
@@ -34,6 +33,7 @@ if TYPE_CHECKING:
 
     Spec = dict[str, Any]
     Done = Callable[[int, dict[str, Any]], None]
+    Job = Callable[[Spec], dict[str, Any]]  # a job spec to its result row, in the job's process (`bagfault.api.job`)
 
 TERM_GRACE = 10.0  # seconds between SIGTERM (the job stops its system under test) and SIGKILL
 PR_SET_PDEATHSIG = 1
@@ -41,14 +41,14 @@ _context: multiprocessing.context.ForkServerContext | None = None
 _context_lock = threading.Lock()
 
 
-def _forkserver() -> multiprocessing.context.ForkServerContext:
-    """Job processes are forked from a server that has imported bagfault once: each job starts fresh, without
-    paying the imports again (0.8 s of a 1.4 s job on the test bags)."""
+def _forkserver(preload: str) -> multiprocessing.context.ForkServerContext:
+    """Job processes are forked from a server that has imported the job's module (`preload`) once: each job
+    starts fresh, without paying the imports again (0.8 s of a 1.4 s job on the test bags)."""
     global _context  # noqa: PLW0603 - one server per worker process
     with _context_lock:
         if _context is None:
             _context = multiprocessing.get_context('forkserver')
-            _context.set_forkserver_preload(['bagfault.api', 'bagfault.campaign.job'])
+            _context.set_forkserver_preload([preload, 'bagfault.campaign.job'])
         return _context
 
 
@@ -78,11 +78,11 @@ def cool_down() -> None:
                 stop()
 
 
-def warm_up() -> int:
-    """Start this process's fork server (bagfault imported) before the first job needs it; its pid."""
+def warm_up(preload: str) -> int:
+    """Start this process's fork server (the job's module imported) before the first job needs it; its pid."""
     from multiprocessing import forkserver  # noqa: PLC0415
 
-    _forkserver()
+    _forkserver(preload)
     forkserver.ensure_running()
     return os.getpid()
 
@@ -93,7 +93,7 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
-def _job_process(spec: Spec, log: str, conn: Connection) -> None:
+def _job_process(job: Job, spec: Spec, log: str, conn: Connection) -> None:
     """The job process: its own session, its output in `log`, its result sent back on `conn`. A stop that comes
     before its output goes to the log ends it quietly (the default actions): a traceback of an interrupted job
     never reaches the command's stderr."""
@@ -112,7 +112,7 @@ def _job_process(spec: Spec, log: str, conn: Connection) -> None:
     os.dup2(handle, 2)
     signal.signal(signal.SIGTERM, interrupt)
     signal.signal(signal.SIGINT, interrupt)
-    conn.send(run_job(spec))
+    conn.send(job(spec))
     conn.close()
 
 
@@ -141,12 +141,12 @@ def _reap(process: BaseProcess) -> None:
         process.join()
 
 
-def execute(spec: Spec) -> dict[str, Any]:
+def execute(job: Job, spec: Spec) -> dict[str, Any]:
     """Run one job in its own process; its result, or an `error` result saying what happened to it."""
-    context = _forkserver()
+    context = _forkserver(job.__module__)
     receiver, sender = context.Pipe(duplex=False)
     with tempfile.NamedTemporaryFile(prefix='bagfault-job-', suffix='.log') as log:
-        process = context.Process(target=_job_process, args=(spec, log.name, sender), name='bagfault-job')
+        process = context.Process(target=_job_process, args=(job, spec, log.name, sender), name='bagfault-job')
         with Running.lock, _without_main():
             process.start()
             Running.processes.add(process)
@@ -189,19 +189,20 @@ class Engine(Protocol):
 
 
 class LocalEngine:
-    """A pool of `workers` threads, each waiting on one job process at a time."""
+    """A pool of `workers` threads, each waiting on one job process at a time, running `job`."""
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, job: Job) -> None:
         self.workers = workers
+        self.job = job
         self.description = f'local pool of {workers} worker{"s" if workers != 1 else ""}'
-        warm_up()
+        warm_up(job.__module__)
 
     def run(self, specs: Sequence[Spec], done: Done) -> None:
         """All specs; KeyboardInterrupt ends the running jobs and is raised again."""
         pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix='bagfault-job')
         futures: dict[Future[dict[str, Any]], int] = {}
         try:
-            futures = {pool.submit(execute, spec): i for i, spec in enumerate(specs)}
+            futures = {pool.submit(execute, self.job, spec): i for i, spec in enumerate(specs)}
             pending = set(futures)
             while pending:
                 finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
@@ -226,15 +227,16 @@ RAY_CONNECT_TIMEOUT = 60.0  # seconds for ray.init to join a cluster (it takes 1
 
 
 class RayEngine:
-    """Every job a Ray task (one CPU each) on a local Ray instance or the cluster at `address`."""
+    """Every job a Ray task (one CPU each) on a local Ray instance or the cluster at `address`, running `job`."""
 
-    def __init__(self, address: str | None, workers: int | None) -> None:
+    def __init__(self, address: str | None, workers: int | None, job: Job) -> None:
         try:
             import ray  # noqa: PLC0415
         except ImportError:
             raise CampaignError('--ray needs Ray: pip install "bagfault[campaign]"') from None
         self.ray: Any = ray
         self.limit = workers
+        self.job = job
         if address:
             _reachable(address)
         options: dict[str, Any] = {'include_dashboard': False, 'log_to_driver': False,
@@ -263,7 +265,7 @@ class RayEngine:
         # a task whose worker or node dies (not one whose job failed: that is a result) runs again elsewhere
         self.task = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(execute)
         warm = ray.remote(num_cpus=1)(warm_up)
-        ray.get([warm.remote() for _ in range(min(cpus, workers or cpus))])  # each worker's fork server
+        ray.get([warm.remote(job.__module__) for _ in range(min(cpus, workers or cpus))])  # each one's fork server
 
     def run(self, specs: Sequence[Spec], done: Done) -> None:
         """All specs as tasks (at most `workers` at a time when given); KeyboardInterrupt cancels them."""
@@ -274,7 +276,7 @@ class RayEngine:
             while waiting or running:
                 while waiting and (self.limit is None or len(running) < self.limit):
                     i, spec = waiting.pop()
-                    running[self.task.remote(spec)] = i
+                    running[self.task.remote(self.job, spec)] = i
                 finished, _ = ray.wait(list(running), num_returns=1, timeout=0.2)
                 for ref in finished:
                     i = running.pop(ref)
@@ -385,8 +387,9 @@ def _reachable(address: str) -> None:
         raise CampaignError(f'--ray {address}: no Ray head answers there ({exc.strerror or exc})') from None
 
 
-def make_engine(workers: int | None, ray: str | None) -> Engine:
-    """`ray` None: the local pool (`workers` or one per core); '' a local Ray instance; else a cluster address."""
+def make_engine(workers: int | None, ray: str | None, job: Job) -> Engine:
+    """An engine running `job`: `ray` None the local pool (`workers` or one per core); '' a local Ray instance;
+    else a cluster address."""
     if ray is None:
-        return LocalEngine(workers or os.cpu_count() or 1)
-    return RayEngine(ray or None, workers)
+        return LocalEngine(workers or os.cpu_count() or 1, job)
+    return RayEngine(ray or None, workers, job)

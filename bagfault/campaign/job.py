@@ -1,6 +1,8 @@
 """One job: the scenario's run (or closed-loop test) on one bag with one seed, as a plain result dict.
 
-The engines call it in a process of its own per job: a crash, a hang or a
+The engines call it in a process of its own per job, through the API
+(`bagfault.api.job`, which hands it the API's `run` and `test`, so the
+campaign never imports the API): a crash, a hang or a
 leak of one job never touches the others (the engine kills it at its
 timeout), and every job starts from the same fresh state, so results do not
 depend on which worker ran what.
@@ -12,9 +14,14 @@ import contextlib
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bagfault.units import NS
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from bagfault.engine.result import RunResult
 
 
 @contextlib.contextmanager
@@ -34,9 +41,8 @@ def _local(spec: dict[str, Any]) -> Iterator[str]:
         yield str(bag.path)
 
 
-def run_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """Run a job spec (see Job.spec); the result row's job-specific part."""
-    from bagfault import api  # noqa: PLC0415
+def run_job(spec: dict[str, Any], run: Callable[..., RunResult], test: Callable[..., RunResult]) -> dict[str, Any]:
+    """Run a job spec (see Job.spec) with the API's `run` or `test`; the result row's job-specific part."""
     from bagfault.scenario import parse_scenario  # noqa: PLC0415
 
     started = time.monotonic()
@@ -46,10 +52,10 @@ def run_job(spec: dict[str, Any]) -> dict[str, Any]:
         with _local(spec) as bag:
             bags = spec.get('bags') or [bag]  # an exploration's run plays every bag given, as `run` and `test` do
             if spec['mode'] == 'test':
-                result = api.test(scenario, bags, output, seed=spec['seed'], rate=spec.get('rate', 1.0))
+                result = test(scenario, bags, output, seed=spec['seed'], rate=spec.get('rate', 1.0))
             else:
                 assert output is not None
-                result = api.run(scenario, bags, output, seed=spec['seed'])
+                result = run(scenario, bags, output, seed=spec['seed'])
     except Exception as exc:  # noqa: BLE001 - any failure of a job is its row, never the campaign's end
         message = ' '.join(str(exc).split()) or type(exc).__name__
         return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {}, 'warnings': [],

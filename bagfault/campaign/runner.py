@@ -33,6 +33,7 @@ from bagfault.progress import _clock
 if TYPE_CHECKING:
     from collections.abc import Collection
 
+    from bagfault.campaign.engines import Job as RunJob
     from bagfault.campaign.model import Campaign
     from bagfault.campaign.plan import Job, Plan
     from bagfault.campaign.results import Table
@@ -181,10 +182,11 @@ class _Store:
         return str(path.relative_to(self.directory.resolve())) if here else ''
 
 
-def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = None, ray: str | None = None,
-                 resume: bool = False, progress: JobProgress | None = None, force: bool = False,
-                 kept_elsewhere: Collection[str] = ()) -> CampaignResult:
-    """Every job of the plan (and the search rounds), then the tables and the report in `directory`."""
+def run_campaign(campaign: Campaign, directory: Path, *, job: RunJob, workers: int | None = None,
+                 ray: str | None = None, resume: bool = False, progress: JobProgress | None = None,
+                 force: bool = False, kept_elsewhere: Collection[str] = ()) -> CampaignResult:
+    """Every job of the plan (and the search rounds) run by `job` in a process of its own (`bagfault.api.job`),
+    then the tables and the report in `directory`."""
     plan = make_plan(campaign)
     store = _Store(directory, plan, kept_elsewhere)
     store.check(resume, force=force)
@@ -194,7 +196,7 @@ def run_campaign(campaign: Campaign, directory: Path, *, workers: int | None = N
     bar = progress or JobProgress(enabled=False)
     ran = 0
     # the engine before any folder is made: an engine that cannot start leaves nothing
-    with contextlib.closing(make_engine(workers, ray)) as engine, contextlib.closing(bar):
+    with contextlib.closing(make_engine(workers, ray, job)) as engine, contextlib.closing(bar):
         store.open(resume)
 
         def run_jobs(jobs: list[Job]) -> dict[str, dict[str, Any]]:

@@ -43,6 +43,7 @@ from bagfault.spec.yamlnodes import load_located
 if TYPE_CHECKING:
     from collections.abc import Generator, Sequence
 
+    from bagfault.campaign.engines import Job
     from bagfault.spec.model import Explore, Scenario
 
 RESERVE = 30  # runs the search leaves to each shrink in progress
@@ -179,7 +180,7 @@ class Explorer:
     """One exploration: the loop of the module's docstring."""
 
     def __init__(self, scenario: Scenario, bags: Sequence[Path], directory: Path, options: ExploreOptions,
-                 progress: ExploreProgress | None = None) -> None:
+                 progress: ExploreProgress | None = None, *, job: Job) -> None:
         if scenario.explore is None:
             raise ExploreError(f'{scenario.name}: no explore: section (the fault space to search)')
         if not bags:
@@ -188,6 +189,7 @@ class Explorer:
         self.space: Explore = scenario.explore
         self.bags = [Path(b) for b in bags]
         self.options = options
+        self.job = job  # a run in its process (`bagfault.api.job`)
         self.mode: Literal['run', 'test'] = 'test' if scenario.system is not None else 'run'
         self.confirm = self.space.confirm or (2 if self.mode == 'test' else 1)
         self.budget = options.budget or self.space.budget
@@ -211,7 +213,7 @@ class Explorer:
     def run(self) -> ExploreResult:
         """Explore until the budget is spent or nothing is left to do; write the results."""
         stored = self.folder.check(self.options.resume, self.options.force)
-        engine = make_engine(self.options.workers, self.options.ray)
+        engine = make_engine(self.options.workers, self.options.ray, self.job)
         description = getattr(engine, 'description', type(engine).__name__)
         with contextlib.closing(engine), contextlib.closing(self.progress), \
                 tempfile.TemporaryDirectory(prefix='bagfault-explore-') as scratch:
@@ -462,6 +464,7 @@ class Explorer:
 
 
 def explore(scenario: Scenario, bags: Sequence[Path], directory: Path, options: ExploreOptions,
-            progress: ExploreProgress | None = None) -> ExploreResult:
-    """Explore a scenario's fault space (see the module's docstring)."""
-    return Explorer(scenario, bags, directory, options, progress).run()
+            progress: ExploreProgress | None = None, *, job: Job) -> ExploreResult:
+    """Explore a scenario's fault space (see the module's docstring), each run by `job` in a process of its own
+    (`bagfault.api.job`)."""
+    return Explorer(scenario, bags, directory, options, progress, job=job).run()

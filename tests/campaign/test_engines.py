@@ -176,8 +176,8 @@ def test_jobs_spread_over_nodes_and_survive_a_node_and_a_driver_lost(cluster: An
 
     # 3. `--ray` without an address starts an instance of its own even where a cluster runs and RAY_ADDRESS
     # names it (as when a second suite runs beside this one): Ray would join that cluster and refuse num_cpus
-    local = subprocess.run([sys.executable, '-c', 'from bagfault.campaign.engines import RayEngine\n'
-                            'engine = RayEngine(None, 1)\nprint(engine.description)\nengine.close()'],
+    local = subprocess.run([sys.executable, '-c', 'from bagfault.api import job\nfrom bagfault.campaign.engines import RayEngine\n'
+                            'engine = RayEngine(None, 1, job)\nprint(engine.description)\nengine.close()'],
                            check=False, capture_output=True, text=True, timeout=120,
                            env={**os.environ, 'RAY_ADDRESS': cluster.address})
     assert local.returncode == 0, local.stderr[-3000:]

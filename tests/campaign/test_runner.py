@@ -538,7 +538,7 @@ def test_a_campaign_hashes_each_bag_once(corpus: Path, tmp_path: Path, monkeypat
     digest in its output's provenance); a bag changed since the plan is hashed again."""
     import blake3
 
-    from bagfault.campaign.job import run_job
+    from bagfault.api import job as run_job
     from bagfault.campaign.loader import load_campaign
     from bagfault.campaign.plan import make_plan
     from bagfault.io import sources
