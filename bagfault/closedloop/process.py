@@ -149,6 +149,12 @@ def _watchdog(leader: int, start: int, token: str, scratch: Path | None) -> subp
         return None
 
 
+def _new_log(path: Path) -> IO[bytes]:
+    """An empty log file, opened for appending (O_APPEND: each write lands at the end, whoever wrote before)."""
+    path.write_bytes(b'')
+    return path.open('ab')
+
+
 class SystemProcess:
     """A running system under test with its stdout and stderr in files."""
 
@@ -160,8 +166,10 @@ class SystemProcess:
         self.stderr_path = logs / 'system.stderr.log'
         self.ending: Ending = 'running'
         self.sent: list[tuple[str, float]] = []  # each signal sent while the main process ran, seconds into the stop
-        self._out: IO[bytes] = self.stdout_path.open('wb')
-        self._err: IO[bytes] = self.stderr_path.open('wb')
+        # appended to by every process of the system, those started again later included: a writer that does
+        # not append writes at its own offset, over what the others appended since
+        self._out: IO[bytes] = _new_log(self.stdout_path)
+        self._err: IO[bytes] = _new_log(self.stderr_path)
         argv: str | list[str] = command[0] if shell else command
         self.token = secrets.token_hex(8)  # in every process of the system, daemons that left its session included
         env = {**env, MARK: self.token}

@@ -352,3 +352,29 @@ def test_scratch_folders_of_dead_runs_are_swept_and_live_ones_kept(tmp_path: Pat
         holder.kill()
         holder.wait()
     assert sweep_scratch(str(tmp_path)) == ['bagfault-test-live']  # its run is gone now
+
+
+def test_a_process_started_again_and_the_system_s_own_processes_all_append_to_its_logs(tmp_path: Path) -> None:
+    """The system's processes and one started again after them write the same log files: every line of each is
+    kept, whoever writes last (a writer that does not append writes at its own offset, over the lines the
+    restarted process appended: a restarted controller's 'controller up' was lost so under load)."""
+    from bagfault.closedloop.process import Launch
+
+    token = uuid.uuid4().hex
+    marker = tmp_path / 'go'
+    script = (f"{sys.executable} -c 'import pathlib, sys, time; print(\"first\", file=sys.stderr, flush=True); "
+              f"[time.sleep(0.02) for _ in iter(lambda: pathlib.Path(\"{marker}\").exists(), True)]; "
+              "print(\"third, written by the first process after the restarted one wrote\", file=sys.stderr, "
+              "flush=True); time.sleep(300)'")
+    process = start(tmp_path, script, token)
+    try:
+        wait_for(lambda: 'first' in process.tail())
+        again = process.start_again(Launch([sys.executable, '-c', 'import sys; print("second", file=sys.stderr)'],
+                                           dict(os.environ), str(tmp_path), 0))
+        again.wait(timeout=30)
+        marker.touch()
+        wait_for(lambda: 'third' in (tmp_path / 'system.stderr.log').read_text())
+        lines = (tmp_path / 'system.stderr.log').read_text().splitlines()
+        assert lines == ['first', 'second', 'third, written by the first process after the restarted one wrote']
+    finally:
+        process.stop(timeout=5.0)
