@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import glob
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,26 +24,28 @@ from bagfault.engine.options import RunOptions
 from bagfault.engine.result import RunResult
 from bagfault.engine.stop import StopFlag
 from bagfault.errors import BagfaultError, OutputError, Problem, ScenarioError, UsageError
-from bagfault.io.outputs import PartialFile, Protected, check_derived, check_output
+from bagfault.io.outputs import PUBLISHED, PartialFile, Protected, check_derived, check_output, write_atomic
+from bagfault.report.files import ReportPaths
 from bagfault.scenario import Scenario, load_scenario
 from bagfault.scenario.loader import build_scenario, read_scenario
-from bagfault.spec.system import SystemUnderTest, system_from
+from bagfault.spec.system import SystemUnderTest, ready_spec, system_from
 from bagfault.spec.yamlnodes import format_path
 
 if TYPE_CHECKING:
     from collections.abc import Collection, Mapping, Sequence
 
     from bagfault.campaign.model import Campaign
-    from bagfault.campaign.runner import CampaignResult, JobProgress
+    from bagfault.campaign.runner import CampaignResult
     from bagfault.engine.offline import Progress
     from bagfault.engine.run import Observer
-    from bagfault.explore import ExploreProgress, ExploreResult
+    from bagfault.explore import ExploreResult
     from bagfault.explore.draw import Strategy
     from bagfault.explore.shrink import ShrinkMode
     from bagfault.io.leading_copy import LeadingCopy
     from bagfault.io.recover import Recovered
     from bagfault.live.recorder import RecordResult
     from bagfault.live.viewing import OpenView
+    from bagfault.progress import ExploreProgress, JobProgress
     from bagfault.spec.yamlnodes import PathKey
 
 DEFAULT_SEED = 0
@@ -50,11 +53,11 @@ SEED_MAX = 2**64 - 1
 
 
 def scenario_of(scenario: Scenario | str | Path, *, space: bool = False, mode: str = '',
-                offers: Collection[str] = ()) -> Scenario:
+                offers: Collection[str] = (), strict: bool = False) -> Scenario:
     """A loaded scenario, or the file loaded and validated; one with an `explore:` section only where `space`
     (its assertions name faults that only `bagfault explore` draws); injectors of the system or its clock only
     where the `mode` offers what they act on (`offers`: 'system', 'clock')."""
-    loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    loaded = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, strict=strict)
     if loaded.explore is not None and not space:
         raise UsageError(f'{loaded.source or loaded.name}: has an explore: section, a fault space: '
                          f'`bagfault explore` searches it (run or test one of the scenarios it writes)')
@@ -114,6 +117,34 @@ def _check_output(output: Path, what: str, inputs: Sequence[Path], scenario: Sce
                   force=force)
 
 
+def _protected(**paths: str | Path | Sequence[str | Path] | None) -> list[tuple[str, Path]]:
+    """What reports must not replace: a command's inputs, scenario and main output (`name=path(s)`)."""
+    out: list[tuple[str, Path]] = []
+    for name, value in paths.items():
+        if value is not None:
+            out += [(f'the {name}', Path(p)) for p in ([value] if isinstance(value, (str, Path)) else value)]
+    return out
+
+
+def _source(scenario: Scenario | str | Path | None) -> Path | None:
+    return scenario.source if isinstance(scenario, Scenario) else None if scenario is None else Path(scenario)
+
+
+def _collectors(reports: ReportPaths | None, protected: list[tuple[str, Path]]) -> list[Observer]:
+    """Before the run: the reports' paths checked against what the command reads and writes; the observers
+    they need during it."""
+    if reports is None:
+        return []
+    reports.check(protected)
+    return reports.collectors()
+
+
+def _reported(result: RunResult, reports: ReportPaths | None, collectors: Sequence[Observer]) -> RunResult:
+    if reports is not None:
+        reports.write(result, collectors)
+    return result
+
+
 def _activations(scenario: Scenario, texts: Sequence[str | Activation]) -> list[Activation]:
     out = []
     for text in texts:
@@ -147,8 +178,9 @@ def run(
     force: bool = False,
     verify: bool = False,
     strict: bool = False,
+    reports: ReportPaths | None = None,
 ) -> RunResult:
-    """Inject the scenario's faults into the inputs and write the output MCAP.
+    """Inject the scenario's faults into the inputs and write the output MCAP (and the `reports` asked for).
 
     `observers` see every output record in time order (report collectors). Corruption the file formats
     detect (CRCs, record lengths, impossible rows) stops the run; with `salvage` what can be read is copied
@@ -162,6 +194,9 @@ def run(
     The input's leading chunks start copying into the output as soon as the scenario's YAML is read, on a
     guess (`engine/lead.py`), beside the imports and the setup: this module imports the engine only then.
     """
+    collectors = _collectors(reports, _protected(input=inputs, scenario=_source(scenario), output=output,
+                                                 **{'--msg-path': msg_paths}))
+    observers = [*observers, *collectors]
     document = scenario if isinstance(scenario, Scenario) else read_scenario(scenario)
     paths, out = _paths(inputs), Path(output)
     with contextlib.ExitStack() as stack:
@@ -181,7 +216,8 @@ def run(
                              msg_paths=tuple(Path(p) for p in msg_paths), chunk_copy=chunk_copy, verify=verify)
         if file is None:
             file = stack.enter_context(PartialFile(out))
-        return run_to_file(loaded, paths, file, options, progress=progress, observers=observers, lead=lead)
+        result = run_to_file(loaded, paths, file, options, progress=progress, observers=observers, lead=lead)
+    return _reported(result, reports, collectors)
 
 
 def _lead(document: object, paths: Sequence[Path], out: Path, stack: contextlib.ExitStack[bool | None], *,
@@ -217,13 +253,18 @@ def check(
     progress: Progress | None = None,
     salvage: bool = False,
     msg_paths: Sequence[str | Path] = (),
+    strict: bool = False,
+    reports: ReportPaths | None = None,
 ) -> RunResult:
     """Evaluate the scenario's assertions (and fault manager) on an existing recording; inject nothing."""
     from bagfault.engine.offline import check_recording  # noqa: PLC0415
 
-    return check_recording(scenario_of(scenario), Path(recording), start_offset=_seconds('--start', start_offset),
-                           observers=observers, progress=progress, salvage=salvage,
-                           msg_paths=[Path(p) for p in msg_paths])
+    collectors = _collectors(reports, _protected(recording=recording, scenario=_source(scenario),
+                                                 **{'--msg-path': msg_paths}))
+    result = check_recording(scenario_of(scenario, strict=strict), Path(recording),
+                             start_offset=_seconds('--start', start_offset), observers=[*observers, *collectors],
+                             progress=progress, salvage=salvage, msg_paths=[Path(p) for p in msg_paths])
+    return _reported(result, reports, collectors)
 
 
 def proxy(
@@ -236,6 +277,8 @@ def proxy(
     ros_args: Sequence[str] = (),
     foxglove: str | None = None,
     force: bool = False,
+    strict: bool = False,
+    reports: ReportPaths | None = None,
 ) -> RunResult:
     """Live proxy (`/x_raw` -> faults -> `/x`) until SIGINT/SIGTERM or `stop.set()`; needs rclpy.
 
@@ -246,12 +289,14 @@ def proxy(
     require_rclpy()
     from bagfault.live.proxy import run_proxy  # noqa: PLC0415
 
-    loaded = scenario_of(scenario, mode='proxy')
+    collectors = _collectors(reports, _protected(scenario=_source(scenario), recording=record))
+    loaded = scenario_of(scenario, mode='proxy', strict=strict)
     out = Path(record) if record is not None else None
     if out is not None:
         _check_output(out, 'recording', [], loaded, force=force)
-    return run_proxy(loaded, seed=seed_of(loaded, seed), record=out, use_sim_time=use_sim_time,
-                     stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args), view=_view(foxglove))
+    result = run_proxy(loaded, seed=seed_of(loaded, seed), record=out, use_sim_time=use_sim_time,
+                       stop=stop if stop is not None else StopFlag(), ros_args=list(ros_args), view=_view(foxglove))
+    return _reported(result, reports, collectors)
 
 
 def play(
@@ -273,6 +318,8 @@ def play(
     ros_args: Sequence[str] = (),
     foxglove: str | None = None,
     force: bool = False,
+    strict: bool = False,
+    reports: ReportPaths | None = None,
 ) -> RunResult:
     """Publish bags on their topics through the scenario's faults (a plain player without one); needs rclpy,
     but for `foxglove` ('HOST:PORT'), which shows the play in Foxglove with its faults as parameters and
@@ -288,8 +335,9 @@ def play(
         require_rclpy()
     from bagfault.live.player import run_play  # noqa: PLC0415
 
+    collectors = _collectors(reports, _protected(input=inputs, scenario=_source(scenario), recording=record))
     loaded = (scenario_of(scenario, mode='play' if clock else 'play without --clock',
-                          offers=('clock',) if clock else ())
+                          offers=('clock',) if clock else (), strict=strict)
               if scenario is not None else Scenario([], [], []))
     paths = _paths(inputs)
     if not (math.isfinite(rate) and rate > 0):
@@ -305,12 +353,13 @@ def play(
         if not (sep and source.startswith('/') and target.startswith('/')):
             raise UsageError(f'--remap {item}: must be /FROM:=/TO')
         mapped += ['-r', f'{source}:={target}']
-    return run_play(loaded, paths, seed=seed_of(loaded, seed), rate=rate, clock=clock, loop=loop, record=out,
-                    delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag(),
-                    wait_for=[t if t == 'all' or t.startswith('/') else '/' + t for t in wait_for],
-                    topics=[t if t.startswith('/') else '/' + t for t in topics],
-                    start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
-                    ros_args=[*mapped, *ros_args], view=_view(foxglove), ros=ros)
+    result = run_play(loaded, paths, seed=seed_of(loaded, seed), rate=rate, clock=clock, loop=loop, record=out,
+                      delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag(),
+                      wait_for=[t if t == 'all' or t.startswith('/') else '/' + t for t in wait_for],
+                      topics=[t if t.startswith('/') else '/' + t for t in topics],
+                      start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
+                      ros_args=[*mapped, *ros_args], view=_view(foxglove), ros=ros)
+    return _reported(result, reports, collectors)
 
 
 def record(
@@ -354,6 +403,8 @@ def test(
     foxglove: str | None = None,
     force: bool = False,
     observers: Sequence[Observer] = (),
+    strict: bool = False,
+    reports: ReportPaths | None = None,
 ) -> RunResult:
     """Closed loop: start the scenario's system under test on a private ROS domain, play the inputs (default:
     the scenario's `bags`) into it through the faults on sim time, record it, judge it, stop it; needs rclpy.
@@ -369,7 +420,9 @@ def test(
     from bagfault.closedloop.repeat import fold  # noqa: PLC0415
     from bagfault.closedloop.runner import run_test  # noqa: PLC0415
 
-    loaded = scenario_of(scenario, mode='test', offers=('system', 'clock'))
+    collectors = _collectors(reports, _protected(input=inputs, scenario=_source(scenario), output=output))
+    observers = [*observers, *collectors]
+    loaded = scenario_of(scenario, mode='test', offers=('system', 'clock'), strict=strict)
     paths = [Path(p) for p in inputs] or list(loaded.bags)
     if not paths:
         raise UsageError(f'{loaded.name}: no bag given, and the scenario names none under `bags:`')
@@ -394,11 +447,15 @@ def test(
         results.append(run_test(loaded, paths, path, system=under_test, seed=seed_of(loaded, seed), rate=rate,
                                 logs=folder, stop=flag, view=_view(foxglove),
                                 observers=observers if number == 1 else ()))
-    return results[0] if repeat == 1 else fold(results)
+    return _reported(results[0] if repeat == 1 else fold(results), reports, collectors)
 
 
 def system_of(scenario: Scenario, overrides: Mapping[str, object]) -> SystemUnderTest:
-    """The scenario's `system_under_test` with `overrides` in place of its keys; ScenarioError if unusable."""
+    """The scenario's `system_under_test` with `overrides` in place of its keys (a `ready` condition also in the
+    command line's text form, `publisher:/t@5`); ScenarioError if unusable."""
+    ready = overrides.get('ready')
+    if isinstance(ready, list):
+        overrides = {**overrides, 'ready': [ready_spec(r) if isinstance(r, str) else r for r in ready]}
     problems: list[Problem] = []
     name = str(scenario.source or scenario.name)
 
@@ -497,6 +554,113 @@ def job(spec: dict[str, Any]) -> dict[str, Any]:
     return run_job(spec, run, test)
 
 
+def schema(type_name: str | None = None, *, as_json: bool = False, json_schema_of: str | None = None) -> str:
+    """`bagfault schema`: every section, injector type and assertion type (or one type's keys, as text or
+    JSON), or with `json_schema_of` ('scenario', 'campaign', ...) a JSON Schema for editors."""
+    import json  # noqa: PLC0415
+
+    from bagfault.report import schema as text  # noqa: PLC0415
+
+    if json_schema_of:
+        return json.dumps(text.json_schema(json_schema_of), indent=2, sort_keys=True)
+    if type_name or as_json:
+        return text.render_schema(type_name, as_json=as_json)
+    return '\n\n'.join([text.render_sections(), "Injector types (each fault's config keys are its injector type's):",
+                        text.render_schema(), 'Assertion types:', text.render_assertions()])
+
+
+def info(inputs: Sequence[str | Path]) -> str:
+    """`bagfault info`: what each input holds (format, topics, types, counts, time span), as text."""
+    from bagfault.report.info import render_info  # noqa: PLC0415
+
+    return render_info([Path(p) for p in inputs])
+
+
+@dataclass(frozen=True)
+class LatencyOutcome:
+    """What `bagfault latency` says: its text, warnings, and whether it is usable (exit 0) or not (2)."""
+
+    text: str
+    warnings: tuple[str, ...] = ()
+    usable: bool = True
+
+
+def latency(architecture: str | Path, bags: Sequence[str | Path] = (), *, path: str | None = None,
+            stamp_origin: bool = False, json: str | Path | None = None, html: str | Path | None = None,
+            force: bool = False) -> LatencyOutcome:
+    """CARET path latency of a CARET architecture file's paths measured on `bags` (reports to `json`, `html`);
+    with no bags, the architecture file validated (its paths listed, unusable ones said)."""
+    import json as json_module  # noqa: PLC0415
+
+    from bagfault.latency.architecture import load_architecture  # noqa: PLC0415
+    from bagfault.latency.measure import measure  # noqa: PLC0415
+    from bagfault.report.latency import render_html, render_text, render_validation  # noqa: PLC0415
+
+    if not bags:
+        loaded = load_architecture(architecture)
+        usable = all(p.usable for p in loaded.paths.values()) and not loaded.dropped
+        return LatencyOutcome(render_validation(loaded), tuple(loaded.warnings), usable)
+    inputs = [Path(b) for b in bags]
+    for option, report in (('--json', json), ('--html', html)):
+        if report is not None:
+            check_output(Path(report), f'{option} report',
+                         [('the architecture', Path(architecture)), *(('the input', b) for b in inputs)], force=force)
+    measured = measure(architecture, inputs, path=path, stamp_origin=stamp_origin)
+    if json is not None:
+        write_atomic(Path(json), json_module.dumps(measured.to_dict(), indent=1, sort_keys=True) + '\n', 'json')
+    if html is not None:
+        write_atomic(Path(html), render_html(measured), 'html')
+    return LatencyOutcome(render_text(measured))
+
+
+def demo(directory: str | Path) -> RunResult:
+    """`bagfault demo`: a synthetic bag and its scenario written in `directory`, run, with its markdown and HTML
+    reports beside them (demo_report.md, demo_report.html)."""
+    from bagfault import demo as files  # noqa: PLC0415
+
+    folder = Path(directory)
+    try:
+        bag, scenario = files.prepare(folder)
+    except OSError as exc:
+        raise OutputError(f'{folder}: cannot write the demo files: {exc.strerror}') from None
+    return run(scenario, [bag], folder / 'demo_output.mcap',
+               reports=ReportPaths(markdown=folder / 'demo_report.md', html=folder / 'demo_report.html'))
+
+
+def campaign_plan(file: str | Path) -> str:
+    """`bagfault campaign --dry-run`: the jobs a campaign file makes, summed up, without running any."""
+    from bagfault.campaign.loader import load_campaign  # noqa: PLC0415
+    from bagfault.campaign.plan import make_plan  # noqa: PLC0415
+
+    return make_plan(load_campaign(file)).summary()
+
+
+def print_summary(result: RunResult) -> None:
+    """The terminal summary of a run: inputs, output, fault timeline, notes, one line per assertion, the verdict
+    (warnings on stderr)."""
+    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
+
+    print_run_summary(result)
+
+
+def junit_error(path: Path, scenario: str, reason: str, seconds: float, *, extended: bool = False,
+                protected: Sequence[tuple[str, Path]] = ()) -> None:
+    """A JUnit file that says why a command could not run (exit 2), so CI shows the reason; nothing when that
+    path is itself the problem or names anything in `protected`."""
+    from bagfault.report.junit import render_error  # noqa: PLC0415
+
+    try:
+        check_output(path, '--junit report', protected)
+        write_atomic(path, render_error(scenario, reason, seconds, extended=extended), 'xml')
+    except BagfaultError:
+        return
+
+
+def published() -> list[Path]:
+    """Every file this process has put under its final name so far, in order (what a stopped command says)."""
+    return list(PUBLISHED)
+
+
 def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scenario]:
     """Load and validate scenario files; raise ScenarioError with every problem of all files."""
     scenarios, problems = [], []
@@ -514,17 +678,29 @@ def validate(paths: Sequence[str | Path], *, strict: bool = False) -> list[Scena
 
 __all__ = [
     'BagfaultError',
+    'LatencyOutcome',
+    'ReportPaths',
+    'RunOptions',
     'RunResult',
     'StopFlag',
     'campaign',
+    'campaign_plan',
     'check',
+    'demo',
     'explore',
+    'info',
+    'job',
+    'junit_error',
+    'latency',
     'load_scenario',
     'play',
+    'print_summary',
     'proxy',
+    'published',
     'record',
     'recover',
     'run',
+    'schema',
     'test',
     'validate',
 ]

@@ -14,20 +14,19 @@ import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from bagfault import __version__, settings
-from bagfault.errors import BagfaultError, UsageError
-from bagfault.io.outputs import PUBLISHED, check_output
+from bagfault import __version__, api, settings
+from bagfault.errors import BagfaultError, LatencyError, UsageError
 from bagfault.log import console
+from bagfault.progress import ExploreProgress, JobProgress, ProgressBar
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
 
     from bagfault.engine.result import RunResult
-    from bagfault.engine.run import Observer
-    from bagfault.report.files import ReportPaths
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
 INTERRUPTED: list[str] = []  # how the command was stopped, once a signal stopped it (bagfault.__main__ reads it)
+EARLIER: list[Path] = []  # files published before this command began (an earlier `main` in this process)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -176,7 +175,7 @@ def _parser() -> argparse.ArgumentParser:
                               usage='bagfault campaign FILE -o DIR [--workers N] [--ray [ADDRESS]] [--resume] '
                                     '[--dry-run]')
     campaign.add_argument('campaign', type=Path, metavar='FILE')
-    campaign.add_argument('-o', '--output-dir', type=_folder_or_url, metavar='DIR',
+    campaign.add_argument('-o', '--output-dir', metavar='DIR',
                           help='results.parquet, results.csv, campaign.json, report.html, jobs/, outputs/')
     _force_option(campaign)
     campaign.add_argument('--workers', type=int, default=None, metavar='N',
@@ -230,13 +229,6 @@ def output_file(text: str) -> Path:
     return Path(text)
 
 
-def _folder_or_url(text: str) -> Path | str:
-    """A campaign's -o: a local folder, or a bucket prefix (s3://, gs://, az://) kept as written."""
-    from bagfault.io.objects import is_remote  # noqa: PLC0415
-
-    return text if is_remote(text) else Path(text)
-
-
 def _force_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--force', action='store_true',
                         help='replace existing output files that bagfault did not write (never an input)')
@@ -270,107 +262,62 @@ def _strict_option(parser: argparse.ArgumentParser) -> None:
                         help='treat scenario warnings (what ros2_fault_injection accepts but ignores) as errors')
 
 
-def _reports(args: argparse.Namespace) -> ReportPaths:
-    from bagfault.report.files import ReportPaths  # noqa: PLC0415
-
-    return ReportPaths(markdown=getattr(args, 'report', None), json=getattr(args, 'json', None),
-                       junit=getattr(args, 'junit', None), html=getattr(args, 'html', None),
-                       junit_file_line=getattr(args, 'junit_file_line', False),
-                       force=getattr(args, 'force', False))
+def _reports(args: argparse.Namespace) -> api.ReportPaths:
+    return api.ReportPaths(markdown=args.report, json=args.json, junit=args.junit, html=args.html,
+                           junit_file_line=args.junit_file_line, force=args.force)
 
 
-def _protected(**paths: Path | Sequence[Path] | None) -> list[tuple[str, Path]]:
-    """What reports must not replace: the command's inputs, scenario and main output."""
-    out: list[tuple[str, Path]] = []
-    for name, value in paths.items():
-        if value is None:
-            continue
-        for path in [value] if isinstance(value, Path) else value:
-            out.append((f'the {name}', path))
-    return out
-
-
-def _finish(reports: ReportPaths, result: RunResult, collectors: Sequence[Observer] = ()) -> int:
-    """Reports, terminal summary, exit code: the end of every command that runs a scenario."""
-    from bagfault.report.summary import print_run_summary  # noqa: PLC0415
-
-    reports.write(result, collectors)
-    print_run_summary(result)
+def _finish(result: RunResult) -> int:
+    """The terminal summary and the exit code: the end of every command that runs a scenario."""
+    api.print_summary(result)
     return EXIT_FAILED if result.failed else EXIT_OK
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    reports = _reports(args)
-    reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output,
-                             **{'--msg-path': args.msg_path}))
-    from bagfault import api  # noqa: PLC0415 - it starts the leading copy before it imports the engine
-    from bagfault.progress import ProgressBar  # noqa: PLC0415
-
     bar = ProgressBar()
-    collectors = reports.collectors()
     try:
         result = api.run(
             args.scenario, args.inputs, args.output, seed=args.seed, activate=args.activate,
             start_offset=args.start, compression=args.compression, compression_level=args.compression_level,
-            progress=bar, observers=collectors, salvage=args.salvage, msg_paths=args.msg_path,
-            chunk_copy=not args.no_chunk_copy, force=args.force, verify=args.verify, strict=args.strict,
+            progress=bar, salvage=args.salvage, msg_paths=args.msg_path, chunk_copy=not args.no_chunk_copy,
+            force=args.force, verify=args.verify, strict=args.strict, reports=_reports(args),
         )
     finally:
         bar.close()
-    return _finish(reports, result, collectors)
+    return _finish(result)
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-    from bagfault.progress import ProgressBar  # noqa: PLC0415
-
-    reports = _reports(args)
-    reports.check(_protected(recording=args.recording, scenario=args.scenario, **{'--msg-path': args.msg_path}))
-    scenario = api.load_scenario(args.scenario, strict=args.strict)
     bar = ProgressBar()
-    collectors = reports.collectors()
     try:
-        result = api.check(scenario, args.recording, start_offset=args.start, observers=collectors, progress=bar,
-                           salvage=args.salvage, msg_paths=args.msg_path)
+        result = api.check(args.scenario, args.recording, start_offset=args.start, progress=bar,
+                           salvage=args.salvage, msg_paths=args.msg_path, strict=args.strict, reports=_reports(args))
     finally:
         bar.close()
-    return _finish(reports, result, collectors)
+    return _finish(result)
 
 
 def _cmd_proxy(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-
-    reports = _reports(args)
-    reports.check(_protected(scenario=args.scenario, recording=args.record))
-    scenario = api.load_scenario(args.scenario, strict=args.strict)
-    result = api.proxy(scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time,
-                       ros_args=args.ros_args, foxglove=args.foxglove, force=args.force)
-    return _finish(reports, result)
+    return _finish(api.proxy(args.scenario, record=args.record, seed=args.seed, use_sim_time=args.use_sim_time,
+                             ros_args=args.ros_args, foxglove=args.foxglove, force=args.force, strict=args.strict,
+                             reports=_reports(args)))
 
 
 def _cmd_play(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-
     items = list(args.items)
     scenario_path = None
     if items[0].suffix in ('.yaml', '.yml') and items[0].is_file():
         scenario_path = items.pop(0)
     if not items:
         raise UsageError('play: give at least one bag after the scenario')
-    reports = _reports(args)
-    reports.check(_protected(input=items, scenario=scenario_path, recording=args.record))
-    scenario = api.load_scenario(scenario_path, strict=args.strict) if scenario_path is not None else None
-    result = api.play(scenario, items, rate=args.rate, clock=args.clock is not None, loop=args.loop,
-                      record=args.record, seed=args.seed, delay=args.delay, wait_for=args.wait_for, remap=args.remap,
-                      topics=args.topics, start_offset=args.start_offset,
-                      clock_hz=args.clock if args.clock is not None else 100.0, ros_args=args.ros_args,
-                      foxglove=args.foxglove, force=args.force)
-    return _finish(reports, result)
+    return _finish(api.play(scenario_path, items, rate=args.rate, clock=args.clock is not None, loop=args.loop,
+                            record=args.record, seed=args.seed, delay=args.delay, wait_for=args.wait_for,
+                            remap=args.remap, topics=args.topics, start_offset=args.start_offset,
+                            clock_hz=args.clock if args.clock is not None else 100.0, ros_args=args.ros_args,
+                            foxglove=args.foxglove, force=args.force, strict=args.strict, reports=_reports(args)))
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-
     result = api.record(args.topics, args.output, every=args.all, duration=args.duration,
                         use_sim_time=args.use_sim_time, ros_args=args.ros_args, force=args.force)
     for topic, count in sorted(result.counts.items()):
@@ -389,9 +336,8 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 
 def _system_overrides(args: argparse.Namespace) -> dict[str, object]:
-    """`system_under_test` keys given on the command line, in their YAML form."""
-    from bagfault.spec.system import ready_spec  # noqa: PLC0415
-
+    """`system_under_test` keys given on the command line, in their YAML form (`--ready` as written: the API
+    reads it)."""
     out: dict[str, object] = {}
     if args.command_line is not None:
         out['command'] = args.command_line
@@ -406,7 +352,7 @@ def _system_overrides(args: argparse.Namespace) -> dict[str, object]:
     if args.cwd is not None:
         out['cwd'] = args.cwd
     if args.ready:
-        out['ready'] = [ready_spec(text) for text in args.ready]
+        out['ready'] = list(args.ready)
     if args.record_topic:
         out['record'] = list(args.record_topic)
     if args.stop_timeout is not None:
@@ -419,33 +365,19 @@ def _system_overrides(args: argparse.Namespace) -> dict[str, object]:
 
 
 def _cmd_test(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-
-    reports = _reports(args)
-    reports.check(_protected(input=args.inputs, scenario=args.scenario, output=args.output))
-    scenario = api.load_scenario(args.scenario, strict=args.strict)
-    collectors = reports.collectors()
-    result = api.test(scenario, args.inputs, args.output, system=_system_overrides(args), seed=args.seed,
-                      rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs, foxglove=args.foxglove,
-                      force=args.force, observers=collectors)
-    return _finish(reports, result, collectors)
+    return _finish(api.test(args.scenario, args.inputs, args.output, system=_system_overrides(args), seed=args.seed,
+                            rate=args.rate, repeat=args.repeat, keep_logs=args.keep_logs, foxglove=args.foxglove,
+                            force=args.force, strict=args.strict, reports=_reports(args)))
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-    from bagfault.campaign.loader import load_campaign  # noqa: PLC0415
-    from bagfault.campaign.plan import make_plan  # noqa: PLC0415
-    from bagfault.campaign.runner import JobProgress  # noqa: PLC0415
-
-    campaign = load_campaign(args.campaign)
     if args.dry_run:
-        plan = make_plan(campaign)
-        print(plan.summary())
+        print(api.campaign_plan(args.campaign))
         return EXIT_OK
     if args.output_dir is None:
         raise UsageError('campaign: -o DIR is required (or --dry-run)')
     try:
-        result = api.campaign(campaign, args.output_dir, workers=args.workers, ray=args.ray, resume=args.resume,
+        result = api.campaign(args.campaign, args.output_dir, workers=args.workers, ray=args.ray, resume=args.resume,
                               progress=JobProgress(), force=args.force)
     except KeyboardInterrupt:
         INTERRUPTED.append('SIGINT')
@@ -453,6 +385,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
               'continues', file=sys.stderr)
         return EXIT_ERROR
     c = result.counts
+    campaign = result.plan.campaign
     search = f', {len(result.table.rows) - len(result.table.sweep_rows())} search jobs' \
         if campaign.search is not None else ''
     print(f'{campaign.name}: {sum(c.values())} jobs: {c["passed"]} passed, {c["failed"]} failed, {c["error"]} error'
@@ -470,9 +403,6 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
 
 
 def _cmd_explore(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-    from bagfault.explore import ExploreProgress  # noqa: PLC0415
-
     try:
         result = api.explore(args.scenario, args.inputs, args.output_dir, budget=args.budget, seed=args.seed,
                              workers=args.workers, ray=args.ray_address if args.engine == 'ray' else None,
@@ -508,8 +438,6 @@ def _under(folder: Path | str, name: str) -> str:
 
 
 def _cmd_recover(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-
     done = api.recover(args.recording, args.output, force=args.force)
     state = 'complete (nothing was lost)' if done.complete else f'cut short ({done.stopped})'
     print(f'{done.source}: {state}')
@@ -518,31 +446,12 @@ def _cmd_recover(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from bagfault import api, demo  # noqa: PLC0415
-    from bagfault.errors import OutputError  # noqa: PLC0415
-    from bagfault.progress import ProgressBar  # noqa: PLC0415
-    from bagfault.report.files import ReportPaths  # noqa: PLC0415
-
-    directory = args.output_dir
-    try:
-        bag, scenario = demo.prepare(directory)
-    except OSError as exc:
-        raise OutputError(f'{directory}: cannot write the demo files: {exc.strerror}') from None
-    reports = ReportPaths(markdown=directory / 'demo_report.md', html=directory / 'demo_report.html')
-    bar = ProgressBar()
-    collectors = reports.collectors()
-    try:
-        result = api.run(scenario, [bag], directory / 'demo_output.mcap', progress=bar, observers=collectors)
-    finally:
-        bar.close()
-    code = _finish(reports, result, collectors)
-    print(f'report    {reports.markdown}, {reports.html}')
+    code = _finish(api.demo(args.output_dir))
+    print(f'report    {args.output_dir / "demo_report.md"}, {args.output_dir / "demo_report.html"}')
     return code
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from bagfault import api  # noqa: PLC0415
-
     for scenario in api.validate(args.scenarios, strict=args.strict):
         for warning in scenario.warnings:
             print(f'warning: {warning}', file=sys.stderr)
@@ -555,60 +464,29 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
-    import json  # noqa: PLC0415
-
-    from bagfault.report.schema import json_schema, render_assertions, render_schema, render_sections  # noqa: PLC0415
-
-    if args.json_schema:
-        text = json.dumps(json_schema(args.json_schema), indent=2, sort_keys=True)
-    elif args.type or args.json:
-        text = render_schema(args.type, as_json=args.json)
-    else:
-        text = '\n\n'.join([render_sections(), "Injector types (each fault's config keys are its injector "
-                             "type's):", render_schema(), 'Assertion types:', render_assertions()])
-    print(text)
+    print(api.schema(args.type, as_json=args.json, json_schema_of=args.json_schema))
     return EXIT_OK
 
 
 def _cmd_latency(args: argparse.Namespace) -> int:
-    import json  # noqa: PLC0415
-
-    from bagfault.errors import LatencyError  # noqa: PLC0415
-    from bagfault.io.outputs import write_atomic  # noqa: PLC0415
-    from bagfault.latency.architecture import load_architecture  # noqa: PLC0415
-    from bagfault.latency.measure import measure  # noqa: PLC0415
-    from bagfault.report.latency import render_html, render_text, render_validation  # noqa: PLC0415
-
     items = args.items
     if items[0] == 'validate':
         if len(items) != 2:
             raise LatencyError('usage: bagfault latency validate ARCH.yaml')
-        architecture = load_architecture(items[1])
-        for warning in architecture.warnings:
-            print(f'warning: {warning}', file=sys.stderr)
-        print(render_validation(architecture))
-        usable = all(p.usable for p in architecture.paths.values()) and not architecture.dropped
-        return EXIT_OK if usable else EXIT_ERROR
-    if len(items) < 2:
+        outcome = api.latency(items[1])
+    elif len(items) < 2:
         raise LatencyError('usage: bagfault latency ARCH.yaml BAG... (or: bagfault latency validate ARCH.yaml)')
-    bags = [Path(item) for item in items[1:]]
-    for option, path in (('--json', args.json), ('--html', args.html)):
-        if path is not None:
-            check_output(path, f'{option} report', _protected(architecture=Path(items[0]), input=bags),
-                         force=args.force)
-    report = measure(items[0], items[1:], path=args.path, stamp_origin=args.stamp_origin)
-    print(render_text(report))
-    if args.json:
-        write_atomic(args.json, json.dumps(report.to_dict(), indent=1, sort_keys=True) + '\n', 'json')
-    if args.html:
-        write_atomic(args.html, render_html(report), 'html')
-    return EXIT_OK
+    else:
+        outcome = api.latency(items[0], items[1:], path=args.path, stamp_origin=args.stamp_origin, json=args.json,
+                              html=args.html, force=args.force)
+    for warning in outcome.warnings:
+        print(f'warning: {warning}', file=sys.stderr)
+    print(outcome.text)
+    return EXIT_OK if outcome.usable else EXIT_ERROR
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    from bagfault.report.info import render_info  # noqa: PLC0415
-
-    print(render_info(args.inputs))
+    print(api.info(args.inputs))
     return EXIT_OK
 
 
@@ -684,7 +562,7 @@ def _main(argv: Sequence[str] | None) -> int:
         print(f'bagfault: error: --ros-args: only {", ".join(ROS_COMMANDS)} make a ROS node', file=sys.stderr)
         return EXIT_ERROR
     began = time.monotonic()
-    PUBLISHED.clear()
+    EARLIER[:] = api.published()
     try:
         with _terminating_signals():
             settings.check()  # a bad environment variable is one line before anything runs
@@ -760,9 +638,10 @@ def _stopped_by(exc: KeyboardInterrupt) -> str:
 
 def _written() -> str:
     """What the command had put under its final names before it stopped: true whenever it stops."""
-    if not PUBLISHED:
+    written = api.published()[len(EARLIER):]
+    if not written:
         return 'nothing was written under the requested names'
-    return 'written before that: ' + ', '.join(str(p) for p in PUBLISHED)
+    return 'written before that: ' + ', '.join(str(p) for p in written)
 
 
 def _junit_error(args: argparse.Namespace, reason: str, began: float) -> None:
@@ -775,16 +654,8 @@ def _junit_error(args: argparse.Namespace, reason: str, began: float) -> None:
     for key, value in vars(args).items():
         values = value if isinstance(value, list) else [value]
         named += [(key, v) for v in values if isinstance(v, Path) and key != 'junit']
-    from bagfault.io.outputs import write_atomic  # noqa: PLC0415
-    from bagfault.report.junit import render_error  # noqa: PLC0415
-
-    scenario = getattr(args, 'scenario', None)
-    try:
-        check_output(path, '--junit report', named)
-        write_atomic(path, render_error(str(scenario or args.command), reason, time.monotonic() - began,
-                                        extended=getattr(args, 'junit_file_line', False)), 'xml')
-    except BagfaultError:
-        return
+    api.junit_error(path, str(getattr(args, 'scenario', None) or args.command), reason, time.monotonic() - began,
+                    extended=getattr(args, 'junit_file_line', False), protected=named)
 
 
 @contextlib.contextmanager

@@ -1,6 +1,6 @@
-"""Progress bar on a terminal: messages and bag seconds done, throughput, ETA.
+"""Progress on a terminal: a run's messages and bag seconds, a campaign's jobs, an exploration's runs.
 
-Display only: it reads the wall clock to pace itself and estimate time
+Display only: each reads the wall clock to pace itself and estimate time
 left; the engine never sees it. Silent when stderr is not a terminal.
 """
 
@@ -77,4 +77,84 @@ class ProgressBar:
         """End the progress line."""
         if self.enabled and self.shown:
             self.stream.write('\r\x1b[2K')
+            self.stream.flush()
+
+
+class JobProgress:
+    """A one-line bar on a terminal: jobs done, passed/failed/error so far, ETA."""
+
+    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.total = 0
+        self.done = 0
+        self.cached = 0
+        self.counts = {'passed': 0, 'failed': 0, 'error': 0}
+        self.began = time.monotonic()
+
+    def add(self, total: int, cached: int) -> None:
+        """More jobs to do (a search round), `cached` of them already done."""
+        self.total += total
+        self.done += cached
+        self.cached += cached
+
+    def finished(self, status: str) -> None:
+        """A job ended."""
+        self.done += 1
+        self.counts[status] = self.counts.get(status, 0) + 1
+        self.draw()
+
+    def line(self) -> str:
+        """The text of the bar."""
+        width = 24
+        fraction = self.done / self.total if self.total else 1.0
+        filled = int(fraction * width)
+        ran = self.done - self.cached
+        elapsed = time.monotonic() - self.began
+        left = self.total - self.done
+        eta = f' ETA {_clock(elapsed / ran * left)}' if ran and left else ''
+        c = self.counts
+        return (f'[{"#" * filled}{"." * (width - filled)}] {self.done}/{self.total} jobs  {c["passed"]} passed  '
+                f'{c["failed"]} failed  {c["error"]} error{eta}')
+
+    def draw(self) -> None:
+        """Redraw on the terminal."""
+        if self.enabled:
+            self.stream.write('\r' + self.line() + '\x1b[K')
+            self.stream.flush()
+
+    def close(self) -> None:
+        """End the line."""
+        if self.enabled and self.total:
+            self.stream.write('\n')
+            self.stream.flush()
+
+
+class ExploreProgress:
+    """A one-line bar on a terminal: runs of the budget, failures, the closest margin so far."""
+
+    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.began = time.monotonic()
+        self.shown = False
+
+    def update(self, used: int, budget: int, failures: int, best: float | None) -> None:
+        """Redraw."""
+        if not self.enabled:
+            return
+        width = 24
+        filled = int(width * used / budget) if budget else width
+        elapsed = time.monotonic() - self.began
+        eta = f'  ETA {_clock(elapsed / used * (budget - used))}' if used and used < budget else ''
+        margin = f'  closest {best:.2f} of the baseline margin' if best is not None else ''
+        self.stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {used}/{budget} runs  {failures} '
+                          f'failure{"s" if failures != 1 else ""}{margin}{eta}\x1b[K')
+        self.stream.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        """End the line."""
+        if self.enabled and self.shown:
+            self.stream.write('\n')
             self.stream.flush()

@@ -50,7 +50,7 @@ keep: none
 
 def clock_progress() -> Any:
     """A JobProgress that notes when the jobs began (the engine is up) and when the last one ended."""
-    from bagfault.campaign.runner import JobProgress
+    from bagfault.progress import JobProgress
 
     class Clock(JobProgress):
         first: float | None = None

@@ -42,7 +42,7 @@ sys.path.insert(0, str(HERE.parent))
 
 def explore(space: Path, out: Path, args: argparse.Namespace, **options: Any) -> tuple[Any, float]:
     from bagfault import api
-    from bagfault.explore import ExploreProgress
+    from bagfault.progress import ExploreProgress
 
     began = time.monotonic()
     result = api.explore(space, directory=out, budget=args.budget, workers=args.workers, rate=args.rate,

@@ -12,11 +12,9 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
-import sys
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__
 from bagfault.campaign.edit import expanded, scenario_data
@@ -28,7 +26,7 @@ from bagfault.errors import CampaignError
 from bagfault.io.outputs import Protected, check_output, write_atomic
 from bagfault.io.regular import read_bytes, read_text
 from bagfault.log import log
-from bagfault.progress import _clock
+from bagfault.progress import JobProgress
 
 if TYPE_CHECKING:
     from collections.abc import Collection
@@ -58,56 +56,6 @@ class CampaignResult:
     def failed(self) -> bool:
         """True when a sweep job failed or could not run: exit code 1."""
         return bool(self.counts.get('failed') or self.counts.get('error'))
-
-
-class JobProgress:
-    """A one-line bar on a terminal: jobs done, passed/failed/error so far, ETA."""
-
-    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
-        self.stream = stream or sys.stderr
-        self.enabled = self.stream.isatty() if enabled is None else enabled
-        self.total = 0
-        self.done = 0
-        self.cached = 0
-        self.counts = {'passed': 0, 'failed': 0, 'error': 0}
-        self.began = time.monotonic()
-
-    def add(self, total: int, cached: int) -> None:
-        """More jobs to do (a search round), `cached` of them already done."""
-        self.total += total
-        self.done += cached
-        self.cached += cached
-
-    def finished(self, status: str) -> None:
-        """A job ended."""
-        self.done += 1
-        self.counts[status] = self.counts.get(status, 0) + 1
-        self.draw()
-
-    def line(self) -> str:
-        """The text of the bar."""
-        width = 24
-        fraction = self.done / self.total if self.total else 1.0
-        filled = int(fraction * width)
-        ran = self.done - self.cached
-        elapsed = time.monotonic() - self.began
-        left = self.total - self.done
-        eta = f' ETA {_clock(elapsed / ran * left)}' if ran and left else ''
-        c = self.counts
-        return (f'[{"#" * filled}{"." * (width - filled)}] {self.done}/{self.total} jobs  {c["passed"]} passed  '
-                f'{c["failed"]} failed  {c["error"]} error{eta}')
-
-    def draw(self) -> None:
-        """Redraw on the terminal."""
-        if self.enabled:
-            self.stream.write('\r' + self.line() + '\x1b[K')
-            self.stream.flush()
-
-    def close(self) -> None:
-        """End the line."""
-        if self.enabled and self.total:
-            self.stream.write('\n')
-            self.stream.flush()
 
 
 TABLES = ('results.csv', 'results.parquet', 'campaign.json', 'report.html')  # what a campaign writes at the top

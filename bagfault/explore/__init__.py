@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from bagfault.explore.explorer import ExploreOptions, ExploreProgress, ExploreResult, explore
+from bagfault.explore.explorer import ExploreOptions, ExploreResult, explore
 from bagfault.explore.records import Failure, Outcome, RunRecord
 
-__all__ = ['ExploreOptions', 'ExploreProgress', 'ExploreResult', 'Failure', 'Outcome', 'RunRecord', 'explore']
+__all__ = ['ExploreOptions', 'ExploreResult', 'Failure', 'Outcome', 'RunRecord', 'explore']

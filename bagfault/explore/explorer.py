@@ -21,12 +21,10 @@ from __future__ import annotations
 
 import contextlib
 import json
-import sys
 import tempfile
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, TextIO
+from typing import TYPE_CHECKING, Any, Literal
 
 from bagfault import __version__
 from bagfault.campaign.engines import make_engine
@@ -37,7 +35,7 @@ from bagfault.explore.records import Failure, Outcome, Purpose, RunRecord
 from bagfault.explore.shrink import Shrinker, ShrinkMode
 from bagfault.io.outputs import Protected, check_output, mark_table, write_atomic
 from bagfault.io.regular import read_text
-from bagfault.progress import _clock
+from bagfault.progress import ExploreProgress
 from bagfault.spec.yamlnodes import load_located
 
 if TYPE_CHECKING:
@@ -93,36 +91,6 @@ class _Request:
     candidate: Candidate
     purpose: Purpose
     failure: Failure | None = None
-
-
-class ExploreProgress:
-    """A one-line bar on a terminal: runs of the budget, failures, the closest margin so far."""
-
-    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
-        self.stream = stream or sys.stderr
-        self.enabled = self.stream.isatty() if enabled is None else enabled
-        self.began = time.monotonic()
-        self.shown = False
-
-    def update(self, used: int, budget: int, failures: int, best: float | None) -> None:
-        """Redraw."""
-        if not self.enabled:
-            return
-        width = 24
-        filled = int(width * used / budget) if budget else width
-        elapsed = time.monotonic() - self.began
-        eta = f'  ETA {_clock(elapsed / used * (budget - used))}' if used and used < budget else ''
-        margin = f'  closest {best:.2f} of the baseline margin' if best is not None else ''
-        self.stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {used}/{budget} runs  {failures} '
-                          f'failure{"s" if failures != 1 else ""}{margin}{eta}\x1b[K')
-        self.stream.flush()
-        self.shown = True
-
-    def close(self) -> None:
-        """End the line."""
-        if self.enabled and self.shown:
-            self.stream.write('\n')
-            self.stream.flush()
 
 
 class _Folder:

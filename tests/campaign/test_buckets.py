@@ -134,7 +134,7 @@ class _DeleteAfterFirst:
     """A progress display that deletes an object from the bucket when the first job has finished."""
 
     def __init__(self, server: S3Server, key: str) -> None:
-        from bagfault.campaign.runner import JobProgress
+        from bagfault.progress import JobProgress
 
         self.bar = JobProgress(enabled=False)
         self.server, self.key = server, key

@@ -107,12 +107,12 @@ def test_a_glob_that_finds_nothing_is_named(corpus: Path) -> None:
 def test_the_progress_line_counts_jobs_and_estimates_what_is_left(monkeypatch: pytest.MonkeyPatch) -> None:
     import io
 
-    from bagfault.campaign import runner
+    from bagfault import progress
 
     now = [100.0]
-    monkeypatch.setattr(runner.time, 'monotonic', lambda: now[0])
+    monkeypatch.setattr(progress.time, 'monotonic', lambda: now[0])
     stream = io.StringIO()
-    bar = runner.JobProgress(stream=stream, enabled=True)
+    bar = progress.JobProgress(stream=stream, enabled=True)
     bar.add(10, 2)  # 2 of 10 already stored
     now[0] = 130.0
     for status in ('passed', 'failed', 'error'):

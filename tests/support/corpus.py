@@ -66,7 +66,7 @@ class InterruptAfter:
     """A progress display that presses Ctrl-C after `count` finished jobs."""
 
     def __init__(self, count: int) -> None:
-        from bagfault.campaign.runner import JobProgress
+        from bagfault.progress import JobProgress
 
         self.bar = JobProgress(enabled=False)
         self.count = count
