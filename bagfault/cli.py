@@ -22,8 +22,6 @@ from bagfault.progress import ExploreProgress, JobProgress, ProgressBar
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
 
-    from bagfault.engine.result import RunResult
-
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
 INTERRUPTED: list[str] = []  # how the command was stopped, once a signal stopped it (bagfault.__main__ reads it)
 EARLIER: list[Path] = []  # files published before this command began (an earlier `main` in this process)
@@ -267,7 +265,7 @@ def _reports(args: argparse.Namespace) -> api.ReportPaths:
                            junit_file_line=args.junit_file_line, force=args.force)
 
 
-def _finish(result: RunResult) -> int:
+def _finish(result: api.RunResult) -> int:
     """The terminal summary and the exit code: the end of every command that runs a scenario."""
     api.print_summary(result)
     return EXIT_FAILED if result.failed else EXIT_OK

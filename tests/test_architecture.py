@@ -55,12 +55,43 @@ def test_importing_engine_and_io_loads_nothing_of_live_or_api() -> None:
 
 
 def test_only_the_front_ends_import_the_api() -> None:
-    """The command line, the pytest plugin and a campaign's job (which is `bagfault run` or `test` in a process
-    of its own) use the API; nothing below them does."""
+    """The command line and the pytest plugin use the API; nothing below them does (a campaign's job calls it
+    through the function the API hands the engines)."""
     users = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob('*.py')
              if any(module == 'bagfault.api' for _, module in _imports(p))}
     assert 'cli.py' in users
-    assert users <= {'cli.py', 'pytest_plugin.py', 'campaign/job.py'}
+    assert users <= {'cli.py', 'pytest_plugin.py'}
+
+
+def test_the_command_line_imports_the_api_and_the_bottom_layers_only() -> None:
+    """cli.py parses arguments and calls the API: besides it, only the error tree, logging, the terminal's
+    progress lines and the environment's settings."""
+    modules = {m for _, m in _imports(PACKAGE / 'cli.py') if m.startswith('bagfault')}
+    allowed = {'bagfault', 'bagfault.__version__', 'bagfault.api', 'bagfault.settings', 'bagfault.errors',
+               'bagfault.log', 'bagfault.progress'}
+    assert {'bagfault.api', 'bagfault.errors'} <= modules
+    assert sorted(m for m in modules if m not in allowed and m.rpartition('.')[0] not in allowed - {'bagfault'}) \
+        == []
+
+
+def test_every_subpackage_names_its_public_api() -> None:
+    """Each subpackage's __init__ has an `__all__`, and each name in it is one of its modules or defined there."""
+    packages = sorted(p for p in PACKAGE.iterdir() if (p / '__init__.py').is_file())
+    assert len(packages) >= 15
+    wrong = []
+    for package in packages:
+        tree = ast.parse((package / '__init__.py').read_text())
+        names = [ast.literal_eval(node.value) for node in tree.body if isinstance(node, ast.Assign)
+                 and any(isinstance(t, ast.Name) and t.id == '__all__' for t in node.targets)]
+        if not names:
+            wrong.append(f'{package.name}: no __all__')
+            continue
+        defined = {n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+        defined |= {t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)}
+        defined |= {a.asname or a.name for n in tree.body if isinstance(n, ast.ImportFrom) for a in n.names}
+        modules = {p.stem for p in package.glob('*.py')} | {p.name for p in package.iterdir() if p.is_dir()}
+        wrong += [f'{package.name}: {name}' for name in names[0] if name not in defined | modules]
+    assert wrong == []
 
 
 def test_the_library_prints_nothing_outside_the_command_line_and_the_reports() -> None:

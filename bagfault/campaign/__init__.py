@@ -6,3 +6,15 @@ its own process, `engines` run jobs on a local pool or on Ray, `search`
 bisects a parameter for its breaking point, `results` writes the tables and
 the report.
 """
+
+__all__ = [  # its public modules (imported when used, not here)
+    'edit',
+    'engines',
+    'job',
+    'loader',
+    'model',
+    'plan',
+    'results',
+    'runner',
+    'search',
+]

@@ -4,3 +4,16 @@
 in its own process group, `link` is the live pass that also hears the
 system, `runner` puts them together (and repeats them).
 """
+
+__all__ = [  # its public modules (imported when used, not here)
+    'actions',
+    'clocks',
+    'domain',
+    'isolation',
+    'link',
+    'links',
+    'process',
+    'repeat',
+    'runner',
+    'watchdog',
+]

@@ -23,3 +23,11 @@ def prepare(directory: Path) -> tuple[Path, Path]:
     synthetic.write_rover_bag(bag, duration=20.0)
     scenario.write_text(scenario_text(), encoding='utf-8')
     return bag, scenario
+
+__all__ = [  # its own functions, then its public modules
+    'SCENARIO_NAME',
+    'prepare',
+    'scenario_text',
+    'synthetic',
+    'workloads',
+]

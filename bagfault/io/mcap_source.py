@@ -36,6 +36,7 @@ from mcap.records import Metadata, Schema
 
 from bagfault.errors import InputError, one_line
 from bagfault.io.channel import Channel, normalize_msgtype
+from bagfault.io.mcap_layout import MAGIC
 from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, read_metadata, read_summary
 from bagfault.io.rosbag2_record import distro_of
 
@@ -45,7 +46,6 @@ if TYPE_CHECKING:
     from mcap.summary import Summary
 
 
-MAGIC = b'\x89MCAP0\r\n'
 OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x03, 0x04, 0x05, 0x06, 0x07, 0x0F
 OP_FOOTER, OP_METADATA = 0x02, 0x0C
 _INDEX_HEAD = struct.Struct('<BQHI')  # message index: opcode, length, channel id, entries length

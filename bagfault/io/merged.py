@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import heapq
 from dataclasses import replace
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterator, Sequence
@@ -12,34 +12,7 @@ if TYPE_CHECKING:
     from typing_extensions import Self
 
     from bagfault.io.channel import Channel, Data, InputMessage
-
-
-class Source(Protocol):
-    """What every input offers."""
-
-    channels: list[Channel]
-    ros_distro: str | None
-    message_count: int | None
-    start_time: int | None
-    end_time: int | None
-
-    @property
-    def losses(self) -> list[str]:
-        """What salvage skipped so far (each with its place), empty without salvage."""
-        ...
-
-    @property
-    def warnings(self) -> list[str]:
-        """What the reader noticed and worked around."""
-        ...
-
-    def messages(self) -> Iterator[InputMessage]:
-        """(channel index, log_time, publish_time, data) in log-time order."""
-        ...
-
-    def close(self) -> None:
-        """Release resources."""
-        ...
+    from bagfault.io.source import Source
 
 
 class MergedSource:

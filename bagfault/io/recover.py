@@ -19,6 +19,7 @@ from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from bagfault.errors import InputError
+from bagfault.io.mcap_layout import MAGIC
 from bagfault.io.mcap_sink import McapSink
 from bagfault.io.rosbag2_record import distro_of
 
@@ -59,7 +60,7 @@ def recover(source: Path, output: Path) -> Recovered:
     """Copy the readable part of `source` into a complete MCAP at `output`."""
     result = Recovered(source, output)
     with source.open('rb') as stream:
-        if stream.read(8) != b'\x89MCAP0\r\n':
+        if stream.read(len(MAGIC)) != MAGIC:
             raise InputError(f'{source}: not an MCAP recording (no MCAP magic at its start); nothing to recover')
     channels: dict[int, int] = {}
     schemas: dict[int, Schema] = {}

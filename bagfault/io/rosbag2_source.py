@@ -18,10 +18,12 @@ import yaml
 import zstandard
 
 from bagfault.errors import InputError, one_line
+from bagfault.io.mcap_layout import MAGIC
 from bagfault.io.mcap_source import McapSource
-from bagfault.io.merged import MergedSource, Source
+from bagfault.io.merged import MergedSource
 from bagfault.io.qos import normalized
 from bagfault.io.regular import read_text
+from bagfault.io.source import Source
 from bagfault.io.sqlite_source import SqliteSource
 
 if TYPE_CHECKING:
@@ -114,7 +116,7 @@ class Rosbag2Source(MergedSource):
             file = self._expand(file)
         with file.open('rb') as stream:
             head = stream.read(16)
-        if head.startswith(b'\x89MCAP') or (file.suffix == '.mcap' and not head.startswith(b'SQLite format 3')):
+        if head.startswith(MAGIC[:5]) or (file.suffix == '.mcap' and not head.startswith(b'SQLite format 3')):
             return McapSource(file, salvage=self.salvage)
         if head.startswith(b'SQLite format 3') or file.suffix == '.db3':
             return SqliteSource(file, salvage=self.salvage)

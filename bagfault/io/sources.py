@@ -8,6 +8,7 @@ import mmap
 import os
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -16,12 +17,14 @@ import blake3
 
 from bagfault.errors import InputError
 from bagfault.io import digests
+from bagfault.io.mcap_layout import MAGIC
 from bagfault.io.mcap_source import McapSource
-from bagfault.io.merged import MergedSource, Source
+from bagfault.io.merged import MergedSource
 from bagfault.io.rosbag2_source import Rosbag2Source
+from bagfault.io.source import Source
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterator, Sequence
+    from collections.abc import Iterator, Sequence
 
 
 class ReadMark:
@@ -97,8 +100,38 @@ class InputFile:
     blake3: str  # hex digest (`b3sum` prints the same)
 
 
+@dataclass(frozen=True)
+class InputFormat:
+    """An input format: how its files begin, and its reader (`open(path, salvage=)`)."""
+
+    name: str
+    begins: Callable[[bytes, Path], bool]  # the file's first 16 bytes and its name: is it one?
+    open: Callable[..., Source]
+
+
+def _ros1(path: Path, *, salvage: bool = False) -> Source:
+    from bagfault.io.ros1_source import Ros1Source  # noqa: PLC0415 - its reader is imported when one is read
+
+    return Ros1Source(path, salvage=salvage)
+
+
+def _old_ros1(path: Path, *, salvage: bool = False) -> Source:
+    with path.open('rb') as stream:
+        version = stream.read(12)[1:].decode(errors='replace')
+    raise InputError(f'{path}: ROS 1 bag format {version!r} is not supported (V2.0 only)')
+
+
+FORMATS = (  # a file is read by the first whose beginning it has; a folder is a rosbag2 bag
+    InputFormat('MCAP', lambda head, _: head.startswith(MAGIC[:5]), McapSource),
+    InputFormat('ROS 1 bag', lambda head, _: head.startswith(b'#ROSBAG V2.0'), _ros1),
+    InputFormat('ROS 1 bag of an older format', lambda head, _: head.startswith(b'#ROSBAG'), _old_ros1),
+    InputFormat('rosbag2 storage file', lambda head, path: head.startswith(b'SQLite format 3') or
+                path.name.endswith('.zstd'), Rosbag2Source),
+)
+
+
 def open_source(path: Path, *, salvage: bool = False) -> Source:
-    """Open an MCAP file, a rosbag2 directory or storage file, or a ROS 1 bag."""
+    """Open an MCAP file, a rosbag2 directory or storage file, or a ROS 1 bag (the reader from `FORMATS`)."""
     if not path.exists():
         if path.is_symlink():
             raise InputError(f'{path}: a symbolic link that leads nowhere (its target is missing, or links loop)')
@@ -113,17 +146,9 @@ def open_source(path: Path, *, salvage: bool = False) -> Source:
         raise InputError(f'{path}: cannot read: {exc.strerror}') from None
     if not head:
         raise InputError(f'{path}: file is empty')
-    if head.startswith(b'\x89MCAP'):
-        return McapSource(path, salvage=salvage)
-    if head.startswith(b'#ROSBAG V2.0'):
-        from bagfault.io.ros1_source import Ros1Source  # noqa: PLC0415
-
-        return Ros1Source(path, salvage=salvage)
-    if head.startswith(b'#ROSBAG'):
-        version = head[1:12].decode(errors='replace')
-        raise InputError(f'{path}: ROS 1 bag format {version!r} is not supported (V2.0 only)')
-    if head.startswith(b'SQLite format 3') or path.name.endswith('.zstd'):
-        return Rosbag2Source(path, salvage=salvage)
+    for kind in FORMATS:
+        if kind.begins(head, path):
+            return kind.open(path, salvage=salvage)
     raise InputError(f'{path}: not a bag (expected MCAP, rosbag2 .db3, a rosbag2 directory or a ROS 1 .bag)')
 
 

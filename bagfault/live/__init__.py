@@ -32,3 +32,29 @@ def require_rclpy() -> None:
             f"live mode needs rclpy ({exc}); install the extra: pip install 'bagfault[live]' "
             'or source a ROS 2 Jazzy installation'
         ) from None
+
+__all__ = [  # its own functions, then its public modules
+    'LOOPBACK_PROFILE',
+    'anchor',
+    'clockwarp',
+    'delay',
+    'diagnostics',
+    'events',
+    'graph',
+    'losses',
+    'node',
+    'pacer',
+    'params',
+    'player',
+    'proxy',
+    'rclpy_available',
+    'recorder',
+    'recording',
+    'require_rclpy',
+    'ros',
+    'runtime',
+    'session',
+    'sink',
+    'trigger',
+    'viewing',
+]
