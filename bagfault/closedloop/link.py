@@ -92,6 +92,7 @@ class SystemLink(LiveSink):
         self._outputs: dict[str, OutputChannel] = {}
         self._recorder: Recorder | None = None
         self._thread: threading.Thread | None = None
+        self._settled_at = 0.0  # monotonic time from which the system's side of every match has settled
         self._run: Run | None = None
         self._floor = 0  # nothing is handed over earlier than what was judged before
         self._last_look = 0.0
@@ -138,13 +139,21 @@ class SystemLink(LiveSink):
         deadline = time.monotonic() + RECORD_MATCH
         while self._recorder.unmatched() and time.monotonic() < deadline:
             time.sleep(POLL)
-        # a publisher sees its subscriber first; the system's side of its subscriptions matches a moment later
-        time.sleep(MATCH_SETTLE)
-        self._thread = threading.Thread(target=self._spin, name='bagfault-test-listener', daemon=True)
-        self._thread.start()
+        # a publisher sees its subscriber first; the system's side of its subscriptions matches a moment later:
+        # the first message waits that long (`_settled`), the run's setup meanwhile
+        self._settled_at = time.monotonic() + MATCH_SETTLE
         if self.rate != 1:
+            self._settled()
             self._hold_clock()
         return {topic: (msgtype, *self.catalog.schema(msgtype)) for topic, msgtype in watched.items()}
+
+    def _settled(self) -> None:
+        """Wait until the matches have settled (MATCH_SETTLE after the last was seen), then hear the system."""
+        if self._thread is not None:
+            return
+        time.sleep(max(0.0, self._settled_at - time.monotonic()))
+        self._thread = threading.Thread(target=self._spin, name='bagfault-test-listener', daemon=True)
+        self._thread.start()
 
     def _hold_clock(self) -> None:
         """HOLD seconds before the first /clock: what the system publishes now, it publishes on wall time."""
@@ -242,9 +251,11 @@ class SystemLink(LiveSink):
                 self.clocks.during_hold(topic)
 
     def begin(self, run: Run) -> None:
-        """Messages of the system go into this run; its events go out live."""
+        """Messages of the system go into this run; its events go out live; the first message waits for the
+        matches to settle."""
         super().begin(run)
         self._run = run
+        self._settled()
 
     def _due(self, bag_time: int) -> None:
         self._hand_over(bag_time)

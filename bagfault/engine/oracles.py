@@ -28,21 +28,21 @@ class Oracles:
     def __init__(self, scenario: Scenario, schemas: Mapping[str, Schema], catalog: TypeCatalog,
                  emit: Callable[[Event], None], blackbox_base: Path | None = None,
                  blackbox_numbers: dict[str, int] | None = None) -> None:
-        kinds: list[EventKind] = []
-        self.fault_manager: FaultManagerObserver | None = None
-        if scenario.fault_manager_config is not None:
-            from bagfault.fault_manager.observer import FaultManagerObserver  # noqa: PLC0415 - only when used
-
-            catalog.add_definition(FaultManagerEvent.msgtype, FaultManagerEvent.definition)
-            self.fault_manager = FaultManagerObserver(scenario.fault_manager_config, scenario, dict(schemas), catalog,
-                                                      emit, blackbox_base, blackbox_numbers)
-            kinds.append(FaultManagerEvent)
-        self.runner: AssertionRunner | None = None
+        manager = scenario.fault_manager_config
+        kinds: list[EventKind] = [FaultManagerEvent] if manager is not None else []
         if scenario.assertions:
             kinds += [AssertionEvent, ScenarioStatus]
-            every: list[EventKind] = [FaultEvent, *kinds]
-            for kind in every:
-                catalog.add_definition(kind.msgtype, kind.definition)
+        every: list[EventKind] = [FaultEvent, *kinds] if scenario.assertions else kinds
+        for kind in every:  # every definition before the first codec: the codecs then come of one build
+            catalog.add_definition(kind.msgtype, kind.definition)
+        self.fault_manager: FaultManagerObserver | None = None
+        if manager is not None:
+            from bagfault.fault_manager.observer import FaultManagerObserver  # noqa: PLC0415 - only when used
+
+            self.fault_manager = FaultManagerObserver(manager, scenario, dict(schemas), catalog, emit, blackbox_base,
+                                                      blackbox_numbers)
+        self.runner: AssertionRunner | None = None
+        if scenario.assertions:
             topics = {topic: entry[0] for topic, entry in schemas.items()}
             topics.update({kind.topic: kind.msgtype for kind in every})
             self.runner = AssertionRunner(scenario, topics, catalog, emit, self.fault_manager)

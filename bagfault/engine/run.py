@@ -126,7 +126,7 @@ class Run:
         self._events: dict[str, tuple[OutputChannel, Codec]] = {}
         self._topics: dict[str, OutputChannel] = {}
         self._closed = False
-        for kind in self.oracles.event_kinds:
+        for kind in self.oracles.event_kinds:  # (their definitions were added first: one build for every codec)
             self.event_channel(kind)
 
     # -- channels -----------------------------------------------------------------------

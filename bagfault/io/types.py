@@ -126,6 +126,10 @@ class TypeCatalog:
         """Codec for a type, or None when no definition can be found or compiled."""
         if msgtype in self._codecs:
             return self._codecs[msgtype]
+        if self._store is not None and msgtype in self._store.fielddefs:  # built with another type: no rebuild
+            self._store_types |= {msgtype}
+            self._codecs[msgtype] = Codec(msgtype, self._store)
+            return self._codecs[msgtype]
         wanted = {*self._store_types, msgtype, *self._extra}
         try:
             self._store = self._build(wanted)
