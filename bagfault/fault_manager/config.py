@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import re2  # type: ignore[import-untyped]
 
@@ -29,6 +29,9 @@ from bagfault.fault_manager.correlation import CorrelationConfig, no_warning, pa
 from bagfault.fault_manager.model import severity_value, valid_code
 from bagfault.spec import sections
 from bagfault.spec.reader import Read, Reader
+
+if TYPE_CHECKING:
+    from bagfault.spec.model import Scenario
 
 Problem = Callable[[tuple[Any, ...], str], None]
 PREFIX = ('fault_manager',)
@@ -192,6 +195,21 @@ def parse_report(fault_id: str, injector_id: str, node: object, path: tuple[Any,
     severity = _severity(read, path, problem)
     return InjectedReport(fault_id, code, severity, read.get('source', f'/bagfault/{injector_id}'),
                           read.get('report_period'))
+
+
+def scenario_config(scenario: Scenario, problem: Problem, ignored: Problem) -> FaultManagerConfig | None:
+    """A scenario's fault manager: its `fault_manager` section and its faults' `report` blocks; None when the
+    scenario uses none (no section, no report, no fault_status or fault_count assertion). `ignored` hears what
+    medkit accepts and does nothing with."""
+    config = parse_fault_manager(scenario.fault_manager, problem, ignored)
+    for fault in scenario.faults:
+        if fault.report is not None:
+            report = parse_report(fault.id, fault.injector_id, fault.report, (*fault.path, 'report'), problem)
+            if report is not None:
+                config.reports.append(report)
+    uses = scenario.fault_manager is not None or config.reports or any(
+        a.type in ('fault_status', 'fault_count') for a in scenario.assertions)
+    return config if uses else None
 
 
 def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,

@@ -107,7 +107,8 @@ def parse_scenario(text: str, *, source: Path | None = None, validate: bool = Tr
 def build_scenario(document: ScenarioText, *, validate: bool = True, strict: bool = False) -> Scenario:
     """The model of a parsed scenario, validated unless not `validate`; ScenarioError listing every problem
     (and every warning with `strict`)."""
-    from bagfault.scenario.validator import validate_scenario  # noqa: PLC0415
+    from bagfault.scenario.resolve import resolve_scenario  # noqa: PLC0415
+    from bagfault.scenario.validator import check_ids, validate_scenario  # noqa: PLC0415
 
     source, located, text = document.source, document.located, document.text
     name = str(source) if source else '<scenario>'
@@ -128,7 +129,9 @@ def build_scenario(document: ScenarioText, *, validate: bool = True, strict: boo
         scenario.msg_paths = [source.parent / p for p in scenario.msg_paths]
     scenario.text = text
     scenario.located = located
-    if validate:
+    if validate:  # ids first (an unknown type's injector counts), then read by type, then checked
+        check_ids(scenario, out)
+        resolve_scenario(scenario, out)
         validate_scenario(scenario, out)
     warnings = sorted(out.warnings, key=_position)
     scenario.warnings = [str(w) for w in warnings]

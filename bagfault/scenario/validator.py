@@ -1,9 +1,9 @@
-"""Scenario checks against the injector and assertion schemas.
+"""Scenario checks against the injector and assertion schemas, on records resolve.py has read.
 
-Every problem is collected with its YAML location; config values are
-replaced by their coerced form (`'inf'` -> float('inf'), `"2"` -> 2) so the
-engine never parses text. Warnings follow the anchor: things it accepts but
-ignores (`start` with `active_on_startup`, `duration` without `start`).
+Every problem is collected with its YAML location; nothing is changed (the
+values were read as their fields say by `scenario/resolve.py`). Warnings
+follow the anchor: things it accepts but ignores (`start` with
+`active_on_startup`, `duration` without `start`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING, Any
 from bagfault.assertions.registry import ASSERTION_TYPES
 from bagfault.errors import FieldValueError, InjectorConfigError
 from bagfault.injectors.base import Injector, ServiceInjector, SystemInjector
-from bagfault.injectors.registry import get_injector_type, injector_types
+from bagfault.injectors.registry import get_injector_type
+from bagfault.scenario.resolve import closest, coerce
 from bagfault.schema import ConfigField
 from bagfault.yamlcpp import as_double
 
@@ -25,17 +26,19 @@ if TYPE_CHECKING:
     from bagfault.spec.model import Explore, ExploreFault, FaultSpec, Scenario
 
 
-def validate_scenario(scenario: Scenario, out: _Collector) -> None:
-    """Check everything; append problems and warnings to `out`."""
+def check_ids(scenario: Scenario, out: _Collector) -> None:
+    """Before the records are resolved (an injector of an unknown type still counts): ids unique."""
     _duplicates(scenario, out)
-    _skip_unknown_types(scenario, out)
+
+
+def validate_scenario(scenario: Scenario, out: _Collector) -> None:
+    """Check the resolved records (scenario/resolve.py); append problems and warnings to `out`. Reads only."""
     for injector in scenario.injectors:
         _check_injector(injector, out)
     _check_outputs(scenario, out)
     for fault in scenario.faults:
         _check_fault(scenario, fault, out)
     _check_chains(scenario, out)
-    _check_fault_manager(scenario, out)
     for assertion in scenario.assertions:
         _check_assertion(scenario, assertion, out)
     if scenario.explore is not None:
@@ -70,27 +73,6 @@ def _duplicates(scenario: Scenario, out: _Collector) -> None:
                                           'the fault')
 
 
-def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:
-    """An injector type neither built in nor given by an installed plugin: the anchor's validator warns
-    ('assuming external plugin'), its controller creates no injector and skips that injector's faults, and the
-    other injectors run. So here: a warning (an error under --strict), the injector and its faults left out."""
-    unknown = [i for i in scenario.injectors if i.type and get_injector_type(i.type) is None]
-    if not unknown:
-        return
-    known_types = ', '.join(sorted(injector_types()))
-    kept = [i for i in scenario.injectors if all(i is not u for u in unknown)]
-    gone = {u.id for u in unknown} - {i.id for i in kept}  # (a duplicate id of a known type keeps its faults)
-    for injector in unknown:  # one warning, as the anchor's validator gives one (its faults named in it)
-        faults = [f.id for f in scenario.faults if f.injector_id == injector.id and injector.id in gone]
-        which = f' ({", ".join(dict.fromkeys(faults))})' if faults else ''
-        out.ignored((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
-                 f'installed plugin provides it, so injector {injector.id!r} and its faults{which} are skipped '
-                 f'and the others run, as the anchor does ("assuming external plugin"; known: {known_types})')
-    scenario.skipped_faults = [f.id for f in scenario.faults if f.injector_id in gone]
-    scenario.injectors = kept
-    scenario.faults = [f for f in scenario.faults if f.injector_id not in gone]
-
-
 ANCHOR_TYPES = frozenset({'odom', 'scan', 'joint_state', 'imu', 'trigger_service', 'tf'})  # is_known_injector_type
 _FROM_CHARS_DOUBLE = re.compile(r'-?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf(?:inity)?|nan(?:\([\w]*\))?)',
                                 re.IGNORECASE)
@@ -116,14 +98,6 @@ def anchor_refusal(field: ConfigField, text: str) -> str | None:
     return None
 
 
-def _coerce(field: ConfigField, value: Any, path: tuple[Any, ...], out: _Collector) -> Any:
-    try:
-        return field.coerce(value)
-    except FieldValueError as exc:
-        out.add(path, str(exc))
-        return None
-
-
 def _check_injector(injector: Any, out: _Collector) -> None:
     if not injector.type:
         return
@@ -140,9 +114,7 @@ def _check_injector(injector: Any, out: _Collector) -> None:
     if not is_service_type and injector.is_service:
         out.add(injector.path, f'injector type {injector.type!r} proxies a topic: give input_topic and output_topic')
     for field in cls.options:
-        if field.key in injector.options:
-            injector.options[field.key] = _coerce(field, injector.options[field.key], (*injector.path, field.key), out)
-        elif field.required:
+        if field.required and field.key not in injector.options:
             out.add(injector.path, f'missing required key {field.key!r} for injector type {injector.type!r}')
     try:
         cls.check_options(injector.options)
@@ -178,22 +150,14 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
     cls = get_injector_type(injector.type)
     if cls is None:
         return
-    keys = [f.key for f in cls.fields]
-    for key, value in list(fault.config.items()):
+    for key, coerced in fault.config.items():  # (as resolve.py read them: unknown keys left out)
         path = (*fault.path, 'config', key)
         field = cls.field(str(key))
-        if field is None:
-            hint = _closest(str(key), keys)
-            out.ignored(path, f'unknown config key {key!r} for injector type {injector.type!r} is ignored'
-                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
-            del fault.config[key]  # still shown in the fault's event details, as the anchor shows it
-            continue
-        fault.config[key] = _coerce(field, value, path, out)
-        coerced = fault.config[key]
-        refusal = anchor_refusal(field, fault.config_text.get(key, str(value))) if injector.type in ANCHOR_TYPES \
-            else None
+        assert field is not None
+        text = fault.config_text.get(str(key), str(coerced))  # the scalar as the file writes it
+        refusal = anchor_refusal(field, text) if injector.type in ANCHOR_TYPES else None
         if coerced is not None and refusal is not None:
-            out.warn(path, f"{fault.config_text.get(key, value)!r} is read here, but ros2_fault_injection's "
+            out.warn(path, f"{text!r} is read here, but ros2_fault_injection's "
                            f'validator refuses it ({refusal}): the file would not load in the anchor')
         if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
             out.ignored(path, "nan has no effect: a level is the largest of the active faults' values, and "
@@ -248,21 +212,6 @@ def _check_chains(scenario: Scenario, out: _Collector) -> None:
             out.add(path, f'chain of "after" faults loops: {" -> ".join([*loop, first])}')
 
 
-def _check_fault_manager(scenario: Scenario, out: _Collector) -> None:
-    """Parse the fault_manager section and the faults' report blocks into scenario.fault_manager_config."""
-    from bagfault.fault_manager.config import parse_fault_manager, parse_report  # noqa: PLC0415
-
-    config = parse_fault_manager(scenario.fault_manager, out.add, out.ignored)  # (its warnings: what does nothing)
-    for fault in scenario.faults:
-        if fault.report is not None:
-            report = parse_report(fault.id, fault.injector_id, fault.report, (*fault.path, 'report'), out.add)
-            if report is not None:
-                config.reports.append(report)
-    uses = scenario.fault_manager is not None or config.reports or any(
-        a.type in ('fault_status', 'fault_count') for a in scenario.assertions)
-    scenario.fault_manager_config = config if uses else None
-
-
 ANCHOR_ASSERTIONS = {'topic_hz', 'fault_event'}  # the assertion types ros2_fault_injection has
 
 
@@ -281,11 +230,10 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
         field = cls.field(str(key))
         path = (*assertion.path, key)
         if field is None:
-            hint = _closest(str(key), keys)
+            hint = closest(str(key), keys)
             out.add(path, f'unknown key {key!r} for assertion type {assertion.type!r}'
                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             continue
-        assertion.params[key] = _coerce(field, value, path, out)
         raw = out.located.raw_text(path, value)
         if assertion.type in ANCHOR_ASSERTIONS and field.type == 'double' and assertion.params[key] is not None \
                 and as_double(raw) is None:  # scenario_config.cpp reads min_hz and window with as<double>()
@@ -302,13 +250,6 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
             and assertion.within < window:  # the anchor's advisory (scenario_validator.cpp, validate_assertions)
         out.warn((*assertion.path, 'within'), f'assertion {assertion.id!r} has within smaller than window; it may '
                                                'fail before a full measurement window is available')
-
-
-def _closest(word: str, candidates: list[str]) -> str | None:
-    import difflib  # noqa: PLC0415
-
-    match = difflib.get_close_matches(word, candidates, n=1, cutoff=0.6)
-    return match[0] if match else None
 
 
 def _check_explore(scenario: Scenario, explore: Explore, out: _Collector) -> None:
@@ -345,12 +286,12 @@ def _check_candidate(scenario: Scenario, fault: ExploreFault, out: _Collector) -
     for key, value in fault.config.items():
         field = cls.field(str(key))
         if field is None:
-            hint = _closest(str(key), keys)
+            hint = closest(str(key), keys)
             out.add((*fault.path, 'config', key), f'injector type {injector.type!r} has no config key {key!r}'
                     + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             continue
         for corner in corners:
-            corner[key] = _coerce(field, value, (*fault.path, 'config', key), out)
+            corner[key] = coerce(field, value, (*fault.path, 'config', key), out)
     for dimension in fault.dimensions:
         if not dimension.name.startswith('config.'):
             continue
@@ -358,7 +299,7 @@ def _check_candidate(scenario: Scenario, fault: ExploreFault, out: _Collector) -
         path = (*fault.path, 'config', key)
         field = cls.field(key)
         if field is None:
-            hint = _closest(key, keys)
+            hint = closest(key, keys)
             out.add(path, f'a dimension on {key!r}, a key injector type {injector.type!r} lacks'
                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             continue

@@ -10,9 +10,12 @@ uses them.
 
 from __future__ import annotations
 
+import contextlib
 import textwrap
+from pathlib import Path
 
 import pytest
+from support.helpers import ANCHORS
 
 from bagfault.errors import ScenarioError
 from bagfault.scenario import parse_scenario
@@ -212,3 +215,40 @@ def test_run_ends_its_summary_with_the_warnings_of_what_does_nothing(tmp_path, c
     out = capsys.readouterr().out.strip().splitlines()
     # the misspelt key and a duration without start: two; the fault defined twice is no such warning (none here)
     assert out[-1] == 'PASSED: 1 passed, 0 failed; 2 warnings of something in the scenario that does nothing (above)'
+
+
+def _records(scenario: object) -> object:
+    """What the validator could change: the lists of records and every value they hold."""
+    import copy
+
+    return copy.deepcopy([(i.id, i.type, i.options) for i in scenario.injectors]  # type: ignore[attr-defined]
+                         + [(f.id, f.config) for f in scenario.faults]  # type: ignore[attr-defined]
+                         + [(a.id, a.type, a.params) for a in scenario.assertions]  # type: ignore[attr-defined]
+                         + [scenario.fault_manager_config, scenario.skipped_faults])  # type: ignore[attr-defined]
+
+
+SCENARIO_FILES = [*sorted((Path(__file__).parents[1] / 'fixtures' / 'scenarios').glob('*.yaml')),
+                  Path(__file__).parents[2] / 'examples' / 'closed_loop' / 'test_imu_drift.bagfault.yaml',
+                  *sorted(ANCHORS.glob('*.yaml'))]
+
+
+@pytest.mark.parametrize('path', SCENARIO_FILES, ids=lambda p: p.name)
+def test_the_checks_read_the_records_and_never_change_them(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every scenario file bagfault ships and every one of the anchor's (where they are): the records as
+    scenario/resolve.py left them are the same after the validator's checks, value for value."""
+    from bagfault.scenario import validator
+    from bagfault.scenario.loader import load_scenario
+
+    seen: list[tuple[object, object]] = []
+    checks = validator.validate_scenario
+
+    def watched(scenario: object, out: object) -> None:
+        before = _records(scenario)
+        checks(scenario, out)  # type: ignore[arg-type]
+        seen.append((before, _records(scenario)))
+
+    monkeypatch.setattr(validator, 'validate_scenario', watched)
+    with contextlib.suppress(ScenarioError):  # a file with problems is checked all the same
+        load_scenario(path)
+    [(before, after)] = seen
+    assert repr(after) == repr(before)  # (repr: nan is not equal to itself)
