@@ -13,6 +13,7 @@ import ctypes
 import multiprocessing
 import multiprocessing.context
 import os
+import resource
 import signal
 import socket
 import sys
@@ -112,8 +113,16 @@ def _job_process(job: Job, spec: Spec, log: str, conn: Connection) -> None:
     os.dup2(handle, 2)
     signal.signal(signal.SIGTERM, interrupt)
     signal.signal(signal.SIGINT, interrupt)
-    conn.send(job(spec))
+    began = cpu_seconds()
+    result = job(spec)
+    conn.send({**result, 'cpu_s': round(cpu_seconds() - began, 3)})
     conn.close()
+
+
+def cpu_seconds() -> float:
+    """CPU seconds of this process (every thread) and of its children that ended (a system under test)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 class Running:
@@ -176,7 +185,7 @@ def execute(job: Job, spec: Spec) -> dict[str, Any]:
 
 
 def _error(message: str) -> dict[str, Any]:
-    return {'status': 'error', 'message': message, 'assertions': {}, 'detections': {}, 'seconds': None,
+    return {'status': 'error', 'message': message, 'assertions': {}, 'detections': {}, 'seconds': None, 'cpu_s': None,
             'output': None}
 
 

@@ -1,8 +1,9 @@
 """The campaign's tables and report: results.parquet, results.csv, campaign.json, report.html.
 
 One row per job, in job order (sweep jobs bag-major, then search rounds), so
-the table is the same whatever ran the jobs. `seconds` is the only column
-that is not a function of the inputs.
+the table is the same whatever ran the jobs. `seconds` and `cpu_s` (the
+job process's CPU seconds, its system under test's included) are the only
+columns that are not a function of the inputs (`MEASURED`).
 """
 
 from __future__ import annotations
@@ -54,6 +55,9 @@ def bag_name(plan: Plan, bag: Bag) -> str:
         return str(bag.absolute())
 
 
+MEASURED = ('seconds', 'cpu_s')  # columns measured as the job ran: wall and CPU seconds
+
+
 def make_table(plan: Plan, done: list[tuple[Job, dict[str, Any], str]], assertions: list[str]) -> Table:
     """Rows of (job, its result, its kept output relative to the campaign folder or '')."""
     parameters = list(plan.campaign.sweep)
@@ -64,7 +68,7 @@ def make_table(plan: Plan, done: list[tuple[Job, dict[str, Any], str]], assertio
     columns = [*FIXED, *parameters, *TAIL]
     for a in assertions:
         columns += [a, f'{a}.value', f'{a}.unit', f'{a}.t_s']
-    columns += [f'{code}.confirmed_s' for code in codes] + ['seconds', 'output', 'key']  # (no assertion suffix)
+    columns += [f'{code}.confirmed_s' for code in codes] + [*MEASURED, 'output', 'key']  # (no assertion suffix)
     rows = []
     for job, result, output in done:
         row: dict[str, Any] = {'job': job.index, 'kind': job.kind, 'bag': bag_name(plan, job.bag), 'seed': job.seed}
@@ -77,7 +81,8 @@ def make_table(plan: Plan, done: list[tuple[Job, dict[str, Any], str]], assertio
             row[f'{a}.unit'], row[f'{a}.t_s'] = got.get('unit') or None, got.get('t_s')
         for code in codes:
             row[f'{code}.confirmed_s'] = result.get('detections', {}).get(code)
-        row['seconds'], row['output'], row['key'] = result.get('seconds'), output or None, job.key
+        row['seconds'], row['cpu_s'] = result.get('seconds'), result.get('cpu_s')
+        row['output'], row['key'] = output or None, job.key
         rows.append(row)
     return Table(columns, rows, parameters, assertions)
 

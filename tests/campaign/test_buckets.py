@@ -50,7 +50,7 @@ def store(server: S3Server, corpus: Path, tmp_path: Path, monkeypatch: pytest.Mo
 
 
 def rows(directory: Path) -> list[dict[str, Any]]:
-    return [{k: v for k, v in row.items() if k not in ('seconds', 'bag', 'key', 'output')}  # keys: BLAKE3 vs ETag
+    return [{k: v for k, v in row.items() if k not in ('seconds', 'cpu_s', 'bag', 'key', 'output')}  # keys: BLAKE3 vs ETag
             for row in pq.read_table(directory / 'results.parquet').to_pylist()]
 
 
@@ -184,9 +184,9 @@ def test_results_written_to_a_bucket_survive_a_stop_and_resume_from_it(store: S3
     assert {'results.parquet', 'results.csv', 'campaign.json', 'report.html'} <= names
     store.s3.download_file(BUCKET, f'{prefix}/results/run1/results.parquet', str(tmp_path / 'resumed.parquet'))
     assert main(['campaign', str(path), '-o', str(tmp_path / 'whole'), '--workers', '1']) in (0, 1)
-    resumed = [{k: v for k, v in r.items() if k != 'seconds'} for r in pq.read_table(tmp_path / 'resumed.parquet')
+    resumed = [{k: v for k, v in r.items() if k not in ('seconds', 'cpu_s')} for r in pq.read_table(tmp_path / 'resumed.parquet')
                .to_pylist()]
-    assert resumed == [{k: v for k, v in r.items() if k != 'seconds'} for r in pq.read_table(
+    assert resumed == [{k: v for k, v in r.items() if k not in ('seconds', 'cpu_s')} for r in pq.read_table(
         tmp_path / 'whole' / 'results.parquet').to_pylist()]
     with pytest.raises(OutputError, match=f'{target}: holds 8 results of a campaign already'):
         api.campaign(path, target, workers=1)  # without --resume, as for a local folder

@@ -38,7 +38,7 @@ HOLD = '  - {id: hold, type: hold, input_topic: /imu, output_topic: /imu_held}\n
 HELD = '  - {id: held, injector_id: hold, active_on_startup: true, config: {level: 1.0}}\n'
 
 def rows(path: Path) -> list[dict[str, Any]]:
-    return [{k: v for k, v in row.items() if k not in ('seconds', 'output', 'key', 'bag')} | {
+    return [{k: v for k, v in row.items() if k not in ('seconds', 'cpu_s', 'output', 'key', 'bag')} | {
         'bag': row['bag'].rsplit('/', 1)[1]} for row in pq.read_table(path / 'results.parquet').to_pylist()]
 
 
@@ -207,3 +207,22 @@ def test_a_ray_head_that_never_answers_is_one_line_within_the_connect_timeout(co
     assert done.stderr.count('\n') == 1 and f'--ray {address}: Ray did not join the cluster within 5 s' in done.stderr
     assert seconds < 60
     assert not out.exists()
+
+
+def test_a_job_s_cpu_seconds_are_its_process_s_and_its_children_s() -> None:
+    """By construction: a job that burns 0.5 s of CPU itself and 0.3 s in a child it waits for (as a system under
+    test), and one that only sleeps 0.6 s; each job's `cpu_s` is measured in its own process around the job."""
+    from support import jobs
+
+    from bagfault.campaign.engines import LocalEngine
+
+    results: dict[int, dict[str, Any]] = {}
+    engine = LocalEngine(2, jobs.measured)
+    try:
+        engine.run([{'timeout': 60.0, 'cpu': 0.5, 'child_cpu': 0.3}, {'timeout': 60.0, 'sleep': 0.6}],
+                   results.__setitem__)
+    finally:
+        engine.close()
+    burning, sleeping = results[0], results[1]
+    assert 0.8 <= burning['cpu_s'] < 0.8 + 0.3, burning  # the child's interpreter start adds a few hundredths
+    assert sleeping['seconds'] >= 0.6 and sleeping['cpu_s'] < 0.1, sleeping

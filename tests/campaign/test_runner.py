@@ -41,9 +41,9 @@ BASE_Z = {'bags/a.mcap': 0.02, 'bags/b.mcap': 0.0}
 
 
 def table(directory: Path) -> list[dict[str, Any]]:
-    """results.parquet without the wall-time column."""
+    """results.parquet without the columns measured as the jobs ran (wall and CPU seconds)."""
     rows = pq.read_table(directory / 'results.parquet').to_pylist()
-    return [{k: v for k, v in row.items() if k != 'seconds'} for row in rows]
+    return [{k: v for k, v in row.items() if k not in ('seconds', 'cpu_s')} for row in rows]
 
 
 def one_bag(folder: Path, name: str, *lines: str) -> Path:
@@ -68,6 +68,8 @@ def sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_twelve_rows_match_twelve_separate_runs(sweep: Path, tmp_path: Path) -> None:
     rows = table(sweep / 'one')
     assert len(rows) == 12
+    measured = pq.read_table(sweep / 'one' / 'results.parquet').to_pylist()  # CPU seconds per job: its two cores'
+    assert all(0 < row['cpu_s'] <= 2 * row['seconds'] + 0.05 for row in measured), measured  # worth at most
     assert [(r['bag'], r[BIAS], r['seed']) for r in rows] == [
         (bag, bias, seed) for bag in BASE_Z for bias in (0.05, 0.09, 0.2) for seed in (0, 1)]
     for row in rows:
