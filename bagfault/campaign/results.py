@@ -191,44 +191,14 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
     page = Page(f'{c.name}: bagfault campaign')
     parts = template('bagfault.campaign', 'report.html.j2')
     page.html(str(parts.header(c.name, str(c.scenario), c.mode, len(plan.bags), len(rows), counts, engine, STYLE)))
-    bags = _order([r['bag'] for r in rows])
-    if len(bags) > 1:  # per bag first: a bag that lacks a topic shows here, not as a lower rate of every value
-        lines = [{'label': bag, 'cells': [_passes(group), *(_passes(group, a) for a in table.assertions)]}
-                 for bag in bags for group in [[r for r in rows if r['bag'] == bag]]]
-        page.html(str(parts.rate_table('bag', ['job passed', *table.assertions], lines)))
+    _per_bag(page, parts, rows, table)
     for parameter in table.parameters:
-        values = _order([r[parameter] for r in rows if parameter in c.sweep])
-        if not values:
-            continue
-        lines = []
-        for value in values:
-            group = [r for r in rows if r[parameter] == value]
-            lines.append({'label': _label(value),
-                          'cells': [_passes(group), *(_passes(group, a) for a in table.assertions)]})
-        page.html(str(parts.rate_table(parameter, ['job passed', *table.assertions], lines)))
-        _pass_rate_figure(page, parameter, values, rows, table.assertions)
+        _per_value(page, parts, rows, table, parameter, [r[parameter] for r in rows if parameter in c.sweep])
     swept = list(c.sweep)
     if len(swept) >= 2:
-        first, second = swept[0], swept[1]
-        xs, ys = _order([r[second] for r in rows]), _order([r[first] for r in rows])
-        lines = [{'label': _label(y), 'cells': [_passes([r for r in rows if r[first] == y and r[second] == x])
-                                                for x in xs]} for y in ys]
-        page.html(str(parts.grid_table(first, second, [_label(x) for x in xs], lines)))
-        rates = [[_rate([r for r in rows if r[first] == y and r[second] == x]) for x in xs] for y in ys]
-        page.figure([{'type': 'heatmap', 'x': [_label(x) for x in xs], 'y': [_label(y) for y in ys], 'z': rates,
-                      'zmin': 0, 'zmax': 100, 'colorscale': PASS_COLORS, 'colorbar': {'title': {'text': '% passed'}},
-                      'hovertemplate': f'{second} %{{x}}, {first} %{{y}}: %{{z:.0f}}% passed<extra></extra>'}],
-                    {'title': title(f'jobs passed: {first} against {second}'), 'height': 320,
-                     'xaxis': {'type': 'category', 'title': {'text': second}},
-                     'yaxis': {'type': 'category', 'title': {'text': first}}}, name=f'heatmap:{first}:{second}')
+        _heatmap(page, parts, rows, swept[0], swept[1])
     if points:
-        assert c.search is not None
-        shown = [{'bag': bag_name(plan, p.bag), 'holds': '-' if p.value is None else _label(p.value),
-                  'below': '-' if p.below is None else _label(p.below), 'jobs': p.jobs, 'note': p.note,
-                  'samples': ', '.join(s.describe() for s in p.samples)} for p in points]
-        page.html(str(parts.points_table(c.search.parameter, c.search.until.assertion, c.search.until.state,
-                                         f'{c.search.tolerance:g}', shown)))
-        _search_figure(page, c.search.parameter, [r for r in table.rows if r['kind'] == 'search'], points, plan)
+        _breaking_points(page, parts, plan, table, points)
     bad = [r for r in rows if r['status'] != 'passed']
     if bad:
         jobs = [{'job': r['job'], 'bag': r['bag'], 'swept': [_label(r[p]) for p in swept], 'seed': r['seed'],
@@ -236,6 +206,57 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
                  'output_name': Path(r['output']).name if r['output'] else ''} for r in bad]
         page.html(str(parts.bad_table(swept, jobs)))
     return page.render()
+
+
+def _per_bag(page: Page, parts: Any, rows: list[dict[str, Any]], table: Table) -> None:
+    """Pass rates per bag, first: a bag that lacks a topic shows here, not as a lower rate of every value."""
+    bags = _order([r['bag'] for r in rows])
+    if len(bags) > 1:
+        lines = [{'label': bag, 'cells': [_passes(group), *(_passes(group, a) for a in table.assertions)]}
+                 for bag in bags for group in [[r for r in rows if r['bag'] == bag]]]
+        page.html(str(parts.rate_table('bag', ['job passed', *table.assertions], lines)))
+
+
+def _per_value(page: Page, parts: Any, rows: list[dict[str, Any]], table: Table, parameter: str,
+               swept: list[Any]) -> None:
+    """Pass rates at each value of one swept parameter: a table and a plot."""
+    values = _order(swept)
+    if not values:
+        return
+    lines = []
+    for value in values:
+        group = [r for r in rows if r[parameter] == value]
+        cells = [_passes(group), *(_passes(group, a) for a in table.assertions)]
+        lines.append({'label': _label(value), 'cells': cells})
+    page.html(str(parts.rate_table(parameter, ['job passed', *table.assertions], lines)))
+    _pass_rate_figure(page, parameter, values, rows, table.assertions)
+
+
+def _heatmap(page: Page, parts: Any, rows: list[dict[str, Any]], first: str, second: str) -> None:
+    """Jobs passed at each pair of values of the first two swept parameters: a grid and a heatmap."""
+    xs, ys = _order([r[second] for r in rows]), _order([r[first] for r in rows])
+    lines = [{'label': _label(y), 'cells': [_passes([r for r in rows if r[first] == y and r[second] == x])
+                                            for x in xs]} for y in ys]
+    page.html(str(parts.grid_table(first, second, [_label(x) for x in xs], lines)))
+    rates = [[_rate([r for r in rows if r[first] == y and r[second] == x]) for x in xs] for y in ys]
+    page.figure([{'type': 'heatmap', 'x': [_label(x) for x in xs], 'y': [_label(y) for y in ys], 'z': rates,
+                  'zmin': 0, 'zmax': 100, 'colorscale': PASS_COLORS, 'colorbar': {'title': {'text': '% passed'}},
+                  'hovertemplate': f'{second} %{{x}}, {first} %{{y}}: %{{z:.0f}}% passed<extra></extra>'}],
+                {'title': title(f'jobs passed: {first} against {second}'), 'height': 320,
+                 'xaxis': {'type': 'category', 'title': {'text': second}},
+                 'yaxis': {'type': 'category', 'title': {'text': first}}}, name=f'heatmap:{first}:{second}')
+
+
+def _breaking_points(page: Page, parts: Any, plan: Plan, table: Table, points: list[BreakingPoint]) -> None:
+    """Each bag's breaking point of the searched parameter, and the search's jobs."""
+    search = plan.campaign.search
+    assert search is not None
+    shown = [{'bag': bag_name(plan, p.bag), 'holds': '-' if p.value is None else _label(p.value),
+              'below': '-' if p.below is None else _label(p.below), 'jobs': p.jobs, 'note': p.note,
+              'samples': ', '.join(s.describe() for s in p.samples)} for p in points]
+    page.html(str(parts.points_table(search.parameter, search.until.assertion, search.until.state,
+                                     f'{search.tolerance:g}', shown)))
+    _search_figure(page, search.parameter, [r for r in table.rows if r['kind'] == 'search'], points, plan)
 
 
 def _rate(group: list[dict[str, Any]], column: str = 'status') -> float | None:
