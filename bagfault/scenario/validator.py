@@ -135,11 +135,7 @@ def _check_outputs(scenario: Scenario, out: _Collector) -> None:
 
 
 def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
-    if fault.active_on_startup and fault.start is not None:
-        out.ignored((*fault.path, 'start'), f'fault {fault.id!r} has active_on_startup and start; start is ignored')
-    if (not fault.active_on_startup and fault.duration is not None and fault.start is None
-            and fault.after is None and fault.repeat is None and fault.probability_per_second is None):
-        out.ignored((*fault.path, 'duration'), f'fault {fault.id!r} has duration but no start; duration is ignored')
+    _check_schedule_keys(fault, out)
     if not fault.injector_id:
         return
     injector = scenario.injector(fault.injector_id)
@@ -151,36 +147,56 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
     if cls is None:
         return
     for key, coerced in fault.config.items():  # (as resolve.py read them: unknown keys left out)
-        path = (*fault.path, 'config', key)
         field = cls.field(str(key))
         assert field is not None
-        text = fault.config_text.get(str(key), str(coerced))  # the scalar as the file writes it
-        refusal = anchor_refusal(field, text) if injector.type in ANCHOR_TYPES else None
-        if coerced is not None and refusal is not None:
-            out.warn(path, f"{text!r} is read here, but ros2_fault_injection's "
-                           f'validator refuses it ({refusal}): the file would not load in the anchor')
-        if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
-            out.ignored(path, "nan has no effect: a level is the largest of the active faults' values, and "
-                           'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
-        elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double' and refusal is None:
-            out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '
-                           'it too)')
+        _check_config_value(fault, injector.type, field, str(key), coerced, out)
     for field in cls.fields:
         if field.required and field.key not in fault.config:
             out.add((*fault.path, 'config'), f'missing required key {field.key!r} for injector type {injector.type!r}')
     if all(v is not None for v in fault.config.values()):
-        try:
-            cls.check_fault(fault.config, injector.options)
-        except InjectorConfigError as exc:
-            out.add((*fault.path, 'config'), str(exc))
-        if issubclass(cls, Injector):
-            for warning in cls.config_warnings(fault.config):
-                out.warn((*fault.path, 'config'), warning)
-        if issubclass(cls, SystemInjector):
-            has_end = fault.duration is not None or fault.repeat is not None or fault.probability_per_second is not None
-            problem = cls.check_schedule(fault.config, has_end)
-            if problem is not None:
-                out.add(fault.path, problem)
+        _check_config(fault, injector.options, cls, out)
+
+
+def _check_schedule_keys(fault: Any, out: _Collector) -> None:
+    """Schedule keys the anchor accepts and ignores."""
+    if fault.active_on_startup and fault.start is not None:
+        out.ignored((*fault.path, 'start'), f'fault {fault.id!r} has active_on_startup and start; start is ignored')
+    if (not fault.active_on_startup and fault.duration is not None and fault.start is None
+            and fault.after is None and fault.repeat is None and fault.probability_per_second is None):
+        out.ignored((*fault.path, 'duration'), f'fault {fault.id!r} has duration but no start; duration is ignored')
+
+
+def _check_config_value(fault: Any, injector_type: str, field: ConfigField, key: str, coerced: Any,
+                        out: _Collector) -> None:
+    """One config value: what the anchor would refuse of its text, what nan and inf do."""
+    path = (*fault.path, 'config', key)
+    text = fault.config_text.get(key, str(coerced))  # the scalar as the file writes it
+    refusal = anchor_refusal(field, text) if injector_type in ANCHOR_TYPES else None
+    if coerced is not None and refusal is not None:
+        out.warn(path, f"{text!r} is read here, but ros2_fault_injection's "
+                       f'validator refuses it ({refusal}): the file would not load in the anchor')
+    if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
+        out.ignored(path, "nan has no effect: a level is the largest of the active faults' values, and "
+                       'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
+    elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double' and refusal is None:
+        out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '
+                       'it too)')
+
+
+def _check_config(fault: Any, options: dict[str, Any], cls: Any, out: _Collector) -> None:
+    """The whole config, as its injector type checks it (and, acting on the system, its schedule)."""
+    try:
+        cls.check_fault(fault.config, options)
+    except InjectorConfigError as exc:
+        out.add((*fault.path, 'config'), str(exc))
+    if issubclass(cls, Injector):
+        for warning in cls.config_warnings(fault.config):
+            out.warn((*fault.path, 'config'), warning)
+    if issubclass(cls, SystemInjector):
+        has_end = fault.duration is not None or fault.repeat is not None or fault.probability_per_second is not None
+        problem = cls.check_schedule(fault.config, has_end)
+        if problem is not None:
+            out.add(fault.path, problem)
 
 
 def _check_chains(scenario: Scenario, out: _Collector) -> None:
