@@ -26,10 +26,10 @@ from __future__ import annotations
 import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from bagfault.spec import sections
-from bagfault.spec.reader import Reader
+from bagfault.spec.reader import Read, Reader
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Mapping
@@ -95,25 +95,8 @@ def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], 
         return None
     system = SystemUnderTest(shell=read.get('shell'), stop_timeout=read.get('stop_timeout'),
                              tail=read.get('tail'), use_sim_time=read.get('use_sim_time'))
-    command = read.get('command')
-    if isinstance(command, str) and command.strip():
-        system.command = [command] if system.shell else shlex.split(command)
-    elif isinstance(command, list) and command and all(isinstance(c, (str, int, float)) for c in command):
-        system.command = [str(c) for c in command]
-    elif 'command' in read.given:
-        problem((*path, 'command'), 'must be a command line: a string or a list of arguments')
-    if any('\0' in part for part in system.command):
-        problem((*path, 'command'), 'holds a NUL character, which no command line can carry')
-    env = read.get('env', {})
-    if not all(isinstance(k, str) and isinstance(v, (str, int, float, bool)) for k, v in env.items()):
-        problem((*path, 'env'), f'must be {sections.SYSTEM.key("env").what}')  # type: ignore[union-attr]
-    else:
-        system.env = {k: _text(v) for k, v in env.items()}
-        for name, value in system.env.items():
-            if not name or '=' in name or '\0' in name:
-                problem((*path, 'env', name), 'not a variable name (empty, or holds = or NUL)')
-            elif '\0' in value:
-                problem((*path, 'env', name), 'the value holds a NUL character, which no environment can carry')
+    system.command = _command(read, system.shell, path, problem)
+    system.env = _env(read.get('env', {}), path, problem)
     if 'cwd' in read:
         system.cwd = (base / read.get('cwd')) if base is not None else Path(read.get('cwd'))
     system.ready = [c for i, item in enumerate(read.get('ready', []))
@@ -132,6 +115,35 @@ def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], 
     else:
         problem((*path, 'publishes'), 'must be a topic or a list of topics')
     return system
+
+
+def _command(read: Read, shell: bool, path: PathKey, problem: Callable[[PathKey, str], None]) -> list[str]:
+    """The command line: one string for the shell, else split as a shell would (or given as a list)."""
+    command = read.get('command')
+    argv: list[str] = []
+    if isinstance(command, str) and command.strip():
+        argv = [command] if shell else shlex.split(command)
+    elif isinstance(command, list) and command and all(isinstance(c, (str, int, float)) for c in command):
+        argv = [str(c) for c in command]
+    elif 'command' in read.given:
+        problem((*path, 'command'), 'must be a command line: a string or a list of arguments')
+    if any('\0' in part for part in argv):
+        problem((*path, 'command'), 'holds a NUL character, which no command line can carry')
+    return argv
+
+
+def _env(env: dict[Any, Any], path: PathKey, problem: Callable[[PathKey, str], None]) -> dict[str, str]:
+    """Variables the system gets beside bagfault's environment (values as text)."""
+    if not all(isinstance(k, str) and isinstance(v, (str, int, float, bool)) for k, v in env.items()):
+        problem((*path, 'env'), f'must be {sections.SYSTEM.key("env").what}')  # type: ignore[union-attr]
+        return {}
+    out = {k: _text(v) for k, v in env.items()}
+    for name, value in out.items():
+        if not name or '=' in name or '\0' in name:
+            problem((*path, 'env', name), 'not a variable name (empty, or holds = or NUL)')
+        elif '\0' in value:
+            problem((*path, 'env', name), 'the value holds a NUL character, which no environment can carry')
+    return out
 
 
 def _condition(item: object, path: PathKey, problem: Callable[[PathKey, str], None]) -> ReadyCondition | None:
