@@ -309,6 +309,12 @@ def test_a_daemon_that_double_forked_out_of_the_session_is_stopped_too(tmp_path:
     wait_for(lambda: daemon_of(process, token) is not None)
     daemon = daemon_of(process, token)
     assert daemon is not None and os.getsid(daemon) != process.pid  # it left the system's session
+
+    def parent(pid: int) -> int:  # (the field after the command's closing parenthesis, then the state)
+        return int(Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[1])
+
+    # once its parent has exited (on a busy machine a moment after the daemon exists), it is re-parented
+    wait_for(lambda: parent(daemon) not in family(process.pid, {}))
     assert daemon not in family(process.pid, {})  # and no walk of the system's descendants finds it
     assert daemon in process.pids()  # so the isolation check does not take it for a stranger
     process.stop(timeout=2.0)

@@ -147,9 +147,11 @@ def test_the_same_seed_gives_the_same_runs_for_any_workers_and_after_a_stop(tmp_
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 8):
         time.sleep(0.05)
+    waited = time.monotonic() - deadline + 60
     process.send_signal(signal.SIGINT)
-    _, err = process.communicate(timeout=60)
-    assert process.returncode == 2 and '--resume continues' in err and 'Traceback' not in err
+    out, err = process.communicate(timeout=60)
+    assert process.returncode == 2 and '--resume continues' in err and 'Traceback' not in err, \
+        (process.returncode, f'SIGINT after {waited:.2f} s', out[-1500:], err[-1500:])
     indices = {json.loads(line)['index'] for line in log.read_text().splitlines()}
     made = len(indices)  # two workers finish out of order: the log may hold a run past one the stop cut short
     assert 8 <= made < 36

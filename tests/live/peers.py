@@ -70,6 +70,13 @@ def publish_imu(args) -> None:
         delay = start + k * period - time.monotonic()
         if delay > 0:
             time.sleep(delay)
+    for _ in range(args.tail):  # slow messages after the rest: a listener hears these, so a loss before them
+        message = Imu()                # is seen (it is counted at the next message heard)
+        message.header.stamp = node.get_clock().now().to_msg()
+        message.orientation_covariance[0] = float(k)
+        publisher.publish(message)
+        k += 1
+        time.sleep(0.05)
     from rclpy.duration import Duration
     publisher.wait_for_all_acked(Duration(seconds=5))  # exiting earlier would lose what is still being resent
     print(json.dumps({'published': k}), flush=True)
@@ -307,6 +314,7 @@ def main() -> None:
     p.add_argument('--malformed-every', type=int, default=0)
     p.add_argument('--wait-subscriber', action='store_true', help='start once a subscriber is matched')
     p.add_argument('--pause-after-first', type=float, default=0.0, help='seconds between the first and the rest')
+    p.add_argument('--tail', type=int, default=0, help='messages at 20 Hz after the rest')
     p = sub.add_parser('echo')
     p.add_argument('topic')
     p.add_argument('type')
