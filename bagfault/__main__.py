@@ -21,7 +21,12 @@ def run() -> int:
         signal.signal(number, _interrupt)
     try:
         from bagfault.cli import main  # noqa: PLC0415 - within the handler: a signal here is no traceback
-    except KeyboardInterrupt as exc:
+    except (KeyboardInterrupt, RuntimeError) as caught:  # (one while a dataclass is made comes as RuntimeError)
+        from bagfault.errors import interrupt_inside  # noqa: PLC0415 - loaded already, by then
+
+        exc = interrupt_inside(caught)
+        if exc is None:
+            raise
         how = f'stopped by {exc}' if str(exc).startswith('SIG') else 'interrupted'
         sys.stderr.write(f'bagfault: {how}; nothing was written under the requested names\n')
         STOPPED.append(how)

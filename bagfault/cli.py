@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bagfault import __version__, api, settings
-from bagfault.errors import BagfaultError, LatencyError, UsageError
+from bagfault.errors import BagfaultError, LatencyError, UsageError, interrupt_inside
 from bagfault.log import console
 from bagfault.progress import ExploreProgress, JobProgress, ProgressBar
 
@@ -612,19 +612,6 @@ def _main(argv: Sequence[str] | None) -> int:
 
 
 TERMINAL = (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG)
-
-
-def interrupt_inside(exc: BaseException) -> KeyboardInterrupt | None:
-    """The Ctrl-C or stop signal another exception carries as its cause or context (Python wraps an exception
-    raised in __set_name__ in a RuntimeError: a signal while a module's dataclass is made arrives so), or None."""
-    seen: set[int] = set()
-    current: BaseException | None = exc
-    while current is not None and id(current) not in seen:
-        if isinstance(current, KeyboardInterrupt):
-            return current
-        seen.add(id(current))
-        current = current.__cause__ or current.__context__
-    return None
 
 
 def _stopped_by(exc: KeyboardInterrupt) -> str:

@@ -144,3 +144,16 @@ class CampaignError(BagfaultError):
 
 class ExploreError(BagfaultError):
     """An exploration cannot start or go on (no space, no bag, a folder that holds another)."""
+
+
+def interrupt_inside(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or stop signal another exception carries as its cause or context (Python wraps an exception
+    raised in __set_name__ in a RuntimeError: a signal while a module's dataclass is made arrives so), or None."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
