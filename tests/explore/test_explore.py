@@ -142,7 +142,14 @@ def test_the_same_seed_gives_the_same_runs_for_any_workers_and_after_a_stop(tmp_
     assert one.failures
     command = [sys.executable, '-m', 'bagfault', 'explore', str(space), '-o', str(tmp_path / 'stopped'),
                '--budget', '36', '--seed', '7', '--workers', '2']
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    inherited = (signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, []))
+
+    def as_from_a_shell() -> None:  # SIGINT's default action, unblocked, whatever this test process was left with
+        signal.signal(signal.SIGINT, signal.SIG_DFL)  # (twice in full suites beside another, the stopped explore
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # heard no SIGINT and ran to its end)
+
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=as_from_a_shell)  # noqa: PLW1509 - two calls, no lock taken
     log = tmp_path / 'stopped' / 'runs.jsonl'
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 8):
@@ -151,7 +158,7 @@ def test_the_same_seed_gives_the_same_runs_for_any_workers_and_after_a_stop(tmp_
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=60)
     assert process.returncode == 2 and '--resume continues' in err and 'Traceback' not in err, \
-        (process.returncode, f'SIGINT after {waited:.2f} s', out[-1500:], err[-1500:])
+        (process.returncode, f'SIGINT after {waited:.2f} s', inherited, out[-1500:], err[-1500:])
     indices = {json.loads(line)['index'] for line in log.read_text().splitlines()}
     made = len(indices)  # two workers finish out of order: the log may hold a run past one the stop cut short
     assert 8 <= made < 36
