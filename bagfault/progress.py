@@ -80,17 +80,45 @@ class ProgressBar:
             self.stream.flush()
 
 
-class JobProgress:
-    """A one-line bar on a terminal: jobs done, passed/failed/error so far, ETA."""
+class _CountLine:
+    """A one-line bar of counted items on a terminal (stderr unless `stream`; drawn only on a terminal)."""
+
+    WIDTH = 24
 
     def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
         self.stream = stream or sys.stderr
         self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.began = time.monotonic()
+        self.shown = False
+
+    def bar(self, fraction: float) -> str:
+        """`[####....]` filled to `fraction`."""
+        filled = int(fraction * self.WIDTH)
+        return f'[{"#" * filled}{"." * (self.WIDTH - filled)}]'
+
+    def show(self, text: str) -> None:
+        """Redraw the line with `text`."""
+        if self.enabled:
+            self.stream.write('\r' + text + '\x1b[K')
+            self.stream.flush()
+            self.shown = True
+
+    def close(self) -> None:
+        """End the line."""
+        if self.enabled and self.shown:
+            self.stream.write('\n')
+            self.stream.flush()
+
+
+class JobProgress(_CountLine):
+    """Jobs done, passed/failed/error so far, ETA."""
+
+    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
+        super().__init__(stream, enabled)
         self.total = 0
         self.done = 0
         self.cached = 0
         self.counts = {'passed': 0, 'failed': 0, 'error': 0}
-        self.began = time.monotonic()
 
     def add(self, total: int, cached: int) -> None:
         """More jobs to do (a search round), `cached` of them already done."""
@@ -102,59 +130,26 @@ class JobProgress:
         """A job ended."""
         self.done += 1
         self.counts[status] = self.counts.get(status, 0) + 1
-        self.draw()
+        self.show(self.line())
 
     def line(self) -> str:
         """The text of the bar."""
-        width = 24
-        fraction = self.done / self.total if self.total else 1.0
-        filled = int(fraction * width)
         ran = self.done - self.cached
         elapsed = time.monotonic() - self.began
         left = self.total - self.done
         eta = f' ETA {_clock(elapsed / ran * left)}' if ran and left else ''
         c = self.counts
-        return (f'[{"#" * filled}{"." * (width - filled)}] {self.done}/{self.total} jobs  {c["passed"]} passed  '
-                f'{c["failed"]} failed  {c["error"]} error{eta}')
-
-    def draw(self) -> None:
-        """Redraw on the terminal."""
-        if self.enabled:
-            self.stream.write('\r' + self.line() + '\x1b[K')
-            self.stream.flush()
-
-    def close(self) -> None:
-        """End the line."""
-        if self.enabled and self.total:
-            self.stream.write('\n')
-            self.stream.flush()
+        return (f'{self.bar(self.done / self.total if self.total else 1.0)} {self.done}/{self.total} jobs  '
+                f'{c["passed"]} passed  {c["failed"]} failed  {c["error"]} error{eta}')
 
 
-class ExploreProgress:
-    """A one-line bar on a terminal: runs of the budget, failures, the closest margin so far."""
-
-    def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
-        self.stream = stream or sys.stderr
-        self.enabled = self.stream.isatty() if enabled is None else enabled
-        self.began = time.monotonic()
-        self.shown = False
+class ExploreProgress(_CountLine):
+    """Runs of the budget, failures, the closest margin so far."""
 
     def update(self, used: int, budget: int, failures: int, best: float | None) -> None:
         """Redraw."""
-        if not self.enabled:
-            return
-        width = 24
-        filled = int(width * used / budget) if budget else width
         elapsed = time.monotonic() - self.began
         eta = f'  ETA {_clock(elapsed / used * (budget - used))}' if used and used < budget else ''
         margin = f'  closest {best:.2f} of the baseline margin' if best is not None else ''
-        self.stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {used}/{budget} runs  {failures} '
-                          f'failure{"s" if failures != 1 else ""}{margin}{eta}\x1b[K')
-        self.stream.flush()
-        self.shown = True
-
-    def close(self) -> None:
-        """End the line."""
-        if self.enabled and self.shown:
-            self.stream.write('\n')
-            self.stream.flush()
+        self.show(f'{self.bar(used / budget if budget else 1.0)} {used}/{budget} runs  {failures} '
+                  f'failure{"s" if failures != 1 else ""}{margin}{eta}')

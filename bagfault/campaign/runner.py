@@ -151,7 +151,7 @@ def run_campaign(campaign: Campaign, directory: Path, *, job: RunJob, workers: i
             nonlocal ran
             todo = list({job.key: job for job in jobs if job.key not in store.results}.values())
             bar.add(len({j.key for j in jobs}), len({j.key for j in jobs}) - len(todo))
-            bar.draw()
+            bar.show(bar.line())
 
             def done(i: int, result: dict[str, Any]) -> None:
                 store.put(todo[i], result)
