@@ -107,11 +107,8 @@ def _paths(inputs: Sequence[str | Path]) -> list[Path]:
 def _check_output(output: Path, what: str, inputs: Sequence[Path], scenario: Scenario | None, *,
                   force: bool = False, msg_paths: Sequence[str | Path] = ()) -> None:
     """Before anything runs: the output, and the black boxes named after it, replace nothing they must not."""
-    pairs = [('the input', p) for p in inputs]
-    if scenario is not None and scenario.source is not None:
-        pairs.append(('the scenario', scenario.source))
-    pairs += [('the --msg-path', Path(p)) for p in msg_paths]
-    protected = Protected.of(pairs)
+    protected = Protected.of(_protected(input=inputs, scenario=scenario.source if scenario is not None else None,
+                                        **{'--msg-path': msg_paths}))
     check_output(output, what, protected, force=force)
     check_derived(output, f'{glob.escape(output.stem)}.blackbox.*.mcap', f'a black box of {output}', protected,
                   force=force)
@@ -603,8 +600,8 @@ def latency(architecture: str | Path, bags: Sequence[str | Path] = (), *, path: 
     inputs = [Path(b) for b in bags]
     for option, report in (('--json', json), ('--html', html)):
         if report is not None:
-            check_output(Path(report), f'{option} report',
-                         [('the architecture', Path(architecture)), *(('the input', b) for b in inputs)], force=force)
+            check_output(Path(report), f'{option} report', _protected(architecture=architecture, input=inputs),
+                         force=force)
     measured = measure(architecture, inputs, path=path, stamp_origin=stamp_origin)
     if json is not None:
         write_atomic(Path(json), json_module.dumps(measured.to_dict(), indent=1, sort_keys=True) + '\n', 'json')
