@@ -75,7 +75,8 @@ def test_the_command_line_imports_the_api_and_the_bottom_layers_only() -> None:
 
 
 def test_every_subpackage_names_its_public_api() -> None:
-    """Each subpackage's __init__ has an `__all__`, and each name in it is one of its modules or defined there."""
+    """Each subpackage's __init__ has an `__all__`, and each name in it is one of its modules or defined there;
+    one that lists modules lists every public one."""
     packages = sorted(p for p in PACKAGE.iterdir() if (p / '__init__.py').is_file())
     assert len(packages) >= 15
     wrong = []
@@ -91,6 +92,9 @@ def test_every_subpackage_names_its_public_api() -> None:
         defined |= {a.asname or a.name for n in tree.body if isinstance(n, ast.ImportFrom) for a in n.names}
         modules = {p.stem for p in package.glob('*.py')} | {p.name for p in package.iterdir() if p.is_dir()}
         wrong += [f'{package.name}: {name}' for name in names[0] if name not in defined | modules]
+        files = {p.stem for p in package.glob('*.py') if not p.stem.startswith('_')}
+        if set(names[0]) & files:  # a list of its modules: all of them (a new module is not left out)
+            wrong += [f'{package.name}: {name} not in __all__' for name in sorted(files - set(names[0]))]
     assert wrong == []
 
 

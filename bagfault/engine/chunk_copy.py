@@ -28,8 +28,9 @@ if TYPE_CHECKING:
     from bagfault.engine.routing import Routing
     from bagfault.engine.run import Observer
     from bagfault.engine.scheduler import FaultScheduler
+    from bagfault.io.mcap_chunks import ChunkRef
     from bagfault.io.mcap_sink import McapSink
-    from bagfault.io.mcap_source import ChunkRef, McapSource
+    from bagfault.io.mcap_source import McapSource
     from bagfault.io.sources import InputSet, ReadMark
     from bagfault.spec.model import Scenario
 

@@ -25,8 +25,8 @@ from mcap.records import Channel, Header, Schema
 from bagfault.errors import BagfaultError
 from bagfault.io.channel import bag_name
 from bagfault.io.leading_copy import LeadingCopy, Piece
-from bagfault.io.mcap_layout import MAGIC, header_library, padding_length, record_bytes
-from bagfault.io.mcap_summary import FOOTER_LENGTH, SummaryError, read_summary
+from bagfault.io.mcap_layout import FOOTER_LENGTH, MAGIC, header_library, padding_length, record_bytes
+from bagfault.io.mcap_summary import SummaryError, read_summary
 from bagfault.units import NS
 
 if TYPE_CHECKING:

@@ -17,17 +17,25 @@ from typing import IO
 from mcap.records import Channel, ChunkIndex, Metadata, MetadataIndex, Schema, Statistics
 from mcap.summary import Summary
 
-OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_CHUNK_INDEX = 0x02, 0x03, 0x04, 0x08
-OP_METADATA, OP_METADATA_INDEX, OP_STATISTICS = 0x0C, 0x0D, 0x0B
-FOOTER_LENGTH = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, summary offset start, summary CRC
-_REC = struct.Struct('<BQ')
-_U16 = struct.Struct('<H')
-_U32 = struct.Struct('<I')
-_U64 = struct.Struct('<Q')
+from bagfault.io.mcap_layout import (
+    FOOTER_LENGTH,
+    INDEX_ENTRY,
+    OP_CHANNEL,
+    OP_CHUNK_INDEX,
+    OP_FOOTER,
+    OP_METADATA,
+    OP_METADATA_INDEX,
+    OP_SCHEMA,
+    OP_STATISTICS,
+    RECORD_HEAD,
+    U16,
+    U32,
+    U64,
+)
+
 _CHUNK_TIMES = struct.Struct('<QQQQ')  # message start, message end, chunk start offset, chunk length
 _CHUNK_SIZES = struct.Struct('<QQ')  # compressed, uncompressed
 _STATISTICS = struct.Struct('<QHIIIIQQ')
-_INDEX_ENTRY = struct.Struct('<HQ')
 
 
 class SummaryError(Exception):
@@ -50,7 +58,7 @@ class _Fields:
         return values
 
     def raw(self) -> memoryview:
-        (length,) = self.take(_U32)
+        (length,) = self.take(U32)
         if self.pos + length > self.end:
             raise SummaryError(f'a field of {length} bytes runs past its record')
         self.pos += length
@@ -60,7 +68,7 @@ class _Fields:
         return bytes(self.raw()).decode()
 
     def strings(self) -> dict[str, str]:
-        (length,) = self.take(_U32)
+        (length,) = self.take(U32)
         end = self.pos + length
         if end > self.end:
             raise SummaryError(f'a map of {length} bytes runs past its record')
@@ -72,10 +80,10 @@ class _Fields:
         return out
 
     def ids(self) -> dict[int, int]:
-        (length,) = self.take(_U32)
-        if self.pos + length > self.end or length % _INDEX_ENTRY.size:
+        (length,) = self.take(U32)
+        if self.pos + length > self.end or length % INDEX_ENTRY.size:
             raise SummaryError(f'a map of {length} bytes does not fit its record')
-        out = dict(entry for entry in _INDEX_ENTRY.iter_unpack(self.buf[self.pos : self.pos + length]))
+        out = dict(entry for entry in INDEX_ENTRY.iter_unpack(self.buf[self.pos : self.pos + length]))
         self.pos += length
         return out
 
@@ -111,7 +119,7 @@ def _parse(buf: memoryview) -> Summary:
     while pos < total:
         if pos + 9 > total:
             raise SummaryError(f'a record header at offset {pos} runs past the summary')
-        opcode, length = _REC.unpack_from(buf, pos)
+        opcode, length = RECORD_HEAD.unpack_from(buf, pos)
         body, end = pos + 9, pos + 9 + length
         if end > total:
             raise SummaryError(f'a record of {length} bytes at offset {pos} runs past the summary')
@@ -119,7 +127,7 @@ def _parse(buf: memoryview) -> Summary:
         if opcode == OP_CHUNK_INDEX:
             start, stop, offset, chunk_length = fields.take(_CHUNK_TIMES)
             index_offsets = fields.ids()
-            (index_length,) = fields.take(_U64)
+            (index_length,) = fields.take(U64)
             compression = fields.text()
             compressed, uncompressed = fields.take(_CHUNK_SIZES)
             summary.chunk_indexes.append(ChunkIndex(
@@ -127,12 +135,12 @@ def _parse(buf: memoryview) -> Summary:
                 chunk_length=chunk_length, message_index_offsets=index_offsets, message_index_length=index_length,
                 compression=compression, compressed_size=compressed, uncompressed_size=uncompressed))
         elif opcode == OP_SCHEMA:
-            (schema_id,) = fields.take(_U16)
+            (schema_id,) = fields.take(U16)
             name, encoding = fields.text(), fields.text()
             summary.schemas[schema_id] = Schema(id=schema_id, name=name, encoding=encoding,
                                                 data=bytes(fields.raw()))
         elif opcode == OP_CHANNEL:
-            channel_id, schema_id = fields.take(_U16) + fields.take(_U16)
+            channel_id, schema_id = fields.take(U16) + fields.take(U16)
             topic, encoding = fields.text(), fields.text()
             summary.channels[channel_id] = Channel(id=channel_id, schema_id=schema_id, topic=topic,
                                                    message_encoding=encoding, metadata=fields.strings())
@@ -161,7 +169,7 @@ def raw_records(section: bytes | memoryview, opcode: int) -> list[bytes]:
     buf = memoryview(section)
     found, pos, total = [], 0, len(buf)
     while pos + 9 <= total:
-        kind, length = _REC.unpack_from(buf, pos)
+        kind, length = RECORD_HEAD.unpack_from(buf, pos)
         end = pos + 9 + length
         if end > total:
             raise SummaryError(f'a record of {length} bytes at offset {pos} runs past the summary')
@@ -194,6 +202,6 @@ def read_metadata(stream: IO[bytes], index: MetadataIndex) -> Metadata:
     if len(data) < 9 or data[0] != OP_METADATA:
         raise SummaryError(f'the metadata index {index.name!r} points at offset {index.offset}, not at a metadata '
                            'record')
-    (length,) = _U64.unpack_from(data, 1)
+    (length,) = U64.unpack_from(data, 1)
     fields = _Fields(data, 9, min(9 + length, len(data)))
     return Metadata(name=fields.text(), metadata=fields.strings())

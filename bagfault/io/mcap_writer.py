@@ -50,18 +50,23 @@ from mcap.records import (
 from bagfault.io import mcap_layout
 from bagfault.io.file_copy import IN_KERNEL, copy_range
 from bagfault.io.marks import MCAP_RECORD, mcap_mark
-from bagfault.io.mcap_layout import MAGIC, padding_length, padding_record, record_bytes
+from bagfault.io.mcap_layout import (
+    INDEX_ENTRY,
+    INDEX_HEAD,
+    MAGIC,
+    MESSAGE_HEAD,
+    padding_length,
+    padding_record,
+    record_bytes,
+)
 
 if TYPE_CHECKING:
     from bagfault.io.leading_copy import LeadingCopy
 
 _MESSAGE_HEAD = struct.Struct('<BQHIQQ')
-_MESSAGE_HEAD_SIZE = 2 + 4 + 8 + 8
-_INDEX_HEAD = struct.Struct('<BQHI')
 _CHUNK_INDEX_HEAD = struct.Struct('<BQQQQQI')
 _CHUNK_INDEX_MID = struct.Struct('<QI')
 _CHUNK_INDEX_TAIL = struct.Struct('<QQ')
-_INDEX_ENTRY = struct.Struct('<HQ')
 PENDING_CHUNKS = 16
 SPAN_LIMIT = 64 << 20  # copied bytes handed to the copy thread at least this often
 COPIES_AHEAD = 2  # spans handed over and not yet copied: the writer reads the input at most ~128 MB ahead of the
@@ -70,7 +75,7 @@ def chunk_index_record(start: int, end: int, offset: int, length: int, index_off
                        index_length: int, compression: str, compressed_size: int, uncompressed_size: int) -> bytes:
     """A chunk index record, packed as the `mcap` library's ChunkIndex.write packs it (ten times faster: the
     summary of a 3000-chunk bag is mostly these)."""
-    entries = b''.join([_INDEX_ENTRY.pack(cid, position) for cid, position in index_offsets.items()])
+    entries = b''.join([INDEX_ENTRY.pack(cid, position) for cid, position in index_offsets.items()])
     name = compression.encode()
     length_of_body = 8 * 4 + 4 + len(entries) + 8 + 4 + len(name) + 8 * 2
     return b''.join((_CHUNK_INDEX_HEAD.pack(Opcode.CHUNK_INDEX, length_of_body, start, end, offset, length,
@@ -285,7 +290,7 @@ class McapWriter:
         if index is None:
             index = chunk.indexes[channel_id] = []
         index.append((log_time, chunk.size))
-        chunk.parts.append(_MESSAGE_HEAD.pack(Opcode.MESSAGE, _MESSAGE_HEAD_SIZE + size, channel_id, sequence,
+        chunk.parts.append(_MESSAGE_HEAD.pack(Opcode.MESSAGE, MESSAGE_HEAD + size, channel_id, sequence,
                                               log_time, publish_time))
         chunk.parts.append(data)
         if chunk.count == 0:
@@ -295,7 +300,7 @@ class McapWriter:
         elif log_time > chunk.end:
             chunk.end = log_time
         chunk.count += 1
-        chunk.size += 9 + _MESSAGE_HEAD_SIZE + size
+        chunk.size += 9 + MESSAGE_HEAD + size
         if chunk.size >= self._chunk_size:
             self._flush_chunk()
 
@@ -429,7 +434,7 @@ class McapWriter:
             offsets[channel_id] = self._offset
             entries = chunk.indexes[channel_id]
             body = struct.pack(f'<{2 * len(entries)}Q', *chain.from_iterable(entries))
-            self._write(_INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel_id, len(body)) + body)
+            self._write(INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel_id, len(body)) + body)
             self._counts[channel_id] = self._counts.get(channel_id, 0) + len(entries)
         if self._message_count == 0:
             self._start, self._end = chunk.start, chunk.end

@@ -207,6 +207,7 @@ def _mcap_marked(stream: BinaryIO, size: int) -> bool:
     """The file's `bagfault.mark` record (named by the summary's metadata index) matches its offset and the
     summary's chunk index records; the chunks are not read."""
     from bagfault.io import mcap_summary  # noqa: PLC0415 - struct and the mcap record classes only
+    from bagfault.io.mcap_layout import OP_CHUNK_INDEX  # noqa: PLC0415
 
     try:
         start, section = mcap_summary.read_section(stream, size)
@@ -216,7 +217,7 @@ def _mcap_marked(stream: BinaryIO, size: int) -> bool:
         if not indexes:
             return False
         record = mcap_summary.read_metadata(stream, indexes[-1])
-        chunks = mcap_summary.raw_records(section, mcap_summary.OP_CHUNK_INDEX)
+        chunks = mcap_summary.raw_records(section, OP_CHUNK_INDEX)
     except (mcap_summary.SummaryError, struct.error):
         return False
     return record.name == MCAP_RECORD and record.metadata.get('mark') == mcap_mark(indexes[-1].offset, chunks)

@@ -226,14 +226,14 @@ def test_the_layout_walk_reads_what_plain_reads_read(tmp_path: Path) -> None:
     file; a file that cannot be mapped (an empty one) is read plainly."""
     import os
 
-    from bagfault.io.mcap_source import _ScatteredReads
+    from bagfault.io.mcap_index_check import ScatteredReads
 
     path = tmp_path / 'data.bin'
     path.write_bytes(bytes(range(256)) * 64)
     empty = tmp_path / 'empty.bin'
     empty.write_bytes(b'')
     with path.open('rb') as stream, empty.open('rb') as nothing:
-        reads, plain = _ScatteredReads(stream.fileno()), _ScatteredReads(nothing.fileno())
+        reads, plain = ScatteredReads(stream.fileno()), ScatteredReads(nothing.fileno())
         for length, offset in ((25, 8), (100, 16_300), (4096, 4000), (10, 16_384), (10, 99_999)):
             assert reads.read(length, offset) == os.pread(stream.fileno(), length, offset)
         assert plain.read(10, 0) == b''
