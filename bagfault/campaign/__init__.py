@@ -2,7 +2,8 @@
 
 `model` and `loader` read and check the campaign file, `plan` expands it
 into jobs (each with the hash it is stored under), `job` runs one job in
-its own process, `engines` run jobs on a local pool or on Ray, `search`
+its own process, `engines` run jobs on a local pool or on Ray (`placement`
+sends a bag's jobs to the nodes that hold it), `search`
 bisects a parameter for its breaking point, `results` writes the tables and
 the report.
 """
@@ -13,6 +14,7 @@ __all__ = [  # its public modules (imported when used, not here)
     'job',
     'loader',
     'model',
+    'placement',
     'plan',
     'results',
     'runner',

@@ -277,28 +277,52 @@ class RayEngine:
         ray.get([warm.remote(job.__module__) for _ in range(min(cpus, workers or cpus))])  # each one's fork server
 
     def run(self, specs: Sequence[Spec], done: Done) -> None:
-        """All specs as tasks (at most `workers` at a time when given); KeyboardInterrupt cancels them."""
+        """All specs as tasks (at most `workers` at a time when given), each on the node `Placement` chooses for
+        its bag; KeyboardInterrupt cancels them."""
+        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy  # noqa: PLC0415
+
+        from bagfault.campaign.placement import Placement  # noqa: PLC0415
+
         ray = self.ray
-        waiting = list(enumerate(specs))[::-1]
-        running: dict[Any, int] = {}
+        placement = Placement.of([spec['bag'] for spec in specs], self._nodes())
+        running: dict[Any, tuple[int, str]] = {}
+        stranded = 0.0
         try:
-            while waiting or running:
-                while waiting and (self.limit is None or len(running) < self.limit):
-                    i, spec = waiting.pop()
-                    running[self.task.remote(self.job, spec)] = i
+            while placement.pending or running:
+                for i, node in placement.assign(self.limit):
+                    # soft: when the node is gone before the task starts, Ray runs it elsewhere
+                    where = NodeAffinitySchedulingStrategy(node_id=node, soft=True)
+                    running[self.task.options(scheduling_strategy=where).remote(self.job, specs[i])] = (i, node)
+                if not running:  # no node with a CPU (one lost a moment ago): wait for one, not for ever
+                    stranded = stranded or time.monotonic()
+                    if time.monotonic() - stranded > RAY_CONNECT_TIMEOUT:
+                        raise CampaignError(f'Ray: no node with a CPU for {RAY_CONNECT_TIMEOUT:g} s, '
+                                            f'{placement.pending} jobs not run')
+                    time.sleep(0.2)
+                    placement.nodes(self._nodes())
+                    continue
+                stranded = 0.0
                 finished, _ = ray.wait(list(running), num_returns=1, timeout=0.2)
                 for ref in finished:
-                    i = running.pop(ref)
+                    i, node = running.pop(ref)
+                    placement.finished(node)
                     try:
                         result = ray.get(ref)
                     except Exception as exc:  # noqa: BLE001 - a lost worker or node is this job's error
                         result = _error(f'the Ray task failed: {" ".join(str(exc).split())[:500]}')
                     done(i, result)
+                if finished or not running:
+                    placement.nodes(self._nodes())
         except BaseException:
             for ref in running:
                 with contextlib.suppress(Exception):
                     ray.cancel(ref, force=True)
             raise
+
+    def _nodes(self) -> dict[str, int]:
+        """The cluster's live nodes and their whole CPUs (a node without one runs no job)."""
+        return {node['NodeID']: int(node['Resources'].get('CPU', 0)) for node in self.ray.nodes()
+                if node.get('Alive') and int(node['Resources'].get('CPU', 0)) > 0}
 
     def close(self) -> None:
         """Disconnect (and stop the local instance if this campaign started it, reaping what it leaves)."""

@@ -1,7 +1,8 @@
 """A campaign on a real multi-node Ray cluster on this machine (ray.cluster_utils.Cluster: a head and two worker
 nodes, each its own raylet, kept on 127.0.0.1), over bags in a bucket (moto's S3 server): jobs land on more
 than one node and each node fills its own cache; a worker node killed mid-campaign loses no job; a driver
-killed with SIGKILL is finished by --resume. Every table is compared with the same campaign on a local pool.
+killed with SIGKILL is finished by --resume; a bag's jobs go to the node that holds it. Every table is compared
+with the same campaign on a local pool.
 """
 
 from __future__ import annotations
@@ -174,7 +175,25 @@ def test_jobs_spread_over_nodes_and_survive_a_node_and_a_driver_lost(cluster: An
     assert f'on Ray at {cluster.address} (auto) (' in out  # the cluster's GCS, found by Ray itself
     assert rows(tmp_path / 'killed') == expected
 
-    # 3. `--ray` without an address starts an instance of its own even where a cluster runs and RAY_ADDRESS
+    # 3. a bag's jobs go to the node that holds it: two bags new to every cache, 9 jobs each, on the two nodes
+    # left. Ray's own placement ran them all on the head here (and spread bags over every node in the bench);
+    # now each node takes a bag of its own, and a bag is fetched a second time only where its holder has more
+    # than 2 rounds left when the other node is free (campaign/placement.py): 2 downloads, 3 where one node ran
+    # 3 jobs behind the other
+    import boto3
+
+    for name in ('a.mcap', 'b.mcap'):
+        boto3.client('s3').upload_file(str(corpus / 'bags' / name), BUCKET, f'fresh/new-{name}')
+    fresh = campaign_file(corpus, CAMPAIGN % f's3://{BUCKET}/fresh/*.mcap', name='fresh.yaml')
+    run = driver(fresh, tmp_path / 'fresh', cluster.port)
+    out, err = run.communicate(timeout=300)
+    assert run.returncode == 1, err[-3000:]
+    held = sorted((node.name, bag.name) for node in cache.iterdir() for bag in node.glob('*/new-*.mcap'))
+    assert {bag for _, bag in held} == {'new-a.mcap', 'new-b.mcap'}
+    assert {node for node, _ in held} == {'head', 'node2'}, held  # both nodes worked
+    assert len(held) <= 3, held
+
+    # 4. `--ray` without an address starts an instance of its own even where a cluster runs and RAY_ADDRESS
     # names it (as when a second suite runs beside this one): Ray would join that cluster and refuse num_cpus
     local = subprocess.run([sys.executable, '-c', 'from bagfault.api import job\nfrom bagfault.campaign.engines import RayEngine\n'
                             'engine = RayEngine(None, 1, job)\nprint(engine.description)\nengine.close()'],
