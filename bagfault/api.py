@@ -402,14 +402,17 @@ def test(
     observers: Sequence[Observer] = (),
     strict: bool = False,
     reports: ReportPaths | None = None,
+    clock_check: bool = True,
 ) -> RunResult:
     """Closed loop: start the scenario's system under test on a private ROS domain, play the inputs (default:
     the scenario's `bags`) into it through the faults on sim time, record it, judge it, stop it; needs rclpy.
 
     `system` holds `system_under_test` keys that replace the scenario's (`env` is added to). With `repeat`
     above 1 the loop runs that many times and the result holds each run in `repeats` and pass rates in its
-    assertions; `observers` (report collectors) see the first run. Exit code semantics: `result.failed` is 1;
-    a BagfaultError (could not run) is 2.
+    assertions; `observers` (report collectors) see the first run. At a `rate` other than 1 the sim clock stands
+    still for a second before the first record, to find what the system publishes on wall time; `clock_check`
+    False leaves that out (an exploration's runs after its baseline, which looked). Exit code semantics:
+    `result.failed` is 1; a BagfaultError (could not run) is 2.
     """
     from bagfault.live import require_rclpy  # noqa: PLC0415 - rclpy is an optional extra
 
@@ -443,7 +446,7 @@ def test(
         folder = logs if logs is None or repeat == 1 else logs / f'run{number}'
         results.append(run_test(loaded, paths, path, system=under_test, seed=seed_of(loaded, seed), rate=rate,
                                 logs=folder, stop=flag, view=_view(foxglove),
-                                observers=observers if number == 1 else ()))
+                                observers=observers if number == 1 else (), clock_check=clock_check))
     return _reported(results[0] if repeat == 1 else fold(results), reports, collectors)
 
 

@@ -425,6 +425,8 @@ def _cmd_explore(args: argparse.Namespace) -> int:
               f'{_under(args.output_dir, f"failures/{failure.name}.min.yaml")}')
     for path in result.saved:
         print(f'saved     {path}')
+    for warning in result.warnings:
+        print(f'warning: {warning}', file=sys.stderr)
     print(f'results   {_under(args.output_dir, "explore.json")}')
     print(f'report    {_under(args.output_dir, "report.html")}')
     return EXIT_FAILED if result.failed else EXIT_OK

@@ -52,7 +52,8 @@ def run_job(spec: dict[str, Any], run: Callable[..., RunResult], test: Callable[
         with _local(spec) as bag:
             bags = spec.get('bags') or [bag]  # an exploration's run plays every bag given, as `run` and `test` do
             if spec['mode'] == 'test':
-                result = test(scenario, bags, output, seed=spec['seed'], rate=spec.get('rate', 1.0))
+                result = test(scenario, bags, output, seed=spec['seed'], rate=spec.get('rate', 1.0),
+                              clock_check=spec.get('clock_check', True))
             else:
                 assert output is not None
                 result = run(scenario, bags, output, seed=spec['seed'])

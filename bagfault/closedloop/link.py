@@ -67,9 +67,11 @@ class SystemLink(LiveSink):
 
     def __init__(self, node: Any, listener: Any, executor: Any, *, system: SystemUnderTest,
                  process: SystemProcess, scenario: Scenario, catalog: TypeCatalog, rate: float, stop: StopFlag,
-                 recording: McapSink | None, watch: DomainWatch | None = None, seed: int = 0) -> None:
+                 recording: McapSink | None, watch: DomainWatch | None = None, seed: int = 0,
+                 clock_check: bool = True) -> None:
         super().__init__(node, rate=rate, clock=True, stop=stop, recording=recording)
         self.watch = watch
+        self.clock_check = clock_check  # at a rate other than 1: hold the clock before the first record (HOLD)
         self.clocks = ClockCheck(rate)
         self._hold = (0.0, 0.0)  # monotonic window in which the sim clock stands still (rate != 1)
         self._stamped: set[str] = set()  # the system's topics whose type starts with a std_msgs/Header
@@ -142,7 +144,7 @@ class SystemLink(LiveSink):
         # a publisher sees its subscriber first; the system's side of its subscriptions matches a moment later:
         # the first message waits that long (`_settled`), the run's setup meanwhile
         self._settled_at = time.monotonic() + MATCH_SETTLE
-        if self.rate != 1:
+        if self.rate != 1 and self.clock_check:
             self._settled()
             self._hold_clock()
         return {topic: (msgtype, *self.catalog.schema(msgtype)) for topic, msgtype in watched.items()}

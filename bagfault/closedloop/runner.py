@@ -59,12 +59,13 @@ ATTEMPTS = 3  # leased domains tried before giving up on finding one without oth
 
 def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *, system: SystemUnderTest,
              seed: int, rate: float, logs: Path | None, stop: StopFlag, view: OpenView | None = None,
-             observers: Sequence[Observer] = (), **lease: int) -> RunResult:
+             observers: Sequence[Observer] = (), clock_check: bool = True, **lease: int) -> RunResult:
     """One closed-loop run; the recording (if `output`) is complete on return, the system stopped; `observers`
     see every record of the run, the system's messages among them (report collectors). The system starts at
     once on a leased domain while bagfault looks for other processes' nodes there (PRESTART: discovery takes
     ~0.2 s); should some show, the system is stopped and the run moves to another domain, ClosedLoopError
-    naming them after ATTEMPTS (later ones void the run: DomainWatch). `lease`: the ids to lease from."""
+    naming them after ATTEMPTS (later ones void the run: DomainWatch). `clock_check` False: no hold of the
+    clock at a rate other than 1 (see closedloop/clocks.py). `lease`: the ids to lease from."""
     crowded: dict[int, list[Stranger]] = {}
     for _ in range(ATTEMPTS):
         try:
@@ -76,7 +77,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
         with held:
             try:
                 return _run_on(held, scenario, inputs, output, system=system, seed=seed, rate=rate, logs=logs,
-                               stop=stop, view=view, observers=observers)
+                               stop=stop, view=view, observers=observers, clock_check=clock_check)
             except CrowdedDomainError as exc:
                 crowded[exc.domain] = exc.found
                 log.info(f'ROS domain {exc.domain} has nodes of other processes '
@@ -88,7 +89,7 @@ def run_test(scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
 
 def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], output: Path | None, *,
             system: SystemUnderTest, seed: int, rate: float, logs: Path | None, stop: StopFlag,
-            view: OpenView | None, observers: Sequence[Observer]) -> RunResult:
+            view: OpenView | None, observers: Sequence[Observer], clock_check: bool) -> RunResult:
     """`run_test` on one leased domain (CrowdedDomainError when other processes show nodes there at first)."""
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.node import Node  # noqa: PLC0415
@@ -133,7 +134,8 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
         watch = DomainWatch(listener, lease.domain, os.getpid(), process.pids, process.pid, quiet_until=quiet_until,
                             on_quiet=announce)
         link = SystemLink(node, listener, executor, system=system, process=process, scenario=scenario,
-                          catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch, seed=seed)
+                          catalog=catalog, rate=rate, stop=stop, recording=recording, watch=watch, seed=seed,
+                          clock_check=clock_check)
         closing.callback(link.close)
         link.view = shown
         run, stopped = replay(input_set, scenario, catalog, link, seed=seed, blackbox_base=output, hooks=link,

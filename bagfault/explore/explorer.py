@@ -79,6 +79,7 @@ class ExploreResult:
     engine: str
     ran: int  # runs made now (the others came from runs.jsonl)
     saved: list[Path] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # the baseline run's (made now), the clock check's among them
 
     @property
     def failed(self) -> bool:
@@ -176,6 +177,7 @@ class Explorer:
         self.replays: list[Failure] = []
         self.search_runs = 0
         self.ran = 0
+        self.warnings: list[str] = []  # what the baseline run warned of, when it ran now
 
     # -- the loop --------------------------------------------------------------------------------------------
     def run(self) -> ExploreResult:
@@ -195,7 +197,7 @@ class Explorer:
             finally:
                 self._write(description)
         return ExploreResult(self.folder.directory, self.mode, self.budget, self.seed, self.runs, self.failures,
-                             description, self.ran, self._save())
+                             description, self.ran, self._save(), self.warnings)
 
     def _round(self) -> list[_Request]:
         """The next round's runs: the baseline first; then shrink steps, replays, and fresh search."""
@@ -237,13 +239,16 @@ class Explorer:
             if kept is not None or any(i >= last for i in stored):  # the resumed log diverges here: what
                 stored = {i: r for i, r in stored.items() if i < index}  # follows is run again
                 self.folder.keep([*self.runs, *(stored[i] for i in range(first, index) if i in stored)])
-            specs[index] = self._spec(text, source, self._output(request, index, scratch))
+            specs[index] = self._spec(text, source, self._output(request, index, scratch),
+                                      clock_check=request.purpose == 'baseline')
         results: dict[int, dict[str, Any]] = {}
 
         def done(position: int, result: dict[str, Any]) -> None:
             index = list(specs)[position]
             results[index] = result
             request = requests[index - first]
+            if request.purpose == 'baseline':
+                self.warnings = list(result.get('warnings') or [])
             record = self._record(index, request, texts[index - first][0], Outcome.of(result), result.get('seconds'))
             self.folder.append(record)
 
@@ -364,11 +369,13 @@ class Explorer:
         data['seed'] = self.seed
         return dump(data), self.source
 
-    def _spec(self, text: str, source: Path, output: Path | None) -> dict[str, Any]:
+    def _spec(self, text: str, source: Path, output: Path | None, *, clock_check: bool) -> dict[str, Any]:
+        """A run's job spec; `clock_check`: the baseline looks once whether the system publishes on wall time
+        (a second of held clock at a rate other than 1), the runs after it do not pay that second again."""
         return {'mode': self.mode, 'scenario_text': text, 'scenario_source': str(source),
                 'bag': str(self.bags[0].resolve()), 'bags': [str(b.resolve()) for b in self.bags], 'seed': self.seed,
                 'remote': None, 'digests': [], 'output': str(output) if output is not None else None,
-                'timeout': RUN_TIMEOUT, 'rate': self.options.rate}
+                'timeout': RUN_TIMEOUT, 'rate': self.options.rate, 'clock_check': clock_check}
 
     def _output(self, request: _Request, index: int, scratch: Path) -> Path | None:
         if request.purpose == 'replay':
@@ -422,6 +429,7 @@ class Explorer:
             'confirm': self.confirm, 'batch': space.batch, 'resolution': space.resolution,
             'max_faults': space.max_faults, 'search': self.options.search, 'shrink': self.options.shrink,
             'rate': self.options.rate if self.mode == 'test' else None, 'engine': engine,
+            'baseline_warnings': self.warnings,
             'space': [{'id': f.id, 'injector_id': f.injector_id,
                        'dimensions': [{'name': d.name, 'low': d.low, 'high': d.high, 'integer': d.integer}
                                       for d in f.dimensions]} for f in space.faults],

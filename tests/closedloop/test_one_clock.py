@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 from support.helpers import EXTERNAL, need
-from support.loop import EXAMPLE, LoopRunner
+from support.loop import EXAMPLE, WALL_CLOCK_SYSTEM, LoopRunner
 
 TURTLEBOT = EXTERNAL / 'Turtlebot_Walker_Algorithm_ROS2' / 'walker_bag_topics_list'
 
@@ -64,34 +64,6 @@ def test_the_quirks_bags_own_clock_is_left_out_and_the_watchdog_stays_quiet(test
 def test_the_turtlebot_bag_gives_no_false_alarm_five_times_of_five(tester: LoopRunner, tmp_path: Path,
                                                                    run: int) -> None:
     judge(tester, need(TURTLEBOT), tmp_path)
-
-
-WALL_CLOCK_SYSTEM = """
-import sys
-import time
-import rclpy
-from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
-from sensor_msgs.msg import Imu, Temperature
-
-rclpy.init(args=sys.argv)
-node = rclpy.create_node('wall_clock_status')
-publisher = node.create_publisher(Temperature, '/temperature', 10)
-node.create_subscription(Imu, '/imu', lambda message: None, 10)
-
-
-def tick():
-    message = Temperature()
-    message.header.stamp.sec, message.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
-    publisher.publish(message)
-
-
-node.create_timer(0.1, tick, clock=Clock(clock_type=ClockType.STEADY_TIME))  # wall time, whatever use_sim_time says
-try:
-    rclpy.spin(node)
-except (KeyboardInterrupt, ExternalShutdownException):
-    pass
-"""
 
 
 def test_a_system_on_wall_time_is_named_when_the_rate_is_not_one(tester: LoopRunner, tmp_path: Path) -> None:

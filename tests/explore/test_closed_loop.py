@@ -1,7 +1,8 @@
 """`bagfault explore` in closed loop: the planted-bug system of bench/explore (real rclpy processes, each run on
 its own leased domain) on a 4 s bag; its odometry teleport bug (B8 of bench/explore/bugs.yaml: x jumps by more
 than 1.0 m between consecutive odometry messages, the jump is x_bias + 0.004 m at the fault's start) found and
-shrunk to its threshold, each step confirmed by a second run."""
+shrunk to its threshold, each step confirmed by a second run; the clock held to look for wall time in the baseline
+run only."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import json
 import pytest
 import yaml
 from support.helpers import ROOT, make_bag
-from support.loop import rclpy_available
+from support.loop import WALL_CLOCK_SYSTEM, rclpy_available
 
 from bagfault import api
 
@@ -45,3 +46,33 @@ def test_a_planted_bug_is_found_and_shrunk_in_closed_loop(tmp_path):
     document = json.loads((tmp_path / 'out' / 'explore.json').read_text())
     assert document['mode'] == 'test' and document['rate'] == 4.0
     assert (tmp_path / 'out' / 'failures' / f'{failure.name}.mcap').stat().st_size > 0  # the replay's recording
+
+
+def test_only_the_baseline_holds_the_clock_to_look_for_wall_time(tmp_path):
+    """At a rate other than 1 a closed-loop run holds the sim clock still for HOLD (1 s) before the first record
+    to see what the system publishes on wall time; an exploration looks in its baseline run only. By
+    construction, a system on a 10 Hz wall-clock timer at rate 2: the baseline's warning names its topic (on
+    the result and in explore.json), and the runs after it are shorter by about that second."""
+    if not rclpy_available():
+        pytest.skip("rclpy not installed (pip install '.[live]')")
+    make_bag(tmp_path / 'rover.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 2.0)
+    (tmp_path / 'wall.py').write_text(WALL_CLOCK_SYSTEM)
+    space = tmp_path / 'space.yaml'
+    space.write_text(yaml.safe_dump({
+        'bags': ['rover.mcap'],
+        'system_under_test': {'command': ['{python}', 'wall.py'], 'cwd': str(tmp_path), 'record': ['/temperature'],
+                              'stop_timeout': 10},
+        'injectors': [{'id': 'imu', 'type': 'imu', 'input_topic': '/imu', 'output_topic': '/imu'}],
+        'faults': [],
+        'assertions': [{'id': 'status_heard', 'type': 'message_count', 'topic': '/temperature', 'min': 1}],
+        'explore': {'faults': [{'id': 'drift', 'injector_id': 'imu', 'start': 0.5, 'duration': 0.5,
+                                'config': {'angular_velocity_z_bias': [0.0, 1.0]}}], 'budget': 5, 'batch': 2},
+    }))
+    result = api.explore(space, directory=tmp_path / 'out', workers=1, rate=2.0, seed=1)
+    assert [r.outcome.status for r in result.runs] == ['passed'] * 5, [r.outcome.message for r in result.runs]
+    held = [w for w in result.warnings if w.startswith('/temperature: published ') and 'stood still' in w]
+    assert held, result.warnings
+    document = json.loads((tmp_path / 'out' / 'explore.json').read_text())
+    assert document['baseline_warnings'] == result.warnings
+    baseline, *later = [r.seconds for r in result.runs]
+    assert min(later) < baseline - 0.5, (baseline, later)  # the hold is 1 s of the baseline's time

@@ -94,3 +94,32 @@ class LoopRunner:
         outcome = self.finish(*self.start(*args, name=name))
         outcome.seconds = time.monotonic() - began
         return outcome
+
+
+# a system that publishes /temperature on a 10 Hz wall-clock timer, stamped with the wall clock
+WALL_CLOCK_SYSTEM = """
+import sys
+import time
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from sensor_msgs.msg import Imu, Temperature
+
+rclpy.init(args=sys.argv)
+node = rclpy.create_node('wall_clock_status')
+publisher = node.create_publisher(Temperature, '/temperature', 10)
+node.create_subscription(Imu, '/imu', lambda message: None, 10)
+
+
+def tick():
+    message = Temperature()
+    message.header.stamp.sec, message.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+    publisher.publish(message)
+
+
+node.create_timer(0.1, tick, clock=Clock(clock_type=ClockType.STEADY_TIME))  # wall time, whatever use_sim_time says
+try:
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
