@@ -1,8 +1,14 @@
-"""Config field schema shared by scenario validation, live updates and `bagfault schema`.
+"""A key of a file's section or of a type's config, declared once: type, unit, range, default, meaning.
 
-Each injector type declares its fault config keys as `ConfigField`s. The same
-declaration checks a YAML value, a runtime parameter change and feeds any UI,
-so a value accepted in one place is accepted in all of them.
+Every section of a scenario or campaign file (spec/sections.py), every
+injector type's fault config and options and every assertion type's keys
+are declared as `Key`s. The one declaration checks a value and feeds
+`bagfault schema`, its `--json` and `--json-schema`, so a value accepted in
+one place is accepted in all of them. Two readings of it remain, one per
+reference: spec/reader.py reads a section's scalars as the file's other
+reader does (yaml-cpp's nodes for the anchor's sections), `coerce` a config
+value as the anchor's fault_config_schema.cpp and a runtime parameter change
+take it (`scenario/validator.anchor_refusal` adds the anchor's own refusals).
 """
 
 from __future__ import annotations
@@ -10,11 +16,18 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, get_args
 
 from bagfault.errors import FieldValueError
 
-FIELD_TYPES = ('double', 'int', 'bool', 'string', 'non_empty_string', 'special_float', 'list', 'target')
+KeyType = Literal['string', 'number', 'integer', 'boolean', 'list', 'mapping', 'string_or_list', 'seconds', 'any',
+                  'dimension', 'non_empty_string', 'special_float', 'target']
+# dimension: a number, or [low, high] that `bagfault explore` draws from; special_float: a number, inf, -inf or
+# nan; target: a process of the system under test ('system', {node: NAME}, {command: REGEX})
+PUBLIC_TYPES: dict[str, str] = {'number': 'double', 'integer': 'int', 'boolean': 'bool'}  # a config key's type as
+# `bagfault schema --json` has always named it (a published format)
+KEY_TYPES = frozenset(get_args(KeyType))
+PUBLISHED = ('double', 'int', 'bool', 'string', 'non_empty_string', 'special_float', 'list', 'target')  # config types
 
 SPECIAL_FLOATS = {
     'inf': math.inf,
@@ -28,60 +41,65 @@ SPECIAL_FLOATS = {
 
 
 @dataclass(frozen=True)
-class ConfigField:
-    """One config key of an injector type.
+class Key:
+    """One key: of a section (read by spec/reader.py) or of a type's config (checked by `coerce`)."""
 
-    Attributes:
-        key: Name of the key inside a fault's `config` map.
-        type: One of FIELD_TYPES.
-        description: What the key does, with its unit.
-        default: Value used when the key is absent.
-        min: Smallest accepted value (numbers only), inclusive.
-        max: Largest accepted value (numbers only), inclusive.
-        required: Every fault of this injector type must set the key.
-        choices: The only accepted values (strings), empty when any value goes.
-        finite: Numbers must be finite (False: inf and nan are accepted, as ros2_fault_injection accepts them).
-
-    """
-
-    key: str
-    type: str
+    name: str
+    type: KeyType
     description: str
+    unit: str = ''
     default: Any = None
-    min: float | None = None
-    max: float | None = None
     required: bool = False
-    choices: tuple[str, ...] = ()
-    finite: bool = True
+    minimum: float | None = None  # inclusive (unless `exclusive`)
+    maximum: float | None = None  # inclusive
+    choices: tuple[str, ...] = ()  # the only accepted values, empty when any value goes
+    section: str = ''  # the section its value is (a mapping, or a list of mappings)
+    what: str = ''  # what a valid value is, for messages ('a list of topics')
+    exclusive: bool = False  # the minimum itself is refused (a period must be above 0)
+    finite: bool = True  # a number must be finite (False: inf and nan pass, as ros2_fault_injection lets them)
 
     def coerce(self, value: object) -> Any:
-        """Return value converted to the field's type, or raise FieldValueError."""
-        coerced = _to_number(value) if self.type == 'double' and not self.finite else _COERCE[self.type](value)
+        """A config value converted to the key's type, or FieldValueError."""
+        coerced = _to_number(value) if self.type == 'number' and not self.finite else _COERCE[self.type](value)
         if isinstance(coerced, (int, float)) and not isinstance(coerced, bool):
-            if self.min is not None and coerced < self.min:
-                raise FieldValueError(f'{_show(value)} is below the minimum {_show(self.min)}')
-            if self.max is not None and coerced > self.max:
-                raise FieldValueError(f'{_show(value)} is above the maximum {_show(self.max)}')
+            if self.minimum is not None and coerced < self.minimum:
+                raise FieldValueError(f'{_show(value)} is below the minimum {_show(self.minimum)}')
+            if self.maximum is not None and coerced > self.maximum:
+                raise FieldValueError(f'{_show(value)} is above the maximum {_show(self.maximum)}')
         if self.choices and coerced not in self.choices:
             raise FieldValueError(f'{_show(value)} is not one of {", ".join(self.choices)}')
         return coerced
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-friendly form, stable keys."""
+        """A config key as `bagfault schema --json` prints it (stable keys, the published type names)."""
         default = self.default
         if isinstance(default, float) and not math.isfinite(default):
             default = str(default)
         return {
-            'key': self.key,
-            'type': self.type,
+            'key': self.name,
+            'type': PUBLIC_TYPES.get(self.type, self.type),
             'description': self.description,
             'default': default,
-            'min': self.min,
-            'max': self.max,
+            'min': self.minimum,
+            'max': self.maximum,
             'required': self.required,
             'choices': list(self.choices),
             'finite': self.finite,
         }
+
+
+class ConfigField(Key):
+    """A config key in the form plugins have declared them since bagfault's first release (`key`, the published
+    type names double/int/bool, `min`, `max`): it is the `Key` it describes, nothing else."""
+
+    def __init__(self, key: str, type: str, description: str, default: Any = None,
+                 min: float | None = None, max: float | None = None,
+                 required: bool = False, choices: tuple[str, ...] = (), finite: bool = True) -> None:
+        kind = {public: own for own, public in PUBLIC_TYPES.items()}.get(type, type)
+        if kind not in KEY_TYPES:
+            raise ValueError(f'{key}: unknown config key type {type!r} (known: {", ".join(sorted(PUBLISHED))})')
+        super().__init__(key, kind, description, default=default, minimum=min,  # type: ignore[arg-type]
+                         maximum=max, required=required, choices=choices, finite=finite)
 
 
 def _show(value: object) -> str:
@@ -192,9 +210,9 @@ def _to_target(value: object) -> str | dict[str, str]:
 
 
 _COERCE = {
-    'double': _to_double,
-    'int': _to_int,
-    'bool': _to_bool,
+    'number': _to_double,
+    'integer': _to_int,
+    'boolean': _to_bool,
     'string': _to_string,
     'non_empty_string': _to_non_empty_string,
     'special_float': _to_special_float,
@@ -203,35 +221,35 @@ _COERCE = {
 }
 
 
-def double(key: str, description: str, default: float = 0.0, **kw: Any) -> ConfigField:
-    """Declare a floating point field."""
-    return ConfigField(key, 'double', description, default, **kw)
+def double(key: str, description: str, default: float = 0.0, **kw: Any) -> Key:
+    """Declare a floating point config key."""
+    return Key(key, 'number', description, default=default, **kw)
 
 
-def integer(key: str, description: str, default: int = 0, **kw: Any) -> ConfigField:
-    """Declare an integer field."""
-    return ConfigField(key, 'int', description, default, **kw)
+def integer(key: str, description: str, default: int = 0, **kw: Any) -> Key:
+    """Declare an integer config key."""
+    return Key(key, 'integer', description, default=default, **kw)
 
 
-def boolean(key: str, description: str, default: bool = False, **kw: Any) -> ConfigField:
-    """Declare a boolean field."""
-    return ConfigField(key, 'bool', description, default, **kw)
+def boolean(key: str, description: str, default: bool = False, **kw: Any) -> Key:
+    """Declare a boolean config key."""
+    return Key(key, 'boolean', description, default=default, **kw)
 
 
-def string(key: str, description: str, default: str = '', **kw: Any) -> ConfigField:
-    """Declare a free text field."""
-    return ConfigField(key, 'string', description, default, **kw)
+def string(key: str, description: str, default: str = '', **kw: Any) -> Key:
+    """Declare a free text config key."""
+    return Key(key, 'string', description, default=default, **kw)
 
 
-def probability(key: str, description: str) -> ConfigField:
+def probability(key: str, description: str) -> Key:
     """Declare a probability in [0, 1] (nan accepted, as the anchor's range check lets it through; it never wins
     the largest of the active faults, so it drops nothing)."""
-    return ConfigField(key, 'double', description, 0.0, min=0.0, max=1.0, finite=False)
+    return Key(key, 'number', description, default=0.0, minimum=0.0, maximum=1.0, finite=False)
 
 
-def stddev(key: str, description: str, **kw: Any) -> ConfigField:
+def stddev(key: str, description: str, **kw: Any) -> Key:
     """Declare a non-negative standard deviation."""
-    return ConfigField(key, 'double', description, 0.0, min=0.0, **kw)
+    return Key(key, 'number', description, default=0.0, minimum=0.0, **kw)
 
 
 DROP_PROBABILITY = probability(
@@ -239,21 +257,21 @@ DROP_PROBABILITY = probability(
 )
 MAX_DELAY_MS = 3_600_000  # an hour: delayed messages wait in memory (delay x rate of them)
 DELAY_MS = integer(
-    'delay_ms', 'Delay added before the message is forwarded, in milliseconds (at most an hour).', 0, min=0,
-    max=MAX_DELAY_MS,
+    'delay_ms', 'Delay added before the message is forwarded, in milliseconds (at most an hour).', 0, minimum=0,
+    maximum=MAX_DELAY_MS,
 )
 
 
-def choice(key: str, description: str, choices: tuple[str, ...]) -> ConfigField:
-    """Declare a string field with a fixed set of values; the first is the default."""
-    return ConfigField(key, 'string', description, choices[0], choices=choices)
+def choice(key: str, description: str, choices: tuple[str, ...]) -> Key:
+    """Declare a string config key with a fixed set of values; the first is the default."""
+    return Key(key, 'string', description, default=choices[0], choices=choices)
 
 
 # Injector keys every topic injector accepts.
 LIVE_OPTIONS = (
-    ConfigField('message_type', 'non_empty_string',
-                'Type of input_topic (pkg/msg/Name): checked against the bag, lets `validate` check field paths '
-                'early, and tells live mode the type before any publisher appears.'),
+    Key('message_type', 'non_empty_string',
+        'Type of input_topic (pkg/msg/Name): checked against the bag, lets `validate` check field paths '
+        'early, and tells live mode the type before any publisher appears.'),
     choice('reliability', 'QoS reliability of the live subscription and publisher.', ('reliable', 'best_effort')),
     choice('durability', 'QoS durability of the live subscription and publisher.', ('volatile', 'transient_local')),
     choice('on_malformed', 'A message an active fault cannot take (truncated, inconsistent sizes): forward it '

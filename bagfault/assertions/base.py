@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Final
 
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -51,7 +51,7 @@ class AssertionType:
 
     type_name: ClassVar[str] = ''
     description: ClassVar[str] = ''
-    fields: ClassVar[tuple[ConfigField, ...]] = ()
+    fields: ClassVar[tuple[Key, ...]] = ()
     takes_within: ClassVar[bool] = True
 
     # -- before the run -----------------------------------------------------
@@ -61,9 +61,9 @@ class AssertionType:
         return []
 
     @classmethod
-    def field(cls, key: str) -> ConfigField | None:
+    def field(cls, key: str) -> Key | None:
         """Schema entry for a key."""
-        return next((x for x in cls.fields if x.key == key), None)
+        return next((x for x in cls.fields if x.name == key), None)
 
     # -- runtime --------------------------------------------------------------
     def __init__(self, spec: AssertionSpec, runner: AssertionRunner) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 from bagfault.assertions.base import TICK, AssertionType, fault_reference_problem
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -18,9 +18,9 @@ class FaultEventAssertion(AssertionType):
 
     type_name = 'fault_event'
     description = 'A named fault reaches state active or inactive (before `within`, if given).'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('fault_id', 'non_empty_string', 'Fault to watch.', required=True),
-        ConfigField('state', 'non_empty_string', 'Expected state: active or inactive.', required=True),
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('fault_id', 'non_empty_string', 'Fault to watch.', required=True),
+        Key('state', 'non_empty_string', 'Expected state: active or inactive.', required=True),
     )
 
     @classmethod

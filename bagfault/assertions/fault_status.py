@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, ClassVar
 from bagfault.assertions.base import AssertionType, fault_reference_problem, range_problems
 from bagfault.errors import AssertionSetupError
 from bagfault.fault_manager.model import STATUSES, valid_code
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -24,12 +24,12 @@ class FaultStatusAssertion(AssertionType):
     description = ('A fault code reaches PREFAILED/CONFIRMED/HEALED/CLEARED within `within` s after the fault '
                    '`after` activates (from time zero without `after`), or `never` does. A status that already '
                    'held when `after` activated is no detection: the assertion fails, naming when it began.')
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('code', 'non_empty_string', 'Fault code in the fault manager.', required=True),
-        ConfigField('status', 'non_empty_string', 'PREFAILED, PREPASSED, CONFIRMED, HEALED or CLEARED.',
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('code', 'non_empty_string', 'Fault code in the fault manager.', required=True),
+        Key('status', 'non_empty_string', 'PREFAILED, PREPASSED, CONFIRMED, HEALED or CLEARED.',
                     required=True),
-        ConfigField('after', 'non_empty_string', 'Scenario fault whose activation starts the clock.'),
-        ConfigField('never', 'bool', 'Passes when the status is never reached (after the trigger, if given).'),
+        Key('after', 'non_empty_string', 'Scenario fault whose activation starts the clock.'),
+        Key('never', 'boolean', 'Passes when the status is never reached (after the trigger, if given).'),
     )
 
     @classmethod
@@ -123,10 +123,10 @@ class FaultCountAssertion(AssertionType):
 
     type_name = 'fault_count'
     description = 'Number of CONFIRMED faults at the end of the bag within [min, max] (muted ones optional).'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('min', 'int', 'Fewest confirmed faults.', min=0),
-        ConfigField('max', 'int', 'Most confirmed faults.', min=0),
-        ConfigField('exclude_muted', 'bool', 'Leave out muted (correlated) faults.'),
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('min', 'integer', 'Fewest confirmed faults.', minimum=0),
+        Key('max', 'integer', 'Most confirmed faults.', minimum=0),
+        Key('exclude_muted', 'boolean', 'Leave out muted (correlated) faults.'),
     )
     takes_within = False
 

@@ -17,7 +17,7 @@ from bagfault.assertions.base import AssertionType, window_problems
 from bagfault.assertions.fields import resolve_on_topic
 from bagfault.assertions.windows import DURING, OUTSIDE, describe, in_window
 from bagfault.errors import AssertionSetupError
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -33,13 +33,13 @@ class FieldDeltaAssertion(AssertionType):
 
     type_name = 'field_delta'
     description = 'Output minus input of a field equals a value (bias really applied), during/outside a fault.'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('topic', 'non_empty_string', 'Output topic.', required=True),
-        ConfigField('input_topic', 'non_empty_string', 'Input topic; default: input of the injector writing topic.'),
-        ConfigField('field', 'non_empty_string', 'Field path, e.g. pose.pose.position.x.', required=True),
-        ConfigField('equals', 'double', 'Expected output - input where the window holds (field unit).', required=True),
-        ConfigField('otherwise', 'double', 'Expected output - input elsewhere (field unit).'),
-        ConfigField('tolerance', 'double', 'Accepted absolute error (field unit).', 1e-9, min=0.0),
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('topic', 'non_empty_string', 'Output topic.', required=True),
+        Key('input_topic', 'non_empty_string', 'Input topic; default: input of the injector writing topic.'),
+        Key('field', 'non_empty_string', 'Field path, e.g. pose.pose.position.x.', required=True),
+        Key('equals', 'number', 'Expected output - input where the window holds (field unit).', required=True),
+        Key('otherwise', 'number', 'Expected output - input elsewhere (field unit).'),
+        Key('tolerance', 'number', 'Accepted absolute error (field unit).', default=1e-9, minimum=0.0),
         DURING,
         OUTSIDE,
     )

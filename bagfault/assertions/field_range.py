@@ -9,7 +9,7 @@ import numpy as np
 from bagfault.assertions.base import AssertionType, range_problems, window_problems
 from bagfault.assertions.fields import resolve_on_topic
 from bagfault.assertions.windows import DURING, OUTSIDE, describe, in_window
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
@@ -21,12 +21,12 @@ class FieldRangeAssertion(AssertionType):
 
     type_name = 'field_range'
     description = 'A field path stays within [min, max] and/or finite, for all messages or during/outside a fault.'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('topic', 'non_empty_string', 'Topic to check.', required=True),
-        ConfigField('field', 'non_empty_string', 'Field path, e.g. pose.pose.position.x or ranges[*].', required=True),
-        ConfigField('min', 'double', 'Smallest accepted value (field unit).'),
-        ConfigField('max', 'double', 'Largest accepted value (field unit).'),
-        ConfigField('finite', 'bool', 'Values must not be inf or nan.'),
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('topic', 'non_empty_string', 'Topic to check.', required=True),
+        Key('field', 'non_empty_string', 'Field path, e.g. pose.pose.position.x or ranges[*].', required=True),
+        Key('min', 'number', 'Smallest accepted value (field unit).'),
+        Key('max', 'number', 'Largest accepted value (field unit).'),
+        Key('finite', 'boolean', 'Values must not be inf or nan.'),
         DURING,
         OUTSIDE,
     )

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from bagfault.assertions.base import AssertionType, range_problems, window_problems
 from bagfault.assertions.windows import DURING, OUTSIDE, describe, in_window
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
@@ -18,10 +18,10 @@ class MessageCountAssertion(AssertionType):
 
     type_name = 'message_count'
     description = 'Message count on a topic (all, or during/outside a fault) within [min, max].'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('topic', 'non_empty_string', 'Topic to count.', required=True),
-        ConfigField('min', 'int', 'Fewest accepted messages.', min=0),
-        ConfigField('max', 'int', 'Most accepted messages.', min=0),
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('topic', 'non_empty_string', 'Topic to count.', required=True),
+        Key('min', 'integer', 'Fewest accepted messages.', minimum=0),
+        Key('max', 'integer', 'Most accepted messages.', minimum=0),
         DURING,
         OUTSIDE,
     )

@@ -13,7 +13,7 @@ from bagfault.faults.header import has_header
 from bagfault.latency.architecture import load_architecture
 from bagfault.latency.collect import SeriesCollector
 from bagfault.latency.compute import path_latency, statistics, window_mask
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 
 if TYPE_CHECKING:
     from bagfault.assertions.runner import AssertionRunner
@@ -36,16 +36,16 @@ class PathLatencyAssertion(AssertionType):
 
     type_name = 'path_latency'
     description = 'A statistic (p95, p99, max, mean, ...) of a CARET path latency stays at or under max_ms.'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('architecture', 'non_empty_string', 'CARET architecture file (relative to the scenario).',
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('architecture', 'non_empty_string', 'CARET architecture file (relative to the scenario).',
                     required=True),
-        ConfigField('path', 'non_empty_string', 'Named path in the architecture file.', required=True),
-        ConfigField('statistic', 'non_empty_string', 'min, mean, p50, p95, p99 or max.', 'p95'),
-        ConfigField('max_ms', 'double', 'Largest accepted value of the statistic, in milliseconds.', required=True,
-                    min=0.0),
-        ConfigField('during', 'non_empty_string', 'Only samples whose first message came while this fault was active.'),
-        ConfigField('min_samples', 'int', 'Fewest samples needed for a verdict.', 1, min=1),
-        ConfigField('stamp_origin', 'bool', "Measure from the first message's header.stamp, not its receive time."),
+        Key('path', 'non_empty_string', 'Named path in the architecture file.', required=True),
+        Key('statistic', 'non_empty_string', 'min, mean, p50, p95, p99 or max.', default='p95'),
+        Key('max_ms', 'number', 'Largest accepted value of the statistic, in milliseconds.', required=True,
+                    minimum=0.0),
+        Key('during', 'non_empty_string', 'Only samples whose first message came while this fault was active.'),
+        Key('min_samples', 'integer', 'Fewest samples needed for a verdict.', default=1, minimum=1),
+        Key('stamp_origin', 'boolean', "Measure from the first message's header.stamp, not its receive time."),
     )
     takes_within = False
 

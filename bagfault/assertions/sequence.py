@@ -6,7 +6,7 @@ import itertools
 from typing import TYPE_CHECKING, ClassVar
 
 from bagfault.assertions.base import FAILED, PASSED, AssertionType
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -18,8 +18,8 @@ class SequenceAssertion(AssertionType):
 
     type_name = 'sequence'
     description = 'A list of other assertions must pass in the given order (before `within`, if given).'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('steps', 'list', 'Assertion ids, in the order they must pass.', required=True),
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('steps', 'list', 'Assertion ids, in the order they must pass.', required=True),
     )
 
     @classmethod

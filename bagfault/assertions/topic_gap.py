@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from bagfault.assertions.base import AssertionType, fault_reference_problem
 from bagfault.assertions.windows import DURING
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -22,9 +22,9 @@ class TopicGapAssertion(AssertionType):
 
     type_name = 'topic_gap'
     description = 'No gap longer than max_gap seconds on a topic (optionally only during a fault).'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('topic', 'non_empty_string', 'Topic to watch.', required=True),
-        ConfigField('max_gap', 'double', 'Longest accepted time between messages, in seconds (> 0).', required=True),
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('topic', 'non_empty_string', 'Topic to watch.', required=True),
+        Key('max_gap', 'number', 'Longest accepted time between messages, in seconds (> 0).', required=True),
         DURING,
     )
     takes_within = False

@@ -13,7 +13,7 @@ from collections import deque
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from bagfault.assertions.base import END_OF_BAG, TICK, AssertionType
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -27,12 +27,12 @@ class TopicHzAssertion(AssertionType):
 
     type_name = 'topic_hz'
     description = 'A topic is observed at or above min_hz over a rolling window.'
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('topic', 'non_empty_string', 'Topic to measure.', required=True),
-        ConfigField('message_type', 'non_empty_string', 'Expected type of the topic, e.g. nav_msgs/msg/Odometry.',
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('topic', 'non_empty_string', 'Topic to measure.', required=True),
+        Key('message_type', 'non_empty_string', 'Expected type of the topic, e.g. nav_msgs/msg/Odometry.',
                     required=True),
-        ConfigField('min_hz', 'double', 'Minimum rate, in Hz (> 0).', required=True),
-        ConfigField('window', 'double', 'Rolling window, in seconds (> 0).', required=True),
+        Key('min_hz', 'number', 'Minimum rate, in Hz (> 0).', required=True),
+        Key('window', 'number', 'Rolling window, in seconds (> 0).', required=True),
     )
 
     @classmethod

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 
 if TYPE_CHECKING:
     from bagfault.assertions.base import AssertionType
 
-DURING = ConfigField('during', 'non_empty_string', 'Only while this fault is active.')
-OUTSIDE = ConfigField('outside', 'non_empty_string', 'Only while this fault is not active.')
+DURING = Key('during', 'non_empty_string', 'Only while this fault is active.')
+OUTSIDE = Key('outside', 'non_empty_string', 'Only while this fault is not active.')
 
 
 def in_window(check: AssertionType) -> bool:

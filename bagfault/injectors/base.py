@@ -15,7 +15,7 @@ from bagfault.faults.active import ActiveFault
 from bagfault.faults.combine import strongest
 from bagfault.faults.drop import drop_mask, should_drop
 from bagfault.injectors.system import SystemInjector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, ConfigField
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, LIVE_OPTIONS, Key
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -63,8 +63,8 @@ class Injector:
     type_name: ClassVar[str] = ''
     description: ClassVar[str] = ''
     message_types: ClassVar[tuple[str, ...]] = ()
-    fields: ClassVar[tuple[ConfigField, ...]] = (DROP_PROBABILITY, DELAY_MS)
-    options: ClassVar[tuple[ConfigField, ...]] = LIVE_OPTIONS
+    fields: ClassVar[tuple[Key, ...]] = (DROP_PROBABILITY, DELAY_MS)
+    options: ClassVar[tuple[Key, ...]] = LIVE_OPTIONS
     live_only: ClassVar[bool] = False
     stream_keys: ClassVar[frozenset[str]] = frozenset({'drop_probability', 'delay_ms'})
 
@@ -110,9 +110,9 @@ class Injector:
         return []
 
     @classmethod
-    def field(cls, key: str) -> ConfigField | None:
+    def field(cls, key: str) -> Key | None:
         """Schema entry for a fault config key."""
-        return next((x for x in cls.fields if x.key == key), None)
+        return next((x for x in cls.fields if x.name == key), None)
 
     @classmethod
     def plot_fields(cls, key: str, config: dict[str, Any]) -> list[str]:
@@ -221,8 +221,8 @@ class ServiceInjector:
     type_name: ClassVar[str] = ''
     description: ClassVar[str] = ''
     service_type: ClassVar[str] = ''
-    fields: ClassVar[tuple[ConfigField, ...]] = ()
-    options: ClassVar[tuple[ConfigField, ...]] = ()
+    fields: ClassVar[tuple[Key, ...]] = ()
+    options: ClassVar[tuple[Key, ...]] = ()
     live_only: ClassVar[bool] = True
     message_types: ClassVar[tuple[str, ...]] = ()
 
@@ -235,9 +235,9 @@ class ServiceInjector:
         """Cross-field checks of one fault config."""
 
     @classmethod
-    def field(cls, key: str) -> ConfigField | None:
+    def field(cls, key: str) -> Key | None:
         """Schema entry for a fault config key."""
-        return next((x for x in cls.fields if x.key == key), None)
+        return next((x for x in cls.fields if x.name == key), None)
 
 
 InjectorType = type[Injector] | type[ServiceInjector] | type[SystemInjector]

@@ -20,7 +20,7 @@ import numpy as np
 from bagfault.errors import FieldPathError, InjectorConfigError
 from bagfault.faults.fieldpath import FLOATS, FieldPath
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key
 from bagfault.units import NS
 
 if TYPE_CHECKING:
@@ -92,10 +92,10 @@ class FieldInjector(Injector):
     type_name = 'field'
     description = 'Any message type: operations on field paths (add, scale, set, noise, clamp, drift, ...).'
     message_types = ()
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
-        ConfigField('operations', 'list',
+        Key('operations', 'list',
                     'List of {op, path, ...}: add/scale/set (value), noise (stddev), uniform_noise (low, high), '
                     'clamp (min, max), nan, stuck, drift (rate per second); units of the field.'),
     )

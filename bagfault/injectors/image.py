@@ -15,7 +15,7 @@ import numpy as np
 from bagfault.errors import InjectorError
 from bagfault.faults.combine import strongest
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, boolean, probability
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, boolean, probability
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -52,15 +52,15 @@ class ImageInjector(Injector):
     type_name = 'image'
     description = 'sensor_msgs/msg/Image (rgb8, bgr8, mono8, mono16, 32FC1): noise, dead pixels, stuck/black frame.'
     message_types = ('sensor_msgs/msg/Image',)
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
-        ConfigField('noise_stddev', 'double', 'Gaussian noise per pixel value, stddev in pixel units of the encoding.',
-                    0.0, min=0.0),
+        Key('noise_stddev', 'number', 'Gaussian noise per pixel value, stddev in pixel units of the encoding.',
+                    default=0.0, minimum=0.0),
         probability('dead_pixel_fraction', 'Share of pixels that read 0, fixed for the fault (0..1).'),
         boolean('stuck_frame', 'Repeat the first frame seen while the fault is active.'),
-        ConfigField('brightness_scale', 'double', 'Multiplies every pixel value (factor), clipped to the range.',
-                    1.0, min=0.0),
+        Key('brightness_scale', 'number', 'Multiplies every pixel value (factor), clipped to the range.',
+                    default=1.0, minimum=0.0),
         boolean('black_frame', 'Every pixel reads 0.'),
     )
 

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from bagfault.faults.combine import add, total
 from bagfault.faults.noise import gaussian_one
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, stddev
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, double, stddev
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -31,7 +31,7 @@ class ImuInjector(Injector):
         *((f'linear_acceleration.{a}', f'linear_acceleration_{a}_bias', 'bias') for a in AXES),
         *((f'linear_acceleration.{a}', f'linear_acceleration_{a}_noise_stddev', 'noise') for a in AXES),
     )
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
         double('angular_velocity_z_bias', 'Added to angular_velocity.z, in rad/s.', finite=False),

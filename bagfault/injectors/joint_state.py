@@ -9,7 +9,7 @@ import numpy as np
 from bagfault.faults.combine import total
 from bagfault.faults.noise import gaussian
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, stddev
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, double, stddev
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class JointStateInjector(Injector):
     description = 'sensor_msgs/msg/JointState: velocity bias and noise on every joint.'
     message_types = ('sensor_msgs/msg/JointState',)
     plotted = (('velocity_', 'velocity[*]'),)
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
         double('velocity_bias', 'Added to every velocity entry, in rad/s (or m/s for prismatic joints).', finite=False),

@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 from bagfault.errors import InjectorConfigError
 from bagfault.injectors.system import SystemInjector
 from bagfault.injectors.topic import TopicInjector
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 
 LINK_PREFIX = '/bagfault/link'  # a link's subscriber is remapped to LINK_PREFIX + topic, where bagfault publishes
 
@@ -19,10 +19,10 @@ class LinkInjector(SystemInjector):
     description = ("A topic the system publishes to itself: its subscriber is started again with the topic remapped "
                    f"to {LINK_PREFIX}/TOPIC, where bagfault republishes it through the `topic` injector's faults "
                    '(`bagfault test` only; no root, no tc).')
-    options: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('link_topic', 'non_empty_string', 'The topic between the nodes, as the system names it.',
+    options: ClassVar[tuple[Key, ...]] = (
+        Key('link_topic', 'non_empty_string', 'The topic between the nodes, as the system names it.',
                     required=True),
-        ConfigField('subscriber', 'target', 'The process whose subscription is remapped: {node: /NAME} or '
+        Key('subscriber', 'target', 'The process whose subscription is remapped: {node: /NAME} or '
                     '{command: REGEX} (started again, with the remap added to its command line, before the bag '
                     'plays).', required=True),
     )

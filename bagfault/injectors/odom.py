@@ -11,7 +11,7 @@ from bagfault.faults.combine import add, strongest, total
 from bagfault.faults.noise import gaussian_one
 from bagfault.faults.rotation import add_rpy
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, stddev
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, double, stddev
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -33,7 +33,7 @@ class OdomInjector(Injector):
         ('pose.pose.position.x', 'x_noise_stddev', 'noise'),
         ('pose.pose.position.y', 'y_noise_stddev', 'noise'),
     )
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
         double('x_bias', 'Added to pose.pose.position.x, in metres; biases of several faults add.', finite=False),
@@ -43,14 +43,14 @@ class OdomInjector(Injector):
         double('yaw_bias_deg', 'Added to the yaw of pose.pose.orientation, in degrees.', finite=False),
         stddev('yaw_noise_stddev_deg', 'Gaussian noise on the yaw of pose.pose.orientation, stddev in degrees.',
                finite=False),
-        ConfigField('pose_covariance_scale', 'double', 'Multiplies every pose covariance entry (factor).', 1.0,
-                    min=0.0, finite=False),
-        ConfigField('twist_covariance_scale', 'double', 'Multiplies every twist covariance entry (factor).', 1.0,
-                    min=0.0, finite=False),
-        ConfigField('pose_covariance_floor', 'double', 'Minimum of every pose covariance entry after scaling.', 0.0,
-                    min=0.0, finite=False),
-        ConfigField('twist_covariance_floor', 'double', 'Minimum of every twist covariance entry after scaling.', 0.0,
-                    min=0.0, finite=False),
+        Key('pose_covariance_scale', 'number', 'Multiplies every pose covariance entry (factor).', default=1.0,
+                    minimum=0.0, finite=False),
+        Key('twist_covariance_scale', 'number', 'Multiplies every twist covariance entry (factor).', default=1.0,
+                    minimum=0.0, finite=False),
+        Key('pose_covariance_floor', 'number', 'Minimum of every pose covariance entry after scaling.', default=0.0,
+                    minimum=0.0, finite=False),
+        Key('twist_covariance_floor', 'number', 'Minimum of every twist covariance entry after scaling.', default=0.0,
+                    minimum=0.0, finite=False),
     )
 
     @classmethod

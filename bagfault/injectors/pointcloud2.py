@@ -16,7 +16,7 @@ import numpy as np
 from bagfault.errors import InjectorConfigError, InjectorError, MalformedMessageError
 from bagfault.faults.combine import strongest, total
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, probability, stddev
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, double, probability, stddev
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -54,7 +54,7 @@ class PointCloud2Injector(Injector):
     type_name = 'pointcloud2'
     description = 'sensor_msgs/msg/PointCloud2: xyz noise and bias, point dropout, blind sector, NaN points.'
     message_types = ('sensor_msgs/msg/PointCloud2',)
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
         stddev('xyz_noise_stddev', 'Gaussian noise on x, y and z of every point, stddev in metres.'),
@@ -65,8 +65,8 @@ class PointCloud2Injector(Injector):
         probability('nan_probability', 'Probability that a point gets NaN coordinates (0..1).'),
         double('sector_min_deg', 'Start azimuth of the blind sector (atan2(y, x)), in degrees.'),
         double('sector_max_deg', 'End azimuth of the blind sector, in degrees.'),
-        ConfigField('sector_min_range', 'double', 'Blind only beyond this range, in metres.', 0.0, min=0.0),
-        ConfigField('sector_max_range', 'double', 'Blind only up to this range, in metres.', math.inf, min=0.0),
+        Key('sector_min_range', 'number', 'Blind only beyond this range, in metres.', default=0.0, minimum=0.0),
+        Key('sector_max_range', 'number', 'Blind only up to this range, in metres.', default=math.inf, minimum=0.0),
     )
 
     @classmethod

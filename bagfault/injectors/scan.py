@@ -10,7 +10,7 @@ import numpy as np
 from bagfault.faults.combine import total
 from bagfault.faults.noise import gaussian
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double, stddev
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, double, stddev
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -25,7 +25,7 @@ class ScanInjector(Injector):
     description = 'sensor_msgs/msg/LaserScan: range bias and noise, blind angular sector.'
     message_types = ('sensor_msgs/msg/LaserScan',)
     plotted = (('range_', 'ranges[*]'), ('sector_min', 'ranges[*]'))
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
         double('range_bias', 'Added to every finite range, in metres, then clamped to [range_min, range_max].',
@@ -35,8 +35,8 @@ class ScanInjector(Injector):
                finite=False),
         double('sector_min_deg', 'Start angle of the blind sector, in degrees in the scan frame.'),
         double('sector_max_deg', 'End angle of the blind sector, in degrees in the scan frame.'),
-        ConfigField('sector_value', 'special_float', 'Range written inside the sector, in metres, or inf, -inf, nan.',
-                    math.inf),
+        Key('sector_value', 'special_float', 'Range written inside the sector, in metres, or inf, -inf, nan.',
+                    default=math.inf),
     )
 
     @classmethod

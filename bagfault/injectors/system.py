@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 from bagfault.errors import InjectorConfigError
-from bagfault.schema import ConfigField, boolean, choice, double
+from bagfault.schema import Key, boolean, choice, double
 
 SIGNALS = ('SIGKILL', 'SIGTERM', 'SIGINT', 'SIGQUIT', 'SIGABRT', 'SIGSEGV', 'SIGHUP')
 MAX_JUMP = 3600.0  # seconds a clock jump may move the clock, either way
@@ -22,8 +22,8 @@ class SystemInjector:
 
     type_name: ClassVar[str] = ''
     description: ClassVar[str] = ''
-    fields: ClassVar[tuple[ConfigField, ...]] = ()
-    options: ClassVar[tuple[ConfigField, ...]] = ()
+    fields: ClassVar[tuple[Key, ...]] = ()
+    options: ClassVar[tuple[Key, ...]] = ()
     actions: ClassVar[tuple[str, ...]] = ()  # config keys of which a fault sets exactly one
     live_only: ClassVar[bool] = True
     message_types: ClassVar[tuple[str, ...]] = ()
@@ -48,9 +48,9 @@ class SystemInjector:
         return None
 
     @classmethod
-    def field(cls, key: str) -> ConfigField | None:
+    def field(cls, key: str) -> Key | None:
         """Schema entry for a fault config key."""
-        return next((x for x in cls.fields if x.key == key), None)
+        return next((x for x in cls.fields if x.name == key), None)
 
 
 class ProcessInjector(SystemInjector):
@@ -59,18 +59,18 @@ class ProcessInjector(SystemInjector):
     type_name = 'process'
     description = ('A process of the system under test: paused (SIGSTOP/SIGCONT), killed (and restarted at the end '
                    'of the window) or held to a fraction of a core for the window (`bagfault test` only).')
-    options: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('target', 'target', "Which process: 'system' (the whole tree), {node: /NAME} (the process "
+    options: ClassVar[tuple[Key, ...]] = (
+        Key('target', 'target', "Which process: 'system' (the whole tree), {node: /NAME} (the process "
                     'hosting that node) or {command: REGEX} (command lines of the tree that match).', required=True),
     )
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         boolean('pause', 'SIGSTOP at the start of the window, SIGCONT at its end: the process misses the window.'),
         boolean('kill', 'Send `signal` at the start of the window.'),
         choice('signal', 'The signal a kill sends.', SIGNALS),
         boolean('restart', 'A killed process starts again at the end of the window (at once without one), with its '
                 'command line, environment and working directory.'),
         double('cpu_limit', 'At most this fraction of one core for the window (cgroup v2 cpu.max where writable, '
-               'else a SIGSTOP/SIGCONT duty cycle; 1.0: no limit).', 1.0, min=0.01, max=1.0),
+               'else a SIGSTOP/SIGCONT duty cycle; 1.0: no limit).', 1.0, minimum=0.01, maximum=1.0),
     )
     actions = ('pause', 'kill', 'cpu_limit')
 
@@ -92,12 +92,12 @@ class ClockInjector(SystemInjector):
     type_name = 'clock'
     description = ('The /clock the system under test follows: stalled (nothing played meanwhile), jumped by '
                    '`jump_s` or run at `rate` x bag time for the window (`bagfault test`, `play --clock`).')
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         boolean('stall', 'The clock stands still for the window while nothing is played, then goes on.'),
         double('jump_s', 'The clock jumps by this many seconds (negative: back) at the start of the window and '
-               'back at its end.', 0.0, min=-MAX_JUMP, max=MAX_JUMP),
+               'back at its end.', 0.0, minimum=-MAX_JUMP, maximum=MAX_JUMP),
         double('rate', 'The clock runs at this factor of bag time for the window, then jumps back to it.', 1.0,
-               min=0.01, max=100.0),
+               minimum=0.01, maximum=100.0),
     )
     actions = ('stall', 'jump_s', 'rate')
     acts_on = 'clock'

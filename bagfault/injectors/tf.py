@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from bagfault.faults.combine import add
 from bagfault.faults.rotation import add_rpy
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, ConfigField, double
+from bagfault.schema import DELAY_MS, Key, double
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -28,12 +28,12 @@ class TfInjector(Injector):
     type_name = 'tf'
     description = 'tf2_msgs/msg/TFMessage: bias or drop of the parent_frame -> child_frame transform.'
     message_types = ('tf2_msgs/msg/TFMessage',)
-    fields: ClassVar[tuple[ConfigField, ...]] = (
-        ConfigField('parent_frame', 'non_empty_string', 'Parent frame id of the transform to affect.', required=True),
-        ConfigField('child_frame', 'non_empty_string', 'Child frame id of the transform to affect.', required=True),
-        ConfigField(
-            'drop_probability', 'double', 'Probability that a matching transform is removed (0..1).', 0.0,
-            min=0.0, max=1.0
+    fields: ClassVar[tuple[Key, ...]] = (
+        Key('parent_frame', 'non_empty_string', 'Parent frame id of the transform to affect.', required=True),
+        Key('child_frame', 'non_empty_string', 'Child frame id of the transform to affect.', required=True),
+        Key(
+            'drop_probability', 'number', 'Probability that a matching transform is removed (0..1).', default=0.0,
+            minimum=0.0, maximum=1.0
         ),
         DELAY_MS,
         double('x_bias', 'Added to transform.translation.x, in metres.', finite=False),

@@ -20,7 +20,7 @@ from bagfault.faults.combine import strongest, total
 from bagfault.faults.drop import should_drop
 from bagfault.faults.header import has_header, shift_stamp
 from bagfault.injectors.base import Injector, RawMessage
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, MAX_DELAY_MS, ConfigField, boolean, integer, probability
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, MAX_DELAY_MS, Key, boolean, integer, probability
 from bagfault.units import MS, NS
 
 if TYPE_CHECKING:
@@ -40,25 +40,25 @@ class TopicInjector(Injector):
     type_name = 'topic'
     description = 'Any message type: stream faults on the serialized messages (no decoding).'
     message_types: ClassVar[tuple[str, ...]] = ()
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
-        integer('burst_drop', 'Drop this many consecutive messages ...', 0, min=0),
-        integer('burst_period', '... out of every this many messages (counted from the fault start).', 0, min=0),
+        integer('burst_drop', 'Drop this many consecutive messages ...', 0, minimum=0),
+        integer('burst_period', '... out of every this many messages (counted from the fault start).', 0, minimum=0),
         boolean('blackout', 'Drop every message.'),
         DELAY_MS,
-        integer('jitter_ms', 'Extra delay drawn uniformly from [0, jitter_ms] per message, in milliseconds.', 0, min=0,
-                max=MAX_DELAY_MS),
+        integer('jitter_ms', 'Extra delay drawn uniformly from [0, jitter_ms] per message, in milliseconds.', 0,
+                minimum=0, maximum=MAX_DELAY_MS),
         probability('duplicate_probability', 'Probability that a message is delivered twice (0..1).'),
-        integer('reorder_window', 'Release messages in groups of this many, shuffled (deterministic).', 0, min=0),
-        ConfigField('throttle_hz', 'double', 'Keep at most this many messages per second, in Hz (0: off, else at '
-                    'least 0.001).', 0.0, min=0.0),
+        integer('reorder_window', 'Release messages in groups of this many, shuffled (deterministic).', 0, minimum=0),
+        Key('throttle_hz', 'number', 'Keep at most this many messages per second, in Hz (0: off, else at '
+                    'least 0.001).', default=0.0, minimum=0.0),
         boolean('freeze', 'Repeat the last message received before the fault, at the original times.'),
         integer('stamp_offset_ms', 'Shift header.stamp by this many milliseconds (header only is touched).', 0,
-                min=-MAX_STAMP_OFFSET_MS, max=MAX_STAMP_OFFSET_MS),
+                minimum=-MAX_STAMP_OFFSET_MS, maximum=MAX_STAMP_OFFSET_MS),
         probability('corrupt_probability', 'Probability that a message gets bits flipped after the CDR header.'),
-        integer('corrupt_bits', 'How many bits to flip in a corrupted message.', 1, min=1),
+        integer('corrupt_bits', 'How many bits to flip in a corrupted message.', 1, minimum=1),
     )
-    stream_keys = frozenset(f.key for f in fields)
+    stream_keys = frozenset(f.name for f in fields)
 
     @classmethod
     def check_fault(cls, config: dict[str, Any], options: dict[str, Any]) -> None:

@@ -134,16 +134,16 @@ class AnchorServices:
             return response
         fault, injector = found
         cls = get_injector_type(injector.type)
-        fields = sorted(cls.fields if cls is not None else (), key=lambda f: f.key)
+        fields = sorted(cls.fields if cls is not None else (), key=lambda f: f.name)
         response.success, response.message = True, f'retrieved schema for fault_id: {fault.id}'
-        response.keys = [f.key for f in fields]
+        response.keys = [f.name for f in fields]
         response.types = [f.type for f in fields]
         response.descriptions = [f.description for f in fields]
         response.default_values = ['' if f.default is None else _text(f.default) for f in fields]
-        response.has_min_values = [f.min is not None for f in fields]
-        response.min_values = [float(f.min) if f.min is not None else 0.0 for f in fields]
-        response.has_max_values = [f.max is not None for f in fields]
-        response.max_values = [float(f.max) if f.max is not None else 0.0 for f in fields]
+        response.has_min_values = [f.minimum is not None for f in fields]
+        response.min_values = [float(f.minimum) if f.minimum is not None else 0.0 for f in fields]
+        response.has_max_values = [f.maximum is not None for f in fields]
+        response.max_values = [float(f.maximum) if f.maximum is not None else 0.0 for f in fields]
         return response
 
     def _get_fault_config(self, request: Any, response: Any) -> Any:

@@ -35,12 +35,12 @@ if TYPE_CHECKING:
     from bagfault.events import FaultSource
     from bagfault.injectors.base import RawMessage
     from bagfault.live.session import FaultStatus, LiveTopic
-    from bagfault.schema import ConfigField
+    from bagfault.schema import Key
     from bagfault.spec.model import FaultSpec, Scenario
 
 NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
-TYPES = {'double': ParameterType.PARAMETER_DOUBLE, 'special_float': ParameterType.PARAMETER_DOUBLE,
-         'int': ParameterType.PARAMETER_INTEGER, 'bool': ParameterType.PARAMETER_BOOL,
+TYPES = {'number': ParameterType.PARAMETER_DOUBLE, 'special_float': ParameterType.PARAMETER_DOUBLE,
+         'integer': ParameterType.PARAMETER_INTEGER, 'boolean': ParameterType.PARAMETER_BOOL,
          'string': ParameterType.PARAMETER_STRING, 'non_empty_string': ParameterType.PARAMETER_STRING,
          'list': ParameterType.PARAMETER_STRING}
 BIG_INT = 2**63 - 1
@@ -58,7 +58,7 @@ class FaultParameter:
     descriptor: ParameterDescriptor
 
 
-def _descriptor(name: str, schema: ConfigField) -> ParameterDescriptor:
+def _descriptor(name: str, schema: Key) -> ParameterDescriptor:
     descriptor = ParameterDescriptor(name=name, type=TYPES[schema.type], description=schema.description)
     constraints = []
     if schema.type == 'list':
@@ -66,27 +66,28 @@ def _descriptor(name: str, schema: ConfigField) -> ParameterDescriptor:
         constraints.append('YAML text; change it by reloading the scenario')
     if schema.choices:
         constraints.append('one of: ' + ', '.join(schema.choices))
-    if schema.type == 'double' and (schema.min is not None or schema.max is not None):
-        low = schema.min if schema.min is not None else -math.inf  # an open side stays open: defaults may be inf
-        high = schema.max if schema.max is not None else math.inf
+    if schema.type == 'number' and (schema.minimum is not None or schema.maximum is not None):
+        # an open side stays open: defaults may be inf
+        low = schema.minimum if schema.minimum is not None else -math.inf
+        high = schema.maximum if schema.maximum is not None else math.inf
         descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
-    if schema.type == 'int' and (schema.min is not None or schema.max is not None):
-        low = int(schema.min) if schema.min is not None else -BIG_INT
-        high = int(schema.max) if schema.max is not None else BIG_INT
+    if schema.type == 'integer' and (schema.minimum is not None or schema.maximum is not None):
+        low = int(schema.minimum) if schema.minimum is not None else -BIG_INT
+        high = int(schema.maximum) if schema.maximum is not None else BIG_INT
         descriptor.integer_range = [IntegerRange(from_value=low, to_value=high, step=0)]
     descriptor.additional_constraints = '; '.join(constraints)
     return descriptor
 
 
-def _value(schema: ConfigField, fault: FaultSpec) -> Any:
-    value = fault.config.get(schema.key, schema.default)
+def _value(schema: Key, fault: FaultSpec) -> Any:
+    value = fault.config.get(schema.name, schema.default)
     if schema.type == 'list':
         return yaml.safe_dump(value, default_flow_style=True).strip() if value is not None else '[]'
-    if schema.type in ('double', 'special_float'):
+    if schema.type in ('number', 'special_float'):
         return float(value) if value is not None else 0.0
-    if schema.type == 'int':
+    if schema.type == 'integer':
         return int(value) if value is not None else 0
-    if schema.type == 'bool':
+    if schema.type == 'boolean':
         return bool(value)
     return '' if value is None else str(value)
 
@@ -107,8 +108,8 @@ def fault_parameters(scenario: Scenario) -> tuple[list[FaultParameter], list[str
             name=name, type=ParameterType.PARAMETER_BOOL,
             description=f'Fault {fault.id} of injector {fault.injector_id} is active (set to switch it now).')))
         for schema in cls.fields:
-            name = f'{fault.id}.{schema.key}'
-            declared.append(FaultParameter(name, fault.id, schema.key, _value(schema, fault),
+            name = f'{fault.id}.{schema.name}'
+            declared.append(FaultParameter(name, fault.id, schema.name, _value(schema, fault),
                                            _descriptor(name, schema)))
     return declared, notes
 

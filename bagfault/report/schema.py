@@ -11,6 +11,8 @@ from bagfault.injectors.registry import injector_types
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
+    from bagfault.schema import Key
+
 
 def schema_dict(type_name: str | None = None) -> dict[str, Any]:
     """{type: {description, message_types, live_only, options, fields}}."""
@@ -134,38 +136,36 @@ def _section_rows(section: Any) -> list[str]:
 
 
 # -- every section, and a JSON Schema of scenario and campaign files ---------------------------------------------
-FIELD_JSON: dict[str, dict[str, Any]] = {
-    'double': {'type': 'number'}, 'int': {'type': 'integer'}, 'bool': {'type': 'boolean'},
-    'string': {'type': 'string'}, 'non_empty_string': {'type': 'string', 'minLength': 1},
-    'special_float': {'anyOf': [{'type': 'number'}, {'enum': ['inf', '+inf', '-inf', '.inf', '-.inf', 'nan', '.nan']}]},
-    'list': {'type': 'array'},
-    'target': {'anyOf': [{'const': 'system'},
-                         {'type': 'object', 'properties': {'node': {'type': 'string', 'minLength': 1}},
-                          'required': ['node'], 'additionalProperties': False},
-                         {'type': 'object', 'properties': {'command': {'type': 'string', 'minLength': 1}},
-                          'required': ['command'], 'additionalProperties': False}]},
-}
-KEY_JSON: dict[str, dict[str, Any]] = {
+KEY_JSON: dict[str, dict[str, Any]] = {  # by Key.type
     'string': {'type': 'string'}, 'number': {'type': 'number'}, 'integer': {'type': 'integer'},
     'boolean': {'type': 'boolean'}, 'seconds': {'type': 'number'}, 'list': {'type': 'array'},
     'mapping': {'type': 'object'}, 'any': {},
     'string_or_list': {'anyOf': [{'type': 'string'}, {'type': 'array', 'items': {'type': 'string'}}]},
     'dimension': {'anyOf': [{'type': 'number'}, {'type': 'array', 'items': {'type': 'number'}, 'minItems': 2,
                                                  'maxItems': 2}]},
+    'non_empty_string': {'type': 'string', 'minLength': 1},
+    'special_float': {'anyOf': [{'type': 'number'}, {'enum': ['inf', '+inf', '-inf', '.inf', '-.inf', 'nan', '.nan']}]},
+    'target': {'anyOf': [{'const': 'system'},
+                         {'type': 'object', 'properties': {'node': {'type': 'string', 'minLength': 1}},
+                          'required': ['node'], 'additionalProperties': False},
+                         {'type': 'object', 'properties': {'command': {'type': 'string', 'minLength': 1}},
+                          'required': ['command'], 'additionalProperties': False}]},
 }
 OPEN_SECTIONS = ('injector',)  # its keys depend on its type
 
 
-def _field_json(field: dict[str, Any]) -> dict[str, Any]:
-    out = {**FIELD_JSON.get(field['type'], {}), 'description': field['description']}
-    if field['min'] is not None:
-        out['minimum'] = field['min']
-    if field['max'] is not None:
-        out['maximum'] = field['max']
-    if field['choices']:
-        out['enum'] = list(field['choices'])
-    if field['default'] not in (None, ''):
-        out['default'] = field['default']
+def _field_json(field: Key) -> dict[str, Any]:
+    """A type's config key or option (no unit, no exclusive bound; an empty default left out, inf as text)."""
+    out = {**KEY_JSON[field.type], 'description': field.description}
+    if field.minimum is not None:
+        out['minimum'] = field.minimum
+    if field.maximum is not None:
+        out['maximum'] = field.maximum
+    if field.choices:
+        out['enum'] = list(field.choices)
+    default = field.to_dict()['default']
+    if default not in (None, ''):
+        out['default'] = default
     return out
 
 
@@ -218,17 +218,17 @@ def json_schema(kind: str) -> dict[str, Any]:
 
     defs = {s.name: _section_json(s, ref) for s in sections}
     if kind == 'scenario':
-        types = schema_dict()
+        types = sorted(injector_types().items())
         injector = defs['injector']
-        injector['properties']['type'] = {'anyOf': [{'enum': sorted(types)}, {'type': 'string'}],
+        injector['properties']['type'] = {'anyOf': [{'enum': [name for name, _ in types]}, {'type': 'string'}],
                                           'description': injector['properties']['type']['description']}
         injector['allOf'] = [{'if': {'properties': {'type': {'const': name}}, 'required': ['type']},
-                              'then': {'properties': {f['key']: _field_json(f) for f in entry['options']}}}
-                             for name, entry in types.items() if entry['options']]
+                              'then': {'properties': {f.name: _field_json(f) for f in cls.options}}}
+                             for name, cls in types if cls.options]
         config: dict[str, Any] = {}
-        for entry in types.values():
-            for f in entry['fields']:
-                config.setdefault(f['key'], _field_json(f))
+        for _, injector_type in types:
+            for f in injector_type.fields:
+                config.setdefault(f.name, _field_json(f))
         defs['fault']['properties']['config'] = {'type': 'object', 'properties': config,
                                                  'description': "The fault config keys of its injector's type."}
         assertion = defs['assertion']
@@ -236,12 +236,12 @@ def json_schema(kind: str) -> dict[str, Any]:
                                            'description': assertion['properties']['type']['description']}
         rules = []
         for name, cls in sorted(ASSERTION_TYPES.items()):
-            fields = [f.to_dict() for f in cls.fields]
-            then: dict[str, Any] = {'properties': {f['key']: _field_json(f) for f in fields}}
+            fields = cls.fields
+            then: dict[str, Any] = {'properties': {f.name: _field_json(f) for f in fields}}
             if cls.takes_within:
                 then['properties']['within'] = {'type': 'number', 'minimum': 0,
                                                 'description': 'Deadline, seconds from time zero.'}
-            required = [f['key'] for f in fields if f['required']]
+            required = [f.name for f in fields if f.required]
             if required:
                 then['required'] = required
             rules.append({'if': {'properties': {'type': {'const': name}}, 'required': ['type']}, 'then': then})

@@ -224,7 +224,7 @@ def _explore_fault(node: object, path: PathKey, scenario: Scenario, out: _Collec
         ok, ends = reader.dimension(declared, value, (*path, 'config', key))
         if ok:
             fault.dimensions.append(Dimension(f'config.{key}', ends[0], ends[1],
-                                              integer=field is not None and field.type == 'int'))
+                                              integer=field is not None and field.type == 'integer'))
     return fault
 
 
@@ -237,7 +237,7 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
         return None
     type_name = node.get('type')
     cls = get_injector_type(type_name) if isinstance(type_name, str) and type_name else None
-    option_keys = {f.key for f in cls.options} if cls else set()
+    option_keys = {f.name for f in cls.options} if cls else set()
     read = out.reader().read(sections.INJECTOR, node, path, extra=option_keys,
                              judge_unknown=cls is not None or not type_name)
     assert read is not None

@@ -20,7 +20,7 @@ from bagfault.injectors.registry import get_injector_type, injector_types
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
-    from bagfault.schema import ConfigField
+    from bagfault.schema import Key
     from bagfault.spec.model import AssertionSpec, FaultSpec, InjectorSpec, Scenario
 
 
@@ -36,7 +36,7 @@ def resolve_scenario(scenario: Scenario, out: _Collector) -> None:
     scenario.fault_manager_config = scenario_config(scenario, out.add, out.ignored)
 
 
-def coerce(field: ConfigField, value: Any, path: tuple[Any, ...], out: _Collector) -> Any:
+def coerce(field: Key, value: Any, path: tuple[Any, ...], out: _Collector) -> Any:
     """The value as the field reads it; None (and the problem said) when it cannot."""
     try:
         return field.coerce(value)
@@ -48,8 +48,9 @@ def coerce(field: ConfigField, value: Any, path: tuple[Any, ...], out: _Collecto
 def _options(injector: InjectorSpec, out: _Collector) -> None:
     cls = get_injector_type(injector.type) if injector.type else None
     for field in cls.options if cls is not None else ():
-        if field.key in injector.options:
-            injector.options[field.key] = coerce(field, injector.options[field.key], (*injector.path, field.key), out)
+        if field.name in injector.options:
+            path = (*injector.path, field.name)
+            injector.options[field.name] = coerce(field, injector.options[field.name], path, out)
 
 
 def _config(scenario: Scenario, fault: FaultSpec, out: _Collector) -> None:
@@ -57,7 +58,7 @@ def _config(scenario: Scenario, fault: FaultSpec, out: _Collector) -> None:
     cls = get_injector_type(injector.type) if injector is not None else None
     if injector is None or cls is None:
         return  # an unknown injector: the validator says so
-    keys = [f.key for f in cls.fields]
+    keys = [f.name for f in cls.fields]
     for key, value in list(fault.config.items()):
         path = (*fault.path, 'config', key)
         field = cls.field(str(key))

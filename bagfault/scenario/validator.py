@@ -18,7 +18,7 @@ from bagfault.errors import FieldValueError, InjectorConfigError
 from bagfault.injectors.base import Injector, ServiceInjector, SystemInjector
 from bagfault.injectors.registry import get_injector_type
 from bagfault.scenario.resolve import closest, coerce
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 from bagfault.yamlcpp import as_double
 
 if TYPE_CHECKING:
@@ -78,23 +78,23 @@ _FROM_CHARS_DOUBLE = re.compile(r'-?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf(
                                 re.IGNORECASE)
 
 
-def anchor_refusal(field: ConfigField, text: str) -> str | None:
+def anchor_refusal(field: Key, text: str) -> str | None:
     """What ros2_fault_injection's validate_config_value (fault_config_schema.cpp) says of a config value's
     scalar text, None when it accepts it. Its numbers are std::from_chars over the whole text: no leading '+',
     no hexadecimal, no YAML's '.inf', and an int key takes no decimal point."""
     kind = field.type
-    if kind == 'bool':
-        return None if text in ('true', 'false') else f"config '{field.key}' must be 'true' or 'false'"
-    if kind == 'int':
+    if kind == 'boolean':
+        return None if text in ('true', 'false') else f"config '{field.name}' must be 'true' or 'false'"
+    if kind == 'integer':
         if re.fullmatch(r'-?\d+', text) is None or not -2**31 <= int(text) < 2**31:
-            return f"config '{field.key}' must be an integer"
+            return f"config '{field.name}' must be an integer"
         return None
-    if kind in ('double', 'special_float'):
+    if kind in ('number', 'special_float'):
         if kind == 'special_float' and text in ('inf', '+inf', '-inf', 'nan'):
             return None
         if _FROM_CHARS_DOUBLE.fullmatch(text) is None:
             tail = ', inf, -inf, or nan' if kind == 'special_float' else ''
-            return f"config '{field.key}' must be a number{tail}"
+            return f"config '{field.name}' must be a number{tail}"
     return None
 
 
@@ -114,8 +114,8 @@ def _check_injector(injector: Any, out: _Collector) -> None:
     if not is_service_type and injector.is_service:
         out.add(injector.path, f'injector type {injector.type!r} proxies a topic: give input_topic and output_topic')
     for field in cls.options:
-        if field.required and field.key not in injector.options:
-            out.add(injector.path, f'missing required key {field.key!r} for injector type {injector.type!r}')
+        if field.required and field.name not in injector.options:
+            out.add(injector.path, f'missing required key {field.name!r} for injector type {injector.type!r}')
     try:
         cls.check_options(injector.options)
     except InjectorConfigError as exc:
@@ -151,8 +151,8 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
         assert field is not None
         _check_config_value(fault, injector.type, field, str(key), coerced, out)
     for field in cls.fields:
-        if field.required and field.key not in fault.config:
-            out.add((*fault.path, 'config'), f'missing required key {field.key!r} for injector type {injector.type!r}')
+        if field.required and field.name not in fault.config:
+            out.add((*fault.path, 'config'), f'missing required key {field.name!r} for injector type {injector.type!r}')
     if all(v is not None for v in fault.config.values()):
         _check_config(fault, injector.options, cls, out)
 
@@ -166,7 +166,7 @@ def _check_schedule_keys(fault: Any, out: _Collector) -> None:
         out.ignored((*fault.path, 'duration'), f'fault {fault.id!r} has duration but no start; duration is ignored')
 
 
-def _check_config_value(fault: Any, injector_type: str, field: ConfigField, key: str, coerced: Any,
+def _check_config_value(fault: Any, injector_type: str, field: Key, key: str, coerced: Any,
                         out: _Collector) -> None:
     """One config value: what the anchor would refuse of its text, what nan and inf do."""
     path = (*fault.path, 'config', key)
@@ -178,7 +178,7 @@ def _check_config_value(fault: Any, injector_type: str, field: ConfigField, key:
     if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
         out.ignored(path, "nan has no effect: a level is the largest of the active faults' values, and "
                        'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
-    elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'double' and refusal is None:
+    elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'number' and refusal is None:
         out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '
                        'it too)')
 
@@ -241,7 +241,7 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
         return
     if assertion.within is not None and not cls.takes_within:
         out.add((*assertion.path, 'within'), f'{assertion.type} has no deadline; within does not apply')
-    keys = [f.key for f in cls.fields]
+    keys = [f.name for f in cls.fields]
     for key, value in list(assertion.params.items()):
         field = cls.field(str(key))
         path = (*assertion.path, key)
@@ -251,13 +251,13 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             continue
         raw = out.located.raw_text(path, value)
-        if assertion.type in ANCHOR_ASSERTIONS and field.type == 'double' and assertion.params[key] is not None \
+        if assertion.type in ANCHOR_ASSERTIONS and field.type == 'number' and assertion.params[key] is not None \
                 and as_double(raw) is None:  # scenario_config.cpp reads min_hz and window with as<double>()
             out.warn(path, f"{raw!r} is read here, but ros2_fault_injection's yaml-cpp refuses it (as<double>: a "
                            "decimal or .inf/.nan only)")
     for field in cls.fields:
-        if field.required and field.key not in assertion.params:
-            out.add(assertion.path, f'missing required key {field.key!r} for assertion type {assertion.type!r}')
+        if field.required and field.name not in assertion.params:
+            out.add(assertion.path, f'missing required key {field.name!r} for assertion type {assertion.type!r}')
     if all(v is not None for v in assertion.params.values()):
         for key, message in cls.check(assertion, scenario):
             out.add((*assertion.path, key) if key else assertion.path, message)
@@ -297,7 +297,7 @@ def _check_candidate(scenario: Scenario, fault: ExploreFault, out: _Collector) -
         return
     cls = get_injector_type(injector.type)
     assert cls is not None  # unknown types were left out
-    keys = [f.key for f in cls.fields]
+    keys = [f.name for f in cls.fields]
     corners: list[dict[str, Any]] = [{}, {}]  # the config with every dimension at its low, and at its high end
     for key, value in fault.config.items():
         field = cls.field(str(key))
@@ -319,15 +319,15 @@ def _check_candidate(scenario: Scenario, fault: ExploreFault, out: _Collector) -
             out.add(path, f'a dimension on {key!r}, a key injector type {injector.type!r} lacks'
                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
             continue
-        if field.type not in ('double', 'int', 'special_float'):
+        if field.type not in ('number', 'integer', 'special_float'):
             out.add(path, f'{key!r} is a {field.type}: only a number can be a dimension')
             continue
         for corner, end, which in ((corners[0], dimension.low, 'low'), (corners[1], dimension.high, 'high')):
             try:
-                corner[key] = field.coerce(round(end) if field.type == 'int' else end)
+                corner[key] = field.coerce(round(end) if field.type == 'integer' else end)
             except FieldValueError as exc:
                 out.add(path, f'the {which} end {end:g}: {exc}')
-            if field.type == 'int' and end != round(end):
+            if field.type == 'integer' and end != round(end):
                 out.add(path, f'the {which} end {end:g} is not whole, and {key!r} takes whole numbers')
     for corner in corners:
         if all(v is not None for v in corner.values()):

@@ -1,10 +1,12 @@
 """Every key of every section of a scenario and a campaign file, declared once.
 
-A `Key` says a key's type, unit, range, default, whether it is required
-and what it means; spec/reader.py reads every section by these declarations. `bagfault schema` prints these tables, and
-`bagfault schema --json-schema` turns them (with the injector and assertion
-types' own `ConfigField`s) into a JSON Schema an editor's YAML language
-server checks and completes files with. The parsers' own key sets are
+A `Key` (bagfault/schema.py, the one declaration of a key, which the injector
+and assertion types' config keys are too) says a key's type, unit, range,
+default, whether it is required and what it means; spec/reader.py reads
+every section by these declarations. `bagfault schema` prints these tables,
+and `bagfault schema --json-schema` turns them (with the types' own keys)
+into a JSON Schema an editor's YAML language server checks and completes
+files with. The parsers' own key sets are
 tested against these declarations (tests/spec/test_sections.py), so a key
 a parser reads is a key the schema documents.
 """
@@ -14,30 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from bagfault.schema import Key, KeyType
 from bagfault.units import MAX_SECONDS
 
 Reads = Literal['anchor', 'caret', 'medkit', 'yaml']
 Unknown = Literal['warn', 'error', 'ignore']
-KeyType = Literal['string', 'number', 'integer', 'boolean', 'list', 'mapping', 'string_or_list', 'seconds', 'any',
-                  'dimension']  # dimension: a number, or [low, high] that `bagfault explore` draws from
-
-
-@dataclass(frozen=True)
-class Key:
-    """One key of a section."""
-
-    name: str
-    type: KeyType
-    description: str
-    unit: str = ''
-    default: object = None
-    required: bool = False
-    minimum: float | None = None
-    maximum: float | None = None
-    choices: tuple[str, ...] = ()
-    section: str = ''  # the section its value is (a mapping, or a list of mappings)
-    what: str = ''  # what a valid value is, for messages ('a list of topics')
-    exclusive: bool = False  # the minimum itself is refused (a period must be above 0)
+__all__ = ['Key', 'KeyType', 'Section']  # Key and KeyType: bagfault.schema's, where every key is declared
 
 
 @dataclass(frozen=True)

@@ -189,8 +189,8 @@ class FoxgloveView:
             cls = get_injector_type(injector.type) if injector is not None else None
             values: list[tuple[str, object]] = [('active', fault.id in self.active)]
             if cls is not None:
-                values += [(f.key, fault.config.get(f.key, f.default)) for f in cls.fields
-                           if f.type in ('double', 'special_float', 'int', 'bool', 'string', 'non_empty_string')]
+                values += [(f.name, fault.config.get(f.name, f.default)) for f in cls.fields
+                           if f.type in ('number', 'special_float', 'integer', 'boolean', 'string', 'non_empty_string')]
             for key, value in values:
                 name = f'{fault.id}.{key}'
                 if names and name not in names:

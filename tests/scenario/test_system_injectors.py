@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 
 from bagfault.errors import FieldValueError, ScenarioError
 from bagfault.scenario import parse_scenario
-from bagfault.schema import ConfigField
+from bagfault.schema import Key
 
-TARGET = ConfigField('target', 'target', '')
+TARGET = Key('target', 'target', '')
 texts = st.one_of(st.text(max_size=12), st.sampled_from(['/controller', 'controller', '(', '[a-', 'planner.py',
                                                          '']))
 values = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(allow_nan=False), texts,
@@ -109,3 +109,25 @@ def test_a_stall_lasts_one_activation_of_its_schedule(schedule: str, seconds: fl
     scenario = parse_scenario('injectors:\n  - {id: c, type: clock}\n'
                               f'faults:\n  - {{id: f, injector_id: c, {schedule}, config: {{stall: true}}}}\n')
     assert stall_seconds(scenario.faults[0]) == seconds
+
+
+def test_a_config_key_in_the_published_plugin_form_is_the_key_it_describes() -> None:
+    """Plugins declared config keys as `ConfigField(key, 'double'|'int'|'bool'|..., description, default, min=,
+    max=)` (the names `bagfault schema --json` prints); that form builds the one `Key`, checked alike."""
+    from bagfault.errors import FieldValueError
+    from bagfault.schema import ConfigField
+
+    published = ConfigField('status_override', 'int', 'A status code.', 0, min=0, max=255)
+    declared = Key('status_override', 'integer', 'A status code.', default=0, minimum=0, maximum=255)
+    assert isinstance(published, Key)
+    assert published.to_dict() == declared.to_dict() == {
+        'key': 'status_override', 'type': 'int', 'description': 'A status code.', 'default': 0, 'min': 0, 'max': 255,
+        'required': False, 'choices': [], 'finite': True}
+    assert published.coerce('7') == declared.coerce('7') == 7
+    for key in (published, declared):
+        with pytest.raises(FieldValueError, match='above the maximum 255'):
+            key.coerce(256)
+    assert ConfigField('gain', 'double', 'A gain.', 1.0).type == 'number'
+    assert ConfigField('on', 'bool', 'A switch.').coerce('true') is True
+    with pytest.raises(ValueError, match="unknown config key type 'float'"):
+        ConfigField('gain', 'float', 'A gain.')

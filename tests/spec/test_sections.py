@@ -76,7 +76,7 @@ def test_every_section_of_a_scenario_knows_exactly_its_declared_keys(section: se
     assert main(['validate', '--strict', str(path)]) == 2
     known = {k.name for k in section.keys}
     if section.name == 'injector':
-        known |= {f.key for f in get_injector_type('imu').options}
+        known |= {f.name for f in get_injector_type('imu').options}
     where = format_path((*place, 'zz_undeclared'))  # type: ignore[arg-type]
     line = next(x for x in capsys.readouterr().err.splitlines() if f'{where}: ' in x)
     assert "key 'zz_undeclared'" in line

@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 
 from bagfault.faults.combine import add, total
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, double
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, double
 
 
 class BatteryStateInjector(Injector):
@@ -20,7 +20,7 @@ class BatteryStateInjector(Injector):
     type_name = 'battery_state'
     description = 'sensor_msgs/msg/BatteryState: voltage and percentage bias.'
     message_types = ('sensor_msgs/msg/BatteryState',)
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
         double('voltage_bias', 'Added to voltage, in volts; biases of several faults add.'),

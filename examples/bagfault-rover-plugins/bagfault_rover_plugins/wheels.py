@@ -13,7 +13,7 @@ import numpy as np
 
 from bagfault.faults.combine import strongest
 from bagfault.injectors.base import Injector
-from bagfault.schema import DELAY_MS, DROP_PROBABILITY, ConfigField, boolean
+from bagfault.schema import DELAY_MS, DROP_PROBABILITY, Key, boolean
 
 WHEEL_ENCODERS_MSG = """std_msgs/Header header
 int32[] ticks
@@ -36,12 +36,13 @@ class WheelEncodersInjector(Injector):
     type_name = 'wheel_encoders'
     description = 'rover_msgs/msg/WheelEncoders: stuck ticks, speed scale, forced status.'
     message_types = ('rover_msgs/msg/WheelEncoders',)
-    fields: ClassVar[tuple[ConfigField, ...]] = (
+    fields: ClassVar[tuple[Key, ...]] = (
         DROP_PROBABILITY,
         DELAY_MS,
         boolean('ticks_stuck', 'Every tick counter keeps the value it had when the fault started.'),
-        ConfigField('speed_scale', 'double', 'Multiplies every wheel speed (factor).', 1.0, min=0.0),
-        ConfigField('status_override', 'int', 'Status code reported instead of the real one.', 0, min=0, max=255),
+        Key('speed_scale', 'number', 'Multiplies every wheel speed (factor).', default=1.0, minimum=0.0),
+        Key('status_override', 'integer', 'Status code reported instead of the real one.', default=0, minimum=0,
+            maximum=255),
     )
 
     def __init__(self, spec: Any, codec: Any = None, faults: Any = ()) -> None:
