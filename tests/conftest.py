@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -32,6 +34,21 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item.add_marker(pytest.mark.closed_loop)
         if item.path.parent.name == 'campaign':
             item.add_marker(pytest.mark.campaign)
+
+
+@pytest.fixture(autouse=True)
+def _sigint_as_found() -> Iterator[None]:
+    """Every test leaves SIGINT's handler and this thread's signal mask as it found them: a worker left with SIGINT
+    ignored or blocked passes that on to every process a later test starts (seen: a stopped `bagfault explore`
+    that heard no SIGINT, in full suites beside another). The test that changed it fails, saying so."""
+    before = (signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, []))
+    yield
+    after = (signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, []))
+    if after != before:
+        signal.signal(signal.SIGINT, before[0])
+        signal.pthread_sigmask(signal.SIG_SETMASK, before[1])
+        pytest.fail(f'this test left SIGINT handled by {after[0]!r} with the mask {sorted(after[1])} (it found '
+                    f'{before[0]!r}, {sorted(before[1])}); restored', pytrace=False)
 
 
 @pytest.fixture
