@@ -232,6 +232,7 @@ class LocalEngine:
 
 
 TASK_RETRIES = 3  # times Ray runs a job again when its worker process or node was lost
+NODES_EVERY = 1.0  # seconds between looks at the cluster's nodes while jobs end
 RAY_CONNECT_TIMEOUT = 60.0  # seconds for ray.init to join a cluster (it takes 1-5 s; Ray itself waits for ever)
 
 
@@ -286,7 +287,7 @@ class RayEngine:
         ray = self.ray
         placement = Placement.of([spec['bag'] for spec in specs], self._nodes())
         running: dict[Any, tuple[int, str]] = {}
-        stranded = 0.0
+        stranded, looked = 0.0, time.monotonic()
         try:
             while placement.pending or running:
                 for i, node in placement.assign(self.limit):
@@ -311,7 +312,8 @@ class RayEngine:
                     except Exception as exc:  # noqa: BLE001 - a lost worker or node is this job's error
                         result = _error(f'the Ray task failed: {" ".join(str(exc).split())[:500]}')
                     done(i, result)
-                if finished or not running:
+                if finished and time.monotonic() - looked >= NODES_EVERY:  # a node lost or added since
+                    looked = time.monotonic()
                     placement.nodes(self._nodes())
         except BaseException:
             for ref in running:
