@@ -1,9 +1,12 @@
 """MCAP input, read chunk by chunk in log-time order, with every record checked.
 
 The summary is parsed by `mcap_summary` (into the `mcap` library's
-records); chunks are read and split here so that messages come out as zero-copy slices of one
-decompressed buffer, channels found only inside chunks are still known,
-and overlapping chunks are merged by log time.
+records) and the data section checked against it by `mcap_index_check`;
+chunks are read here and split by `mcap_chunks`, so that messages come out
+as zero-copy slices of one decompressed buffer, channels found only inside
+chunks are still known, and overlapping chunks are merged by log time.
+Files without chunk index, or cut short, are read record by record
+(`mcap_salvage`).
 
 What the format lets a reader detect is checked: chunk CRCs and sizes,
 record lengths, records that refer to channels nobody defined, chunk
