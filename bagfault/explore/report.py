@@ -27,6 +27,8 @@ def render_report(document: dict[str, Any]) -> str:
     page = Page(heading)
     page.html(f'<style>{STYLE}</style>')
     page.html(str(parts.header(document, counts, heading)))
+    if document.get('baseline_warnings'):  # the clock check's among them: what every run's verdicts rest on
+        page.html(str(parts.warnings(document['baseline_warnings'])))
     if failures:
         page.section('Failures')
         rows = []

@@ -6,6 +6,7 @@ run only."""
 
 from __future__ import annotations
 
+import html
 import json
 
 import pytest
@@ -74,5 +75,6 @@ def test_only_the_baseline_holds_the_clock_to_look_for_wall_time(tmp_path):
     assert held, result.warnings
     document = json.loads((tmp_path / 'out' / 'explore.json').read_text())
     assert document['baseline_warnings'] == result.warnings
+    assert held[0] in html.unescape((tmp_path / 'out' / 'report.html').read_text())  # the report says it too
     baseline, *later = [r.seconds for r in result.runs]
     assert min(later) < baseline - 0.5, (baseline, later)  # the hold is 1 s of the baseline's time
