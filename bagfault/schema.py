@@ -90,16 +90,16 @@ class Key:
 
 class ConfigField(Key):
     """A config key in the form plugins have declared them since bagfault's first release (`key`, the published
-    type names double/int/bool, `min`, `max`): it is the `Key` it describes, nothing else."""
+    type names double/int/bool, `min`, `max`): what it makes is the plain `Key` it describes, equal to it."""
 
-    def __init__(self, key: str, type: str, description: str, default: Any = None,
-                 min: float | None = None, max: float | None = None,
-                 required: bool = False, choices: tuple[str, ...] = (), finite: bool = True) -> None:
+    def __new__(cls, key: str, type: str, description: str, default: Any = None,  # type: ignore[misc]
+                min: float | None = None, max: float | None = None,  # the published names
+                required: bool = False, choices: tuple[str, ...] = (), finite: bool = True) -> Key:
         kind = {public: own for own, public in PUBLIC_TYPES.items()}.get(type, type)
         if kind not in KEY_TYPES:
             raise ValueError(f'{key}: unknown config key type {type!r} (known: {", ".join(sorted(PUBLISHED))})')
-        super().__init__(key, kind, description, default=default, minimum=min,  # type: ignore[arg-type]
-                         maximum=max, required=required, choices=choices, finite=finite)
+        return Key(key, kind, description, default=default, minimum=min,  # type: ignore[arg-type]
+                   maximum=max, required=required, choices=choices, finite=finite)
 
 
 def _show(value: object) -> str:
