@@ -20,70 +20,11 @@ def _clock(seconds: float) -> str:
     return f'{hours}:{minutes:02d}:{secs:02d}' if hours else f'{minutes:02d}:{secs:02d}'
 
 
-class ProgressBar:
-    """Callable given to the pipeline: progress(messages_done, bag_time_ns)."""
-
-    def __init__(self, *, stream: TextIO | None = None, enabled: bool | None = None) -> None:
-        self.stream = stream or sys.stderr
-        self.enabled = self.stream.isatty() if enabled is None else enabled
-        self.start_time: int | None = None
-        self.end_time: int | None = None
-        self.total: int | None = None
-        self.began = time.monotonic()
-        self.last_draw = 0.0
-        self.shown = False
-
-    def begin(self, start_time: int | None, end_time: int | None, total_messages: int | None) -> None:
-        """What the whole job is: bag time span and message count, when known."""
-        self.start_time, self.end_time, self.total = start_time, end_time, total_messages
-        self.began = time.monotonic()
-
-    def fraction(self, messages: int, bag_time: int) -> float | None:
-        """Share of the work done, from bag time if known, else from message count."""
-        if self.start_time is not None and self.end_time is not None and self.end_time > self.start_time:
-            return min(1.0, max(0.0, (bag_time - self.start_time) / (self.end_time - self.start_time)))
-        if self.total:
-            return min(1.0, messages / self.total)
-        return None
-
-    def line(self, messages: int, bag_time: int, elapsed: float) -> str:
-        """The text of one update."""
-        done_s = (bag_time - self.start_time) / NS if self.start_time is not None else 0.0
-        total_s = (self.end_time - self.start_time) / NS if self.end_time and self.start_time is not None else None
-        fraction = self.fraction(messages, bag_time)
-        width = 24
-        if fraction is None:
-            bar, eta = '', ''
-        else:
-            filled = int(fraction * width)
-            bar = '[' + '#' * filled + '.' * (width - filled) + f'] {fraction * 100:5.1f}% '
-            eta = f' ETA {_clock(elapsed * (1 - fraction) / fraction)}' if fraction > 0 else ''
-        bag = f'{done_s:.1f}/{total_s:.1f} s bag' if total_s is not None else f'{done_s:.1f} s bag'
-        rate = messages / elapsed if elapsed > 0 else 0.0
-        return f'{bar}{messages} msgs, {bag}, {rate:,.0f} msg/s, {_clock(elapsed)} elapsed{eta}'
-
-    def __call__(self, messages: int, bag_time: int) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if now - self.last_draw < 0.2:
-            return
-        self.last_draw = now
-        self.stream.write('\r\x1b[2K' + self.line(messages, bag_time, now - self.began))
-        self.stream.flush()
-        self.shown = True
-
-    def close(self) -> None:
-        """End the progress line."""
-        if self.enabled and self.shown:
-            self.stream.write('\r\x1b[2K')
-            self.stream.flush()
-
-
 class _CountLine:
     """A one-line bar of counted items on a terminal (stderr unless `stream`; drawn only on a terminal)."""
 
     WIDTH = 24
+    END = '\n'  # what `close` writes after the last drawing
 
     def __init__(self, stream: TextIO | None = None, enabled: bool | None = None) -> None:
         self.stream = stream or sys.stderr
@@ -104,10 +45,59 @@ class _CountLine:
             self.shown = True
 
     def close(self) -> None:
-        """End the line."""
+        """End the line: kept (a new line after it), or cleared where END says so."""
         if self.enabled and self.shown:
-            self.stream.write('\n')
+            self.stream.write(self.END)
             self.stream.flush()
+
+
+class ProgressBar(_CountLine):
+    """Callable given to the pipeline: progress(messages_done, bag_time_ns); the line is cleared at the end."""
+
+    END = '\r\x1b[2K'
+
+    def __init__(self, *, stream: TextIO | None = None, enabled: bool | None = None) -> None:
+        super().__init__(stream, enabled)
+        self.start_time: int | None = None
+        self.end_time: int | None = None
+        self.total: int | None = None
+        self.last_draw = 0.0
+
+    def begin(self, start_time: int | None, end_time: int | None, total_messages: int | None) -> None:
+        """What the whole job is: bag time span and message count, when known."""
+        self.start_time, self.end_time, self.total = start_time, end_time, total_messages
+        self.began = time.monotonic()
+
+    def fraction(self, messages: int, bag_time: int) -> float | None:
+        """Share of the work done, from bag time if known, else from message count."""
+        if self.start_time is not None and self.end_time is not None and self.end_time > self.start_time:
+            return min(1.0, max(0.0, (bag_time - self.start_time) / (self.end_time - self.start_time)))
+        if self.total:
+            return min(1.0, messages / self.total)
+        return None
+
+    def line(self, messages: int, bag_time: int, elapsed: float) -> str:
+        """The text of one update."""
+        done_s = (bag_time - self.start_time) / NS if self.start_time is not None else 0.0
+        total_s = (self.end_time - self.start_time) / NS if self.end_time and self.start_time is not None else None
+        fraction = self.fraction(messages, bag_time)
+        if fraction is None:
+            bar, eta = '', ''
+        else:
+            bar = f'{self.bar(fraction)} {fraction * 100:5.1f}% '
+            eta = f' ETA {_clock(elapsed * (1 - fraction) / fraction)}' if fraction > 0 else ''
+        bag = f'{done_s:.1f}/{total_s:.1f} s bag' if total_s is not None else f'{done_s:.1f} s bag'
+        rate = messages / elapsed if elapsed > 0 else 0.0
+        return f'{bar}{messages} msgs, {bag}, {rate:,.0f} msg/s, {_clock(elapsed)} elapsed{eta}'
+
+    def __call__(self, messages: int, bag_time: int) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self.last_draw < 0.2:
+            return
+        self.last_draw = now
+        self.show(self.line(messages, bag_time, now - self.began))
 
 
 class JobProgress(_CountLine):
