@@ -17,6 +17,7 @@ from bagfault.assertions.registry import ASSERTION_TYPES
 from bagfault.errors import FieldValueError
 from bagfault.fault_manager.config import scenario_config
 from bagfault.injectors.registry import get_injector_type, injector_types
+from bagfault.spec.reader import closest
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
@@ -79,14 +80,6 @@ def _params(assertion: AssertionSpec, out: _Collector) -> None:
         field = cls.field(str(key))
         if field is not None:  # (an unknown key is the validator's error)
             assertion.params[key] = coerce(field, value, (*assertion.path, key), out)
-
-
-def closest(word: str, candidates: list[str]) -> str | None:
-    """The candidate a misspelt key most likely means, if any."""
-    import difflib  # noqa: PLC0415
-
-    match = difflib.get_close_matches(word, candidates, n=1, cutoff=0.6)
-    return match[0] if match else None
 
 
 def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:

@@ -17,8 +17,9 @@ from bagfault.assertions.registry import ASSERTION_TYPES
 from bagfault.errors import FieldValueError, InjectorConfigError
 from bagfault.injectors.base import Injector, ServiceInjector, SystemInjector
 from bagfault.injectors.registry import get_injector_type
-from bagfault.scenario.resolve import closest, coerce
+from bagfault.scenario.resolve import coerce
 from bagfault.schema import Key
+from bagfault.spec.reader import closest
 from bagfault.yamlcpp import as_double
 
 if TYPE_CHECKING:

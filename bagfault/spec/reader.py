@@ -152,8 +152,8 @@ class Reader:
         for name in node:
             if name in names:
                 continue
-            close = difflib.get_close_matches(str(name), sorted(names), n=1, cutoff=0.6)
-            hint = f'did you mean {close[0]!r}? ' if close else ''
+            close = closest(str(name), sorted(names))
+            hint = f'did you mean {close!r}? ' if close else ''
             if section.unknown == 'warn':
                 (self.warn or self.problem)((*path, name), f'unknown {noun}key {name!r} is ignored ({hint}known: '
                                                            f'{known})')
@@ -247,6 +247,12 @@ def _range_problem(key: Key, value: object, number: float | None) -> str | None:
     if number < low:
         return f'{value} is negative' if low == 0 else f'{value} is below the minimum {low:g}{unit}'
     return None
+
+
+def closest(word: str, candidates: list[str]) -> str | None:
+    """The candidate a misspelt key most likely means, if any."""
+    match = difflib.get_close_matches(word, candidates, n=1, cutoff=0.6)
+    return match[0] if match else None
 
 
 def _number(bound: float) -> str:
