@@ -517,6 +517,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     A terminal that cannot take the messages (stdout or stderr on a full device) is exit 2 too: a verdict
     whose reasons were lost is not a verdict.
     """
+    if argv is None:  # the process's command (not a call from Python): before numpy loads
+        settings.one_blas_thread()
     try:
         with _terminating_signals():  # SIGTERM and SIGHUP as Ctrl-C from the first instant, parsing included
             code = _main(argv)

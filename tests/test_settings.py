@@ -4,9 +4,14 @@ BAGFAULT_CACHE_NODE of '../x' put the cache outside its root)."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import pytest
 from support.helpers import FIXTURES
 
+from bagfault import settings
 from bagfault.cli import main
 
 BAD = [('BAGFAULT_CACHE_GB', 'abc'), ('BAGFAULT_CACHE_GB', '-1'), ('BAGFAULT_CACHE_GB', '0'),
@@ -62,3 +67,49 @@ def test_every_setting_is_documented():
     read = set(re.findall(r"(?:_text|_folder)\('([A-Z_]+)'\)", (root / 'bagfault' / 'settings.py').read_text()))
     page = (root / 'docs' / 'reference' / 'environment.md').read_text()
     assert read and all(f'`{name}`' in page for name in read), read
+
+
+BLAS_PROBE = """
+import os, sys
+if sys.argv[1] == 'command':
+    from bagfault.cli import main
+    sys.argv = ['bagfault', 'schema', 'imu']
+    main()  # as the console script calls it
+import numpy
+print(len(os.listdir('/proc/self/task')), os.environ.get('OPENBLAS_NUM_THREADS'), file=sys.stderr)
+"""
+
+
+@pytest.mark.skipif(not os.path.isdir('/proc/self/task') or (os.cpu_count() or 1) < 2, reason='Linux, 2 cores')
+@pytest.mark.parametrize(('how', 'users', 'threads'), [('numpy', None, os.cpu_count()), ('command', None, 1),
+                                                       ('command', '2', 2)])
+def test_the_command_loads_numpy_with_one_blas_thread_unless_the_user_says(how, users, threads):
+    """numpy alone starts an OpenBLAS thread per core; the `bagfault` command loads it with none beside the main
+    thread, and keeps a value the user gave."""
+    env = {k: v for k, v in os.environ.items() if 'OPENBLAS' not in k and k != 'OMP_NUM_THREADS'}
+    if users is not None:
+        env['OPENBLAS_NUM_THREADS'] = users
+    done = subprocess.run([sys.executable, '-c', BLAS_PROBE, how], env=env, capture_output=True, text=True,
+                          check=True, timeout=120)
+    counted, value = done.stderr.split()[-2:]
+    assert int(counted) == threads
+    assert value == (users or ('1' if how == 'command' else 'None'))
+
+
+def test_a_system_gets_the_users_environment_without_bagfaults_blas_setting(monkeypatch):
+    from bagfault.closedloop.runner import system_env
+    from bagfault.spec.system import SystemUnderTest
+
+    system = SystemUnderTest(command=['true'])
+    monkeypatch.delenv('OPENBLAS_NUM_THREADS', raising=False)
+    monkeypatch.delenv('BAGFAULT_SET_OPENBLAS_NUM_THREADS', raising=False)
+    settings.one_blas_thread()  # as the command does
+    assert os.environ['OPENBLAS_NUM_THREADS'] == '1'
+    env = system_env(system, 7)
+    assert 'OPENBLAS_NUM_THREADS' not in env and 'BAGFAULT_SET_OPENBLAS_NUM_THREADS' not in env
+    assert env['ROS_DOMAIN_ID'] == '7'
+    monkeypatch.delenv('BAGFAULT_SET_OPENBLAS_NUM_THREADS')  # now the user's own value
+    monkeypatch.setenv('OPENBLAS_NUM_THREADS', '3')
+    settings.one_blas_thread()
+    assert system_env(system, 7)['OPENBLAS_NUM_THREADS'] == '3'
+    assert 'BAGFAULT_SET_OPENBLAS_NUM_THREADS' not in os.environ

@@ -32,6 +32,7 @@ from bagfault.live.pacer import CLOCK_NOTE
 from bagfault.live.recording import maybe_recording
 from bagfault.live.runtime import ros_context
 from bagfault.log import log
+from bagfault.settings import users_environment
 from bagfault.spec.system import command_line
 
 if TYPE_CHECKING:
@@ -50,8 +51,8 @@ PROFILE_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
 
 def system_env(system: SystemUnderTest, domain: int) -> dict[str, str]:
     """The system's environment: ours, its `env`, its domain and the loopback discovery profile."""
-    return {**os.environ, 'PYTHONUNBUFFERED': '1', 'RCUTILS_COLORIZED_OUTPUT': '0', **system.env,
-            'ROS_DOMAIN_ID': str(domain), PROFILE_VARIABLE: str(LOOPBACK_PROFILE)}
+    return {**users_environment(dict(os.environ)), 'PYTHONUNBUFFERED': '1', 'RCUTILS_COLORIZED_OUTPUT': '0',
+            **system.env, 'ROS_DOMAIN_ID': str(domain), PROFILE_VARIABLE: str(LOOPBACK_PROFILE)}
 
 
 ATTEMPTS = 3  # leased domains tried before giving up on finding one without other processes' nodes
