@@ -13,40 +13,28 @@ from __future__ import annotations
 from functools import lru_cache
 
 from bagfault.injectors.base import Injector, InjectorType, ServiceInjector
-from bagfault.injectors.field import FieldInjector
-from bagfault.injectors.image import ImageInjector
-from bagfault.injectors.imu import ImuInjector
-from bagfault.injectors.joint_state import JointStateInjector
-from bagfault.injectors.link import LinkInjector
-from bagfault.injectors.odom import OdomInjector
-from bagfault.injectors.pointcloud2 import PointCloud2Injector
-from bagfault.injectors.scan import ScanInjector
-from bagfault.injectors.system import ClockInjector, ProcessInjector, SystemInjector
-from bagfault.injectors.tf import TfInjector
-from bagfault.injectors.topic import CompressedImageInjector, TopicInjector
-from bagfault.injectors.trigger_service import TriggerServiceInjector
+from bagfault.injectors.system import SystemInjector
 from bagfault.log import log
+from bagfault.types_by_name import TypesByName
 
 GROUP = 'bagfault.injectors'
 
-BUILTIN: tuple[InjectorType, ...] = (
-    OdomInjector,
-    ScanInjector,
-    JointStateInjector,
-    ImuInjector,
-    TfInjector,
-    TriggerServiceInjector,
-    TopicInjector,
-    FieldInjector,
-    CompressedImageInjector,
-    PointCloud2Injector,
-    ImageInjector,
-    ProcessInjector,
-    ClockInjector,
-    LinkInjector,
-)
-
-_BUILTIN_TYPES: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}
+BUILTIN: TypesByName[InjectorType] = TypesByName({  # each module imported when a scenario names its type
+    'odom': 'bagfault.injectors.odom:OdomInjector',
+    'scan': 'bagfault.injectors.scan:ScanInjector',
+    'joint_state': 'bagfault.injectors.joint_state:JointStateInjector',
+    'imu': 'bagfault.injectors.imu:ImuInjector',
+    'tf': 'bagfault.injectors.tf:TfInjector',
+    'trigger_service': 'bagfault.injectors.trigger_service:TriggerServiceInjector',
+    'topic': 'bagfault.injectors.topic:TopicInjector',
+    'field': 'bagfault.injectors.field:FieldInjector',
+    'compressed_image': 'bagfault.injectors.topic:CompressedImageInjector',
+    'pointcloud2': 'bagfault.injectors.pointcloud2:PointCloud2Injector',
+    'image': 'bagfault.injectors.image:ImageInjector',
+    'process': 'bagfault.injectors.system:ProcessInjector',
+    'clock': 'bagfault.injectors.system:ClockInjector',
+    'link': 'bagfault.injectors.link:LinkInjector',
+})
 
 
 @lru_cache(maxsize=1)
@@ -54,7 +42,7 @@ def injector_types() -> dict[str, InjectorType]:
     """All known injector types, built-ins first; a plugin cannot replace a built-in."""
     from importlib.metadata import entry_points  # noqa: PLC0415 - 70 ms; scenarios of built-ins never need it
 
-    types: dict[str, InjectorType] = {cls.type_name: cls for cls in BUILTIN}
+    types: dict[str, InjectorType] = dict(BUILTIN)  # every built-in imported: the list needs them all
     for entry in sorted(entry_points(group=GROUP), key=lambda e: e.name):
         if entry.name in types:
             log.warning(f'plugin {entry.value} ignored: type {entry.name!r} is built in')
@@ -73,4 +61,4 @@ def injector_types() -> dict[str, InjectorType]:
 
 def get_injector_type(name: str) -> InjectorType | None:
     """Injector class for a type name, or None (plugins are looked for only when no built-in has the name)."""
-    return _BUILTIN_TYPES.get(name) or injector_types().get(name)
+    return BUILTIN[name] if name in BUILTIN else injector_types().get(name)
