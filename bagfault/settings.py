@@ -114,7 +114,7 @@ def one_blas_thread() -> None:
     """Load numpy, in this process and the ones bagfault starts for itself, without OpenBLAS's thread pool.
 
     bagfault multiplies no matrices; OpenBLAS starts a thread per core when numpy loads and they spin
-    (0.08 s of CPU per process here, a fifth of what a run without faults spends beyond a copy). The command
+    (0.05-0.09 s of CPU per process here, a tenth of what a run without faults spends beyond a copy). The command
     line calls this before numpy loads; a value the user set is left as it is.
     """
     if BLAS_THREADS not in os.environ:

@@ -50,15 +50,15 @@ def test_a_name_not_listed_is_a_key_error_and_a_lookup_loads_once():
 
 PROBE = """
 import json, sys
-from bagfault import api
-from bagfault.scenario import parse_scenario
-api.run(parse_scenario(open(sys.argv[1]).read()), [sys.argv[2]], sys.argv[3], seed=1)
-print(json.dumps(sorted(m for m in sys.modules if m.startswith(('bagfault.injectors.', 'bagfault.assertions.')))))
+from bagfault.cli import main
+assert main(['run', *sys.argv[1:3], '-o', sys.argv[3]]) == 0
+print(json.dumps(sorted(m for m in sys.modules if m.startswith(('bagfault.injectors.', 'bagfault.assertions.',
+                                                              'bagfault.report.')))))
 """
 
 
 def test_a_run_loads_the_types_its_scenario_names_only(tmp_path):
-    """An IMU injector and no assertion: no other injector's module, no assertion's."""
+    """An IMU injector, no assertion, no report: no other injector's module, no assertion's, no renderer."""
     scenario = tmp_path / 'imu.yaml'
     scenario.write_text('injectors:\n  - {id: imu0, type: imu, input_topic: /imu, output_topic: /imu}\n'
                         'faults:\n  - {id: b, injector_id: imu0, start: 1.0, duration: 1.0,\n'
@@ -71,6 +71,8 @@ def test_a_run_loads_the_types_its_scenario_names_only(tmp_path):
     assert injectors <= {'bagfault.injectors.imu', 'bagfault.injectors.base', 'bagfault.injectors.registry',
                          'bagfault.injectors.system'}, injectors
     assert not any(m.rpartition('.')[2] in _declared_modules('assertions') for m in loaded), loaded
+    assert not {'bagfault.report.model', 'bagfault.report.markdown', 'bagfault.report.json_report',
+                'bagfault.report.junit', 'bagfault.report.html'} & set(loaded), loaded
 
 
 def _declared_modules(folder: str) -> set[str]:

@@ -58,19 +58,29 @@ class ReportPaths:
         return [RateTracker()]
 
     def write(self, result: RunResult, collectors: Sequence[Observer] = ()) -> None:
-        """Render and write every report asked for."""
-        from bagfault.report import html, json_report, junit, markdown, model  # noqa: PLC0415
-        from bagfault.report.fields import collect  # noqa: PLC0415
-        from bagfault.report.rates import RateTracker  # noqa: PLC0415
+        """Render and write every report asked for (a renderer's module imported only when its report is)."""
+        if not self.named():
+            return
+        from bagfault.report import model  # noqa: PLC0415
 
         report = model.build(result)
         if self.markdown is not None:
+            from bagfault.report import markdown  # noqa: PLC0415
+
             write_atomic(self.markdown, markdown.render(report), 'markdown')
         if self.json is not None:
+            from bagfault.report import json_report  # noqa: PLC0415
+
             write_atomic(self.json, json_report.render(report), 'json')
         if self.junit is not None:
+            from bagfault.report import junit  # noqa: PLC0415
+
             write_atomic(self.junit, junit.render(report, extended=self.junit_file_line), 'xml')
         if self.html is not None:
+            from bagfault.report import html  # noqa: PLC0415
+            from bagfault.report.fields import collect  # noqa: PLC0415
+            from bagfault.report.rates import RateTracker  # noqa: PLC0415
+
             rates: RateTracker | None = next((c for c in collectors if isinstance(c, RateTracker)), None)
             plots, media = collect(result)
             write_atomic(self.html, html.render(report, rates, plots, media=media), 'html')
