@@ -245,3 +245,25 @@ def test_a_job_s_cpu_seconds_are_its_process_s_and_its_children_s() -> None:
     burning, sleeping = results[0], results[1]
     assert 0.8 <= burning['cpu_s'] < 0.8 + 0.3, burning  # the child's interpreter start adds a few hundredths
     assert sleeping['seconds'] >= 0.6 and sleeping['cpu_s'] < 0.1, sleeping
+
+
+def test_a_job_finds_every_built_in_type_loaded_by_its_fork_server() -> None:
+    """Types are imported when a scenario names them (bagfault/types_by_name.py); the fork server imports them
+    all once, so no job pays for them. Expected: every module of injectors/ and assertions/ whose source
+    declares a `type_name`."""
+    from support import jobs
+
+    from bagfault.campaign.engines import LocalEngine
+
+    package = Path(__file__).resolve().parents[2] / 'bagfault'
+    declaring = {f'bagfault.{folder}.{path.stem}' for folder in ('injectors', 'assertions')
+                 for path in (package / folder).glob('*.py') if "type_name = '" in path.read_text()}
+    results: dict[int, dict[str, Any]] = {}
+    engine = LocalEngine(1, jobs.loaded_modules)
+    try:
+        engine.run([{'timeout': 60.0, 'prefix': 'bagfault.'}], results.__setitem__)
+    finally:
+        engine.close()
+    loaded = set(results[0]['message'].split())
+    assert len(declaring) >= 15
+    assert declaring - loaded == set()

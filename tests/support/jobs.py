@@ -22,3 +22,10 @@ def measured(spec: dict[str, Any]) -> dict[str, Any]:
     time.sleep(spec.get('sleep', 0.0))
     return {'status': 'passed', 'message': '', 'assertions': {}, 'detections': {}, 'warnings': [],
             'seconds': round(time.monotonic() - began, 3), 'output': None}
+
+
+def loaded_modules(spec: dict[str, Any]) -> dict[str, Any]:
+    """The bagfault modules already loaded when the job starts (what its fork server had imported), as the message."""
+    loaded = sorted(m for m in sys.modules if m.startswith(spec['prefix']))
+    return {'status': 'passed', 'message': ' '.join(loaded), 'assertions': {}, 'detections': {}, 'warnings': [],
+            'seconds': 0.0, 'output': None}
