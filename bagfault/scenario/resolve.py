@@ -17,7 +17,7 @@ from bagfault.assertions.registry import ASSERTION_TYPES
 from bagfault.errors import FieldValueError
 from bagfault.fault_manager.config import scenario_config
 from bagfault.injectors.registry import get_injector_type, injector_types
-from bagfault.spec.reader import closest
+from bagfault.spec.reader import key_hint
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
@@ -64,9 +64,8 @@ def _config(scenario: Scenario, fault: FaultSpec, out: _Collector) -> None:
         path = (*fault.path, 'config', key)
         field = cls.field(str(key))
         if field is None:
-            hint = closest(str(key), keys)
             out.ignored(path, f'unknown config key {key!r} for injector type {injector.type!r} is ignored'
-                           + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+                              f'{key_hint(str(key), keys)}')
             del fault.config[key]  # still shown in the fault's event details, as the anchor shows it
             continue
         fault.config[key] = coerce(field, value, path, out)

@@ -19,12 +19,13 @@ from bagfault.injectors.base import Injector, ServiceInjector, SystemInjector
 from bagfault.injectors.registry import get_injector_type
 from bagfault.scenario.resolve import coerce
 from bagfault.schema import Key
-from bagfault.spec.reader import closest
+from bagfault.spec.reader import key_hint
 from bagfault.yamlcpp import as_double
 
 if TYPE_CHECKING:
     from bagfault.scenario.loader import _Collector
     from bagfault.spec.model import Explore, ExploreFault, FaultSpec, Scenario
+    from bagfault.spec.yamlnodes import PathKey
 
 
 def check_ids(scenario: Scenario, out: _Collector) -> None:
@@ -55,11 +56,15 @@ def _duplicates(scenario: Scenario, out: _Collector) -> None:
     for kind, items in (('injector', scenario.injectors), ('assertion', scenario.assertions)):
         counts = Counter(x.id for x in items if x.id)
         seen: set[str] = set()
-        for item in items:
-            if counts[item.id] > 1:
-                if item.id in seen:
-                    out.add((*item.path, 'id'), f'duplicate {kind} id {item.id!r}')
-                seen.add(item.id)
+        for item in (x for x in items if counts[x.id] > 1):
+            if item.id in seen:
+                out.add((*item.path, 'id'), f'duplicate {kind} id {item.id!r}')
+            seen.add(item.id)
+    _redefined_faults(scenario, out)
+
+
+def _redefined_faults(scenario: Scenario, out: _Collector) -> None:
+    """A fault id defined again: refused on another injector, a warning on the same one (see `_duplicates`)."""
     first: dict[str, FaultSpec] = {}
     for fault in scenario.faults:
         earlier = first.setdefault(fault.id, fault) if fault.id else fault
@@ -91,11 +96,17 @@ def anchor_refusal(field: Key, text: str) -> str | None:
             return f"config '{field.name}' must be an integer"
         return None
     if kind in ('number', 'special_float'):
-        if kind == 'special_float' and text in ('inf', '+inf', '-inf', 'nan'):
-            return None
-        if _FROM_CHARS_DOUBLE.fullmatch(text) is None:
-            tail = ', inf, -inf, or nan' if kind == 'special_float' else ''
-            return f"config '{field.name}' must be a number{tail}"
+        return _number_refusal(field.name, text, special=kind == 'special_float')
+    return None
+
+
+def _number_refusal(name: str, text: str, *, special: bool) -> str | None:
+    """A double key's text as from_chars reads it; `special`: inf, -inf and nan are named as accepted."""
+    if special and text in ('inf', '+inf', '-inf', 'nan'):
+        return None
+    if _FROM_CHARS_DOUBLE.fullmatch(text) is None:
+        tail = ', inf, -inf, or nan' if special else ''
+        return f"config '{name}' must be a number{tail}"
     return None
 
 
@@ -104,6 +115,18 @@ def _check_injector(injector: Any, out: _Collector) -> None:
         return
     cls = get_injector_type(injector.type)
     assert cls is not None  # unknown types were left out
+    _check_endpoints(injector, cls, out)
+    for field in cls.options:
+        if field.required and field.name not in injector.options:
+            out.add(injector.path, f'missing required key {field.name!r} for injector type {injector.type!r}')
+    try:
+        cls.check_options(injector.options)
+    except InjectorConfigError as exc:
+        out.add(injector.path, str(exc))
+
+
+def _check_endpoints(injector: Any, cls: Any, out: _Collector) -> None:
+    """A topic type with topics, a service type with services, a system type with neither service."""
     is_service_type = issubclass(cls, ServiceInjector)
     if issubclass(cls, SystemInjector):
         if injector.is_service:
@@ -114,13 +137,6 @@ def _check_injector(injector: Any, out: _Collector) -> None:
                 f'injector type {injector.type!r} proxies a service: give proxy_service and target_service')
     if not is_service_type and injector.is_service:
         out.add(injector.path, f'injector type {injector.type!r} proxies a topic: give input_topic and output_topic')
-    for field in cls.options:
-        if field.required and field.name not in injector.options:
-            out.add(injector.path, f'missing required key {field.name!r} for injector type {injector.type!r}')
-    try:
-        cls.check_options(injector.options)
-    except InjectorConfigError as exc:
-        out.add(injector.path, str(exc))
 
 
 def _check_outputs(scenario: Scenario, out: _Collector) -> None:
@@ -145,8 +161,12 @@ def _check_fault(scenario: Scenario, fault: Any, out: _Collector) -> None:
         out.add((*fault.path, 'injector_id'), f'unknown injector {fault.injector_id!r} (injectors: {known})')
         return
     cls = get_injector_type(injector.type)
-    if cls is None:
-        return
+    if cls is not None:
+        _check_fault_config(fault, injector, cls, out)
+
+
+def _check_fault_config(fault: Any, injector: Any, cls: Any, out: _Collector) -> None:
+    """Each config value, the required keys, then the whole config as the injector type checks it."""
     for key, coerced in fault.config.items():  # (as resolve.py read them: unknown keys left out)
         field = cls.field(str(key))
         assert field is not None
@@ -176,11 +196,17 @@ def _check_config_value(fault: Any, injector_type: str, field: Key, key: str, co
     if coerced is not None and refusal is not None:
         out.warn(path, f"{text!r} is read here, but ros2_fault_injection's "
                        f'validator refuses it ({refusal}): the file would not load in the anchor')
-    if isinstance(coerced, float) and math.isnan(coerced) and key.endswith(('_stddev', '_probability')):
+    if isinstance(coerced, float) and not math.isfinite(coerced):
+        _non_finite(path, key, field, coerced, refused=refusal is not None, out=out)
+
+
+def _non_finite(path: PathKey, key: str, field: Key, value: float, *, refused: bool, out: _Collector) -> None:
+    """What nan and inf do to a config value (nothing to a level, where the anchor's std::max keeps the other)."""
+    if math.isnan(value) and key.endswith(('_stddev', '_probability')):
         out.ignored(path, "nan has no effect: a level is the largest of the active faults' values, and "
                        'ros2_fault_injection folds them with std::max(level, nan), which keeps level')
-    elif isinstance(coerced, float) and not math.isfinite(coerced) and field.type == 'number' and refusal is None:
-        out.warn(path, f'{coerced} makes every value it touches {coerced} or nan (ros2_fault_injection accepts '
+    elif field.type == 'number' and not refused:
+        out.warn(path, f'{value} makes every value it touches {value} or nan (ros2_fault_injection accepts '
                        'it too)')
 
 
@@ -211,15 +237,9 @@ def _check_chains(scenario: Scenario, out: _Collector) -> None:
             out.add((*fault.path, 'after', 'fault'), f'unknown fault {fault.after.fault!r}')
     followed: set[str] = set()  # faults whose chain was walked already (a loop is found once)
     for fault in scenario.faults:
-        walk: list[str] = []
-        probe: FaultSpec | None = fault
-        while probe is not None and probe.id not in followed and probe.id not in walk:
-            walk.append(probe.id)
-            probe = by_id.get(probe.after.fault) if probe.after is not None else None
-        followed.update(walk)
-        if probe is None or probe.id not in walk:
+        loop = _loop_from(fault, by_id, followed)
+        if not loop:
             continue
-        loop = walk[walk.index(probe.id):]
         first = min(loop, key=position.__getitem__)
         loop = loop[loop.index(first):] + loop[:loop.index(first)]
         path = (*by_id[first].path, 'after', 'fault')
@@ -227,6 +247,20 @@ def _check_chains(scenario: Scenario, out: _Collector) -> None:
             out.add(path, 'a fault cannot be chained after itself')
         else:
             out.add(path, f'chain of "after" faults loops: {" -> ".join([*loop, first])}')
+
+
+def _loop_from(fault: FaultSpec, by_id: dict[str, FaultSpec], followed: set[str]) -> list[str]:
+    """The loop the `after` chain from `fault` runs into, if it runs into one not walked before (then `followed`
+    holds every fault walked)."""
+    walk: list[str] = []
+    probe: FaultSpec | None = fault
+    while probe is not None and probe.id not in followed and probe.id not in walk:
+        walk.append(probe.id)
+        probe = by_id.get(probe.after.fault) if probe.after is not None else None
+    followed.update(walk)
+    if probe is None or probe.id not in walk:
+        return []
+    return walk[walk.index(probe.id):]
 
 
 ANCHOR_ASSERTIONS = {'topic_hz', 'fault_event'}  # the assertion types ros2_fault_injection has
@@ -242,31 +276,45 @@ def _check_assertion(scenario: Scenario, assertion: Any, out: _Collector) -> Non
         return
     if assertion.within is not None and not cls.takes_within:
         out.add((*assertion.path, 'within'), f'{assertion.type} has no deadline; within does not apply')
+    _check_assertion_params(assertion, cls, out)
+    for field in cls.fields:
+        if field.required and field.name not in assertion.params:
+            out.add(assertion.path, f'missing required key {field.name!r} for assertion type {assertion.type!r}')
+    _check_assertion_values(scenario, assertion, cls, out)
+    _window_advisory(assertion, out)
+
+
+def _check_assertion_values(scenario: Scenario, assertion: Any, cls: Any, out: _Collector) -> None:
+    """The values together, as the assertion type checks them (once every one could be read)."""
+    if all(v is not None for v in assertion.params.values()):
+        for key, message in cls.check(assertion, scenario):
+            out.add((*assertion.path, key) if key else assertion.path, message)
+
+
+def _window_advisory(assertion: Any, out: _Collector) -> None:
+    """The anchor's advisory (scenario_validator.cpp, validate_assertions): a topic_hz deadline shorter than its
+    window may fail before a full window was measured."""
+    window = assertion.params.get('window')
+    if assertion.type == 'topic_hz' and assertion.within is not None and isinstance(window, (int, float)) \
+            and assertion.within < window:
+        out.warn((*assertion.path, 'within'), f'assertion {assertion.id!r} has within smaller than window; it may '
+                                               'fail before a full measurement window is available')
+
+
+def _check_assertion_params(assertion: Any, cls: Any, out: _Collector) -> None:
+    """Each key the assertion gives: one its type has, and a number the anchor's yaml-cpp reads too."""
     keys = [f.name for f in cls.fields]
     for key, value in list(assertion.params.items()):
         field = cls.field(str(key))
         path = (*assertion.path, key)
         if field is None:
-            hint = closest(str(key), keys)
-            out.add(path, f'unknown key {key!r} for assertion type {assertion.type!r}'
-                          + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
+            out.add(path, f'unknown key {key!r} for assertion type {assertion.type!r}{key_hint(str(key), keys)}')
             continue
         raw = out.located.raw_text(path, value)
         if assertion.type in ANCHOR_ASSERTIONS and field.type == 'number' and assertion.params[key] is not None \
                 and as_double(raw) is None:  # scenario_config.cpp reads min_hz and window with as<double>()
             out.warn(path, f"{raw!r} is read here, but ros2_fault_injection's yaml-cpp refuses it (as<double>: a "
                            "decimal or .inf/.nan only)")
-    for field in cls.fields:
-        if field.required and field.name not in assertion.params:
-            out.add(assertion.path, f'missing required key {field.name!r} for assertion type {assertion.type!r}')
-    if all(v is not None for v in assertion.params.values()):
-        for key, message in cls.check(assertion, scenario):
-            out.add((*assertion.path, key) if key else assertion.path, message)
-    window = assertion.params.get('window')
-    if assertion.type == 'topic_hz' and assertion.within is not None and isinstance(window, (int, float)) \
-            and assertion.within < window:  # the anchor's advisory (scenario_validator.cpp, validate_assertions)
-        out.warn((*assertion.path, 'within'), f'assertion {assertion.id!r} has within smaller than window; it may '
-                                               'fail before a full measurement window is available')
 
 
 def _check_explore(scenario: Scenario, explore: Explore, out: _Collector) -> None:
@@ -298,42 +346,58 @@ def _check_candidate(scenario: Scenario, fault: ExploreFault, out: _Collector) -
         return
     cls = get_injector_type(injector.type)
     assert cls is not None  # unknown types were left out
-    keys = [f.name for f in cls.fields]
-    corners: list[dict[str, Any]] = [{}, {}]  # the config with every dimension at its low, and at its high end
-    for key, value in fault.config.items():
-        field = cls.field(str(key))
-        if field is None:
-            hint = closest(str(key), keys)
-            out.add((*fault.path, 'config', key), f'injector type {injector.type!r} has no config key {key!r}'
-                    + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
-            continue
-        for corner in corners:
-            corner[key] = coerce(field, value, (*fault.path, 'config', key), out)
+    corners = _candidate_config(fault, injector.type, cls, out)
     for dimension in fault.dimensions:
-        if not dimension.name.startswith('config.'):
-            continue
-        key = dimension.name.removeprefix('config.')
-        path = (*fault.path, 'config', key)
-        field = cls.field(key)
-        if field is None:
-            hint = closest(key, keys)
-            out.add(path, f'a dimension on {key!r}, a key injector type {injector.type!r} lacks'
-                          + (f' (did you mean {hint!r}?)' if hint else f' (keys: {", ".join(keys)})'))
-            continue
-        if field.type not in ('number', 'integer', 'special_float'):
-            out.add(path, f'{key!r} is a {field.type}: only a number can be a dimension')
-            continue
-        for corner, end, which in ((corners[0], dimension.low, 'low'), (corners[1], dimension.high, 'high')):
-            try:
-                corner[key] = field.coerce(round(end) if field.type == 'integer' else end)
-            except FieldValueError as exc:
-                out.add(path, f'the {which} end {end:g}: {exc}')
-            if field.type == 'integer' and end != round(end):
-                out.add(path, f'the {which} end {end:g} is not whole, and {key!r} takes whole numbers')
+        if dimension.name.startswith('config.'):
+            _check_config_dimension(fault, injector.type, cls, dimension, corners, out)
+    _check_corners(fault, injector.options, cls, corners, out)
+
+
+def _check_corners(fault: ExploreFault, options: dict[str, Any], cls: Any, corners: list[dict[str, Any]],
+                   out: _Collector) -> None:
+    """The config at both corners of the space, as the injector type checks a config (the first problem only)."""
     for corner in corners:
         if all(v is not None for v in corner.values()):
             try:
-                cls.check_fault(corner, injector.options)
+                cls.check_fault(corner, options)
             except InjectorConfigError as exc:
                 out.add((*fault.path, 'config'), str(exc))
-                break
+                return
+
+
+def _candidate_config(fault: ExploreFault, injector_type: str, cls: Any, out: _Collector) -> list[dict[str, Any]]:
+    """The candidate's fixed config keys, each one its type has, read into the two corners of the space: the
+    config with every dimension at its low end, and at its high end (the dimensions are added after)."""
+    keys = [f.name for f in cls.fields]
+    corners: list[dict[str, Any]] = [{}, {}]
+    for key, value in fault.config.items():
+        field = cls.field(str(key))
+        if field is None:
+            out.add((*fault.path, 'config', key), f'injector type {injector_type!r} has no config key {key!r}'
+                                                  f'{key_hint(str(key), keys)}')
+            continue
+        for corner in corners:
+            corner[key] = coerce(field, value, (*fault.path, 'config', key), out)
+    return corners
+
+
+def _check_config_dimension(fault: ExploreFault, injector_type: str, cls: Any, dimension: Any,
+                            corners: list[dict[str, Any]], out: _Collector) -> None:
+    """A dimension over a config key: a numeric key of the type, each end within its range (put in `corners`)."""
+    key = dimension.name.removeprefix('config.')
+    path = (*fault.path, 'config', key)
+    field = cls.field(key)
+    if field is None:
+        out.add(path, f'a dimension on {key!r}, a key injector type {injector_type!r} lacks'
+                      f'{key_hint(key, [f.name for f in cls.fields])}')
+        return
+    if field.type not in ('number', 'integer', 'special_float'):
+        out.add(path, f'{key!r} is a {field.type}: only a number can be a dimension')
+        return
+    for corner, end, which in ((corners[0], dimension.low, 'low'), (corners[1], dimension.high, 'high')):
+        try:
+            corner[key] = field.coerce(round(end) if field.type == 'integer' else end)
+        except FieldValueError as exc:
+            out.add(path, f'the {which} end {end:g}: {exc}')
+        if field.type == 'integer' and end != round(end):
+            out.add(path, f'the {which} end {end:g} is not whole, and {key!r} takes whole numbers')

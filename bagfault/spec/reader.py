@@ -255,6 +255,12 @@ def closest(word: str, candidates: list[str]) -> str | None:
     return match[0] if match else None
 
 
+def key_hint(word: str, keys: list[str]) -> str:
+    """What follows an unknown key's message: ' (did you mean ...?)', else ' (keys: ...)'."""
+    close = closest(word, keys)
+    return f' (did you mean {close!r}?)' if close else f' (keys: {", ".join(keys)})'
+
+
 def _number(bound: float) -> str:
     """A declared bound as written (2**64 - 1 whole, not rounded through a float)."""
     return str(bound) if isinstance(bound, int) else f'{bound:g}'
