@@ -78,70 +78,82 @@ class Reader:
             node = {}
         needed = [k.name for k in section.keys if k.required or k.name in required]
         if not isinstance(node, dict):
-            if caret and needed:
-                self.problem(path, f'required key {needed[0]!r} not found')
-            else:
-                self.problem(path, 'must be a mapping' + (f' with {_listing(needed, "and")}' if needed else ''))
+            self.problem(path, _not_a_mapping(needed, caret=caret))
             return None
         if judge_unknown:
             self._unknown(section, node, path, extra)
         result = Read()
         for key in section.keys:
-            value = node.get(key.name)
-            absent = (value is None and (yaml_cpp or (caret and key.name not in needed))) or (
-                section.reads == 'medkit' and key.type == 'boolean' and isinstance(value, (dict, list)))
-            if caret and key.name in needed and key.name in node and value is None:
-                self.problem(path, f'{key.name!r} value is None')
-                continue
-            if key.name not in node or absent:
-                if key.name in needed:
-                    self.problem(path, f'required key {key.name!r} not found' if caret else
-                                 f'missing required key {key.name!r}')
-                elif key.default is not None:
-                    result.values[key.name] = copy.copy(key.default)  # a list or mapping of its own
-                continue
-            result.given.add(key.name)
-            ok, read = self.value(section, key, value, (*path, key.name))
-            if ok:
-                result.values[key.name] = read
-            else:
-                result.refused.add(key.name)
+            self._read_key(section, key, node, path, needed, result)
         return result
+
+    def _read_key(self, section: Section, key: Key, node: dict[Any, Any], path: PathKey, needed: list[str],
+                  result: Read) -> None:
+        """One declared key of `node` into `result`: read, refused, missing or its default."""
+        caret = section.reads == 'caret'
+        value = node.get(key.name)
+        if caret and key.name in needed and key.name in node and value is None:
+            self.problem(path, f'{key.name!r} value is None')
+            return
+        if key.name not in node or _absent(section, key, value, needed):
+            self._missing(key, path, needed, result, caret=caret)
+            return
+        result.given.add(key.name)
+        ok, read = self.value(section, key, value, (*path, key.name))
+        if ok:
+            result.values[key.name] = read
+        else:
+            result.refused.add(key.name)
+
+    def _missing(self, key: Key, path: PathKey, needed: list[str], result: Read, *, caret: bool) -> None:
+        """A key not given: a problem when it is required, else its default (a copy: a list or mapping of its
+        own)."""
+        if key.name in needed:
+            self.problem(path, f'required key {key.name!r} not found' if caret else
+                         f'missing required key {key.name!r}')
+        elif key.default is not None:
+            result.values[key.name] = copy.copy(key.default)
 
     def value(self, section: Section, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
         """One key's value read by its declaration: (True, value), or (False, None) with the problem told."""
         anchor = section.reads in ('anchor', 'medkit')  # yaml-cpp's scalars
         if key.choices:
-            if value not in key.choices:
-                self.problem(path, f'{value!r} is not {_listing(list(key.choices), "or")}')
-                return False, None
-            return True, value
+            return self._choice(key, value, path)
         kind = key.type
         if kind == 'string':
             return self._string(key, value, path, anchor=anchor)
         if kind == 'boolean':
-            read = as_bool(value) if anchor else (value if isinstance(value, bool) else None)
-            if read is None and section.reads == 'medkit':
-                self.problem(path, f"{value!r} is not a boolean as medkit's yaml-cpp reads one (true/false, yes/no, "
-                                   'on/off, y/n)')
-            elif read is None:
-                tail = f' ({key.what})' if key.what else \
-                    ' (nor yes/no, y/n, on/off, as yaml-cpp reads booleans)' if anchor else ''
-                self.problem(path, f'{value!r} is not true or false{tail}')
-            if read is None:
-                return False, None
-            return True, read
+            return self._boolean(section, key, value, path)
         if kind in ('number', 'integer', 'seconds'):
             return self._number(key, value, path, anchor=anchor)
         if kind == 'dimension':
             return self.dimension(key, value, path)
-        if kind == 'list' and not isinstance(value, list):
-            self.problem(path, f'must be {key.what or "a list"}')
-            return False, None
-        if kind == 'mapping' and not isinstance(value, dict):
-            self.problem(path, f'must be {key.what or "a mapping"}')
+        if kind in ('list', 'mapping') and not isinstance(value, list if kind == 'list' else dict):
+            self.problem(path, f'must be {key.what or "a " + kind}')
             return False, None
         return True, value
+
+    def _choice(self, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
+        """One of the key's choices, as given."""
+        if value not in key.choices:
+            self.problem(path, f'{value!r} is not {_listing(list(key.choices), "or")}')
+            return False, None
+        return True, value
+
+    def _boolean(self, section: Section, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
+        """A boolean as the section's reader takes one (yaml-cpp's words for the anchor's and medkit's)."""
+        anchor = section.reads in ('anchor', 'medkit')
+        read = as_bool(value) if anchor else (value if isinstance(value, bool) else None)
+        if read is not None:
+            return True, read
+        if section.reads == 'medkit':
+            self.problem(path, f"{value!r} is not a boolean as medkit's yaml-cpp reads one (true/false, yes/no, "
+                               'on/off, y/n)')
+        else:
+            tail = f' ({key.what})' if key.what else \
+                ' (nor yes/no, y/n, on/off, as yaml-cpp reads booleans)' if anchor else ''
+            self.problem(path, f'{value!r} is not true or false{tail}')
+        return False, None
 
     def _unknown(self, section: Section, node: dict[Any, Any], path: PathKey, extra: Collection[str]) -> None:
         if section.unknown == 'ignore':
@@ -173,21 +185,33 @@ class Reader:
     def _number(self, key: Key, value: object, path: PathKey, *, anchor: bool) -> tuple[bool, Any]:
         """A number by its key: the type first, then finite and within the declared range."""
         integer = key.type == 'integer'
-        number: float | int | None = None
-        if not isinstance(value, (bool, dict, list)) and value is not None:
-            if anchor and isinstance(value, (int, float, str)):
-                text = self.raw_text(path, value)
-                unsigned = key.minimum is not None and key.minimum >= 0
-                bits = 32 if key.maximum is not None and key.maximum < 2**32 else 64  # uint32_t, not size_t
-                number = as_int(text, unsigned=unsigned, bits=bits) if integer else as_double(text)
-            elif isinstance(value, int) or (isinstance(value, float) and not integer):
-                number = value
+        number = self._parsed(key, value, path, anchor=anchor)
         message = _range_problem(key, value, number)
         if message is not None:
             self.problem(path, message)
             return False, None
         assert number is not None
         return True, int(number) if integer else float(number)
+
+    def _parsed(self, key: Key, value: object, path: PathKey, *, anchor: bool) -> float | int | None:
+        """The number a value is, as the section's reader takes one; None when it is none."""
+        if isinstance(value, (bool, dict, list)) or value is None:
+            return None
+        if anchor and isinstance(value, (int, float, str)):
+            return self._yaml_cpp_number(key, value, path)
+        if isinstance(value, int) or (isinstance(value, float) and key.type != 'integer'):
+            return value
+        return None
+
+    def _yaml_cpp_number(self, key: Key, value: object, path: PathKey) -> float | int | None:
+        """The scalar's text as yaml-cpp's as<double> or as<int> reads it (an unsigned type where the minimum is
+        not negative, 32 bits where the maximum fits)."""
+        text = self.raw_text(path, value)
+        if key.type != 'integer':
+            return as_double(text)
+        unsigned = key.minimum is not None and key.minimum >= 0
+        bits = 32 if key.maximum is not None and key.maximum < 2**32 else 64  # uint32_t, not size_t
+        return as_int(text, unsigned=unsigned, bits=bits)
 
     def dimension(self, key: Key, value: object, path: PathKey) -> tuple[bool, Any]:
         """A number, or a `[low, high]` pair `bagfault explore` draws from (low the weakest; a tuple): each end
@@ -198,6 +222,10 @@ class Reader:
                 self.problem(path, f'{value!r} is not a number or a [low, high] range')
                 return False, None
             return self._number(plain, value, path, anchor=False)
+        return self._range(plain, value, path)
+
+    def _range(self, plain: Key, value: list[Any], path: PathKey) -> tuple[bool, Any]:
+        """A `[low, high]` pair of numbers of the key's range, low below high."""
         if len(value) != 2:
             self.problem(path, f'{value!r} is not a [low, high] range: give two numbers')
             return False, None
@@ -219,27 +247,41 @@ class Reader:
         return self.raw(path, value) if self.raw is not None else str(value)
 
 
+def _not_a_mapping(needed: list[str], *, caret: bool) -> str:
+    """The problem of a section that is no mapping (as caret says it: its first required key not found)."""
+    if caret and needed:
+        return f'required key {needed[0]!r} not found'
+    return 'must be a mapping' + (f' with {_listing(needed, "and")}' if needed else '')
+
+
+def _absent(section: Section, key: Key, value: object, needed: list[str]) -> bool:
+    """A key given a value its reader takes for no value: yaml-cpp's null (and caret's for an optional key), or
+    medkit's yaml-cpp reading a mapping or list where a boolean goes (its as<bool> fallback)."""
+    if value is None and (section.reads in ('anchor', 'medkit') or
+                          (section.reads == 'caret' and key.name not in needed)):
+        return True
+    return section.reads == 'medkit' and key.type == 'boolean' and isinstance(value, (dict, list))
+
+
 def _range_problem(key: Key, value: object, number: float | None) -> str | None:
     """What is wrong with a number read for `key`, None when nothing is."""
-    low, high = key.minimum, key.maximum
     if key.type == 'integer':
-        if number is not None and (low is None or number >= low) and (high is None or number <= high) \
-                and not (key.exclusive and low is not None and number <= low):
-            return None
-        if low == 1 and high is None:
-            return f'{value!r} is not a positive integer'
-        if low is not None and high is not None:
-            return f'{value!r} is not an integer from {_number(low)} to {_number(high)}'
-        return f'{value!r} is not an integer' + (f' of at least {_number(low)}' if low is not None else '')
+        return _integer_problem(key, value, number)
     seconds = key.type == 'seconds'
     if number is None:
         return f'{value!r} is not a number of seconds' if seconds else f'{value!r} is not a number'
-    unit = ' s' if seconds else ''
+    high = key.maximum
     if not math.isfinite(number) or (high is not None and number > high):
         if seconds:
             return f'{value} is not a time bagfault can schedule (0 to {high:g} s)'
         return f'{value} is not a finite number' if not math.isfinite(number) else \
             f'{value} is above the maximum {high:g}'
+    return _below_problem(key, value, number, ' s' if seconds else '')
+
+
+def _below_problem(key: Key, value: object, number: float, unit: str) -> str | None:
+    """A finite number below the key's minimum (or at it, where the minimum is excluded)."""
+    low = key.minimum
     if low is None:
         return None
     if key.exclusive and number <= low:
@@ -247,6 +289,26 @@ def _range_problem(key: Key, value: object, number: float | None) -> str | None:
     if number < low:
         return f'{value} is negative' if low == 0 else f'{value} is below the minimum {low:g}{unit}'
     return None
+
+
+def _within(key: Key, number: float) -> bool:
+    """Whether `number` lies in the key's range (its minimum excluded where the key says so)."""
+    low, high = key.minimum, key.maximum
+    if low is not None and (number < low or (key.exclusive and number <= low)):
+        return False
+    return high is None or number <= high
+
+
+def _integer_problem(key: Key, value: object, number: float | None) -> str | None:
+    """What is wrong with an integer read for `key` (its range named as the message says it), None if nothing."""
+    low, high = key.minimum, key.maximum
+    if number is not None and _within(key, number):
+        return None
+    if low == 1 and high is None:
+        return f'{value!r} is not a positive integer'
+    if low is not None and high is not None:
+        return f'{value!r} is not an integer from {_number(low)} to {_number(high)}'
+    return f'{value!r} is not an integer' + (f' of at least {_number(low)}' if low is not None else '')
 
 
 def closest(word: str, candidates: list[str]) -> str | None:
