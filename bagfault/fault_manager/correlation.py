@@ -128,20 +128,29 @@ def parse_correlation(node: object, path: tuple[Any, ...], problem: Problem, war
     if not config.enabled:
         problem = warn  # medkit does not validate a disabled block: its mistakes are warnings here
     patterns = _patterns(read.get('patterns') or {}, (*path, 'patterns'), problem, warn)
+    config.rules = _rules(read.get('rules', []), (*path, 'rules'), config.default_window_ms,
+                          _References(patterns, problem, warn), problem, warn)
+    return config
+
+
+def _rules(items: list[Any], path: tuple[Any, ...], default_window_ms: int, refs: _References, problem: Problem,
+           warn: Problem) -> list[Rule]:
+    """Each rule of the list that reads, its id unique."""
+    rules: list[Rule] = []
     seen: set[str] = set()
     reader = Reader(problem)
-    for number, item in enumerate(read.get('rules', [])):
-        where = (*path, 'rules', number)
+    for number, item in enumerate(items):
+        where = (*path, number)
         rule_read = reader.read(sections.RULE, item, where)
         if rule_read is None or 'id' not in rule_read:
             continue
         if rule_read.get('id') in seen:
             problem((*where, 'id'), f"duplicate rule id {rule_read.get('id')!r}")
         seen.add(rule_read.get('id'))
-        rule = _rule(rule_read, where, config.default_window_ms, _References(patterns, problem, warn), problem, warn)
+        rule = _rule(rule_read, where, default_window_ms, refs, problem, warn)
         if rule is not None:
-            config.rules.append(rule)
-    return config
+            rules.append(rule)
+    return rules
 
 
 def _patterns(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem,
@@ -180,19 +189,24 @@ class _References:
             self.problem(where, 'must be a non-empty list of {pattern: ID} or {codes: [...]}')
             return out
         for number, item in enumerate(items):
-            if isinstance(item, dict) and 'pattern' in item:
-                if item['pattern'] not in self.patterns:
-                    self.problem((*where, number, 'pattern'), f"unknown pattern {item['pattern']!r}")
-                else:
-                    out += self.patterns[item['pattern']]
-            elif isinstance(item, dict) and 'codes' in item and not inline:
-                self.warn((*where, number), 'medkit reads only {pattern: ID} items of an auto_cluster match: '
-                                            'these codes match nothing there (define a pattern for them)')
-            elif isinstance(item, dict) and 'codes' in item:
-                out += _codes(item['codes'], (*where, number, 'codes'), self.problem)
-            else:
-                self.problem((*where, number), 'must be {pattern: ID} or {codes: [...]}')
+            out += self._item(item, (*where, number), inline=inline)
         return out
+
+    def _item(self, item: object, where: tuple[Any, ...], *, inline: bool) -> list[Wildcard]:
+        """One item of the list: a pattern's codes, or (`inline`) codes of its own."""
+        if isinstance(item, dict) and 'pattern' in item:
+            if item['pattern'] not in self.patterns:
+                self.problem((*where, 'pattern'), f"unknown pattern {item['pattern']!r}")
+                return []
+            return self.patterns[item['pattern']]
+        if isinstance(item, dict) and 'codes' in item:
+            if inline:
+                return _codes(item['codes'], (*where, 'codes'), self.problem)
+            self.warn(where, 'medkit reads only {pattern: ID} items of an auto_cluster match: these codes match '
+                             'nothing there (define a pattern for them)')
+            return []
+        self.problem(where, 'must be {pattern: ID} or {codes: [...]}')
+        return []
 
 
 def _rule(read: Read, where: tuple[Any, ...], default_window_ms: int, refs: _References,
@@ -209,15 +223,27 @@ def _rule(read: Read, where: tuple[Any, ...], default_window_ms: int, refs: _Ref
         warn((*where, 'window_ms'), f'{window_ms} ms is over 60 s, which may be too long')
     rule = Rule(read.get('id'), read.get('name', read.get('id')), mode, window_ms)
     if mode == 'hierarchical':
-        root = read.get('root_cause')
-        if not isinstance(root, dict) or 'codes' not in root:
-            problem((*where, 'root_cause'), 'must be {codes: [...]}')
-        else:
-            rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
-        rule.symptom_codes = refs(read.get('symptoms'), (*where, 'symptoms'), 'symptoms')
-        rule.mute_symptoms = read.get('mute_symptoms', True)
-        rule.auto_clear_with_root = read.get('auto_clear_with_root', True)
-        return rule
+        _hierarchical(rule, read, where, refs, problem)
+    else:
+        _auto_cluster(rule, read, where, refs, problem, warn)
+    return rule
+
+
+def _hierarchical(rule: Rule, read: Read, where: tuple[Any, ...], refs: _References, problem: Problem) -> None:
+    """A hierarchical rule's root cause and symptoms."""
+    root = read.get('root_cause')
+    if not isinstance(root, dict) or 'codes' not in root:
+        problem((*where, 'root_cause'), 'must be {codes: [...]}')
+    else:
+        rule.root_codes = _codes(root['codes'], (*where, 'root_cause', 'codes'), problem)
+    rule.symptom_codes = refs(read.get('symptoms'), (*where, 'symptoms'), 'symptoms')
+    rule.mute_symptoms = read.get('mute_symptoms', True)
+    rule.auto_clear_with_root = read.get('auto_clear_with_root', True)
+
+
+def _auto_cluster(rule: Rule, read: Read, where: tuple[Any, ...], refs: _References, problem: Problem,
+                  warn: Problem) -> None:
+    """An auto_cluster rule's match patterns, count and representative."""
     rule.match_codes = refs(read.get('match'), (*where, 'match'), 'match patterns', inline=False)
     if 'min_count' in read:
         rule.min_count = read.get('min_count')
@@ -230,7 +256,6 @@ def _rule(read: Read, where: tuple[Any, ...], default_window_ms: int, refs: _Ref
         rule.representative = representative
     elif 'representative' not in read.refused:
         problem((*where, 'representative'), f'{written!r} is not one of {", ".join(REPRESENTATIVES)}')
-    return rule
 
 
 @dataclass
@@ -321,22 +346,27 @@ class CorrelationEngine:
                 return False
             info = cluster.info
             if code not in info.fault_codes:
-                info.fault_codes.append(code)
-                info.last_at = time
-                cluster.severities[code] = severity
-                self.member_of[code] = info.cluster_id
-                if rule.representative == 'most_recent' or (
-                    rule.representative == 'highest_severity'
-                    and severity > cluster.severities[info.representative_code]
-                ):
-                    info.representative_code = code
-                    info.representative_severity = CORRELATION_SEVERITY_NAMES[severity]
-                if len(info.fault_codes) >= rule.min_count:
-                    cluster.active = True
-                    self.active_clusters[info.cluster_id] = cluster
+                self._join(cluster, code, severity, time)
             return (rule.show_as_single and code != info.representative_code
                     and len(info.fault_codes) >= rule.min_count)
         return False
+
+    def _join(self, cluster: _Cluster, code: str, severity: int, time: int) -> None:
+        """A new member of a pending cluster: perhaps its representative, and the cluster active at min_count."""
+        info, rule = cluster.info, cluster.rule
+        info.fault_codes.append(code)
+        info.last_at = time
+        cluster.severities[code] = severity
+        self.member_of[code] = info.cluster_id
+        if rule.representative == 'most_recent' or (
+            rule.representative == 'highest_severity'
+            and severity > cluster.severities[info.representative_code]
+        ):
+            info.representative_code = code
+            info.representative_severity = CORRELATION_SEVERITY_NAMES[severity]
+        if len(info.fault_codes) >= rule.min_count:
+            cluster.active = True
+            self.active_clusters[info.cluster_id] = cluster
 
     def muted_faults(self) -> list[MutedFaultInfo]:
         """Muted symptoms of hierarchical rules (cluster members are never listed as muted), by code."""
@@ -344,33 +374,43 @@ class CorrelationEngine:
 
     def process_clear(self, code: str) -> list[str]:
         """Forget a cleared fault; return the symptoms to clear with it (auto_clear_with_root)."""
-        cleared: list[str] = []
-        symptoms = self.symptoms.pop(code, None)
-        if symptoms is not None:
-            # medkit's process_clear: the pending root's own rule, then any hierarchical rule on this root with
-            # auto_clear_with_root (correlation_engine.cpp:95-119): one such rule is enough
-            if any(r.mode == 'hierarchical' and r.auto_clear_with_root and _matches(code, r.root_codes)
-                   for r in self.config.rules):
-                cleared = list(symptoms)
-            for symptom in symptoms:
-                self.muted.pop(symptom, None)
+        cleared = self._clear_root(code)
         self.pending_roots = [r for r in self.pending_roots if r.code != code]
         cluster_id = self.member_of.pop(code, None)
         if cluster_id is not None:
-            for table in (self.pending_clusters, self.active_clusters):
-                for key, cluster in list(table.items()):
-                    if cluster.info.cluster_id != cluster_id or code not in cluster.info.fault_codes:
-                        continue
-                    cluster.info.fault_codes.remove(code)
-                    cluster.severities.pop(code, None)
-                    if not cluster.info.fault_codes:
-                        del table[key]
-                    elif cluster.info.representative_code == code:
-                        _promote(cluster)
+            self._leave(cluster_id, code)
         self.muted.pop(code, None)
         for symptom in cleared:
             self.muted.pop(symptom, None)
         return cleared
+
+    def _clear_root(self, code: str) -> list[str]:
+        """A cleared root's symptoms unmuted; those to clear with it. medkit's process_clear: the pending root's
+        own rule, then any hierarchical rule on this root with auto_clear_with_root (correlation_engine.cpp:95-119):
+        one such rule is enough."""
+        symptoms = self.symptoms.pop(code, None)
+        if symptoms is None:
+            return []
+        for symptom in symptoms:
+            self.muted.pop(symptom, None)
+        if any(r.mode == 'hierarchical' and r.auto_clear_with_root and _matches(code, r.root_codes)
+               for r in self.config.rules):
+            return list(symptoms)
+        return []
+
+    def _leave(self, cluster_id: str, code: str) -> None:
+        """A cleared code out of its cluster, pending or active: the cluster gone when empty, a new
+        representative when it was the representative."""
+        for table in (self.pending_clusters, self.active_clusters):
+            for key, cluster in list(table.items()):
+                if cluster.info.cluster_id != cluster_id or code not in cluster.info.fault_codes:
+                    continue
+                cluster.info.fault_codes.remove(code)
+                cluster.severities.pop(code, None)
+                if not cluster.info.fault_codes:
+                    del table[key]
+                elif cluster.info.representative_code == code:
+                    _promote(cluster)
 
     def clusters(self) -> list[ClusterInfo]:
         """Active clusters."""
