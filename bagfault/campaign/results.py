@@ -69,33 +69,44 @@ def make_table(plan: Plan, done: list[tuple[Job, dict[str, Any], str]], assertio
     for a in assertions:
         columns += [a, f'{a}.value', f'{a}.unit', f'{a}.t_s']
     columns += [f'{code}.confirmed_s' for code in codes] + [*MEASURED, 'output', 'key']  # (no assertion suffix)
-    rows = []
-    for job, result, output in done:
-        row: dict[str, Any] = {'job': job.index, 'kind': job.kind, 'bag': bag_name(plan, job.bag), 'seed': job.seed}
-        row.update({p: job.values.get(p) for p in parameters})
-        row['status'], row['message'] = result['status'], result.get('message') or None
-        row['warnings'] = '; '.join(result.get('warnings') or []) or None  # what the job's run warned about
-        for a in assertions:
-            got = result.get('assertions', {}).get(a, {})
-            row[a], row[f'{a}.value'] = got.get('state'), got.get('value')
-            row[f'{a}.unit'], row[f'{a}.t_s'] = got.get('unit') or None, got.get('t_s')
-        for code in codes:
-            row[f'{code}.confirmed_s'] = result.get('detections', {}).get(code)
-        row['seconds'], row['cpu_s'] = result.get('seconds'), result.get('cpu_s')
-        row['output'], row['key'] = output or None, job.key
-        rows.append(row)
+    rows = [_row(plan, job, result, output, parameters, assertions, codes) for job, result, output in done]
     return Table(columns, rows, parameters, assertions)
 
 
+def _row(plan: Plan, job: Job, result: dict[str, Any], output: str, parameters: list[str], assertions: list[str],
+         codes: list[str]) -> dict[str, Any]:
+    """One job's row: its parameters, status, each assertion's outcome, each code's detection, what it cost."""
+    row: dict[str, Any] = {'job': job.index, 'kind': job.kind, 'bag': bag_name(plan, job.bag), 'seed': job.seed}
+    row.update({p: job.values.get(p) for p in parameters})
+    row['status'], row['message'] = result['status'], result.get('message') or None
+    row['warnings'] = '; '.join(result.get('warnings') or []) or None  # what the job's run warned about
+    for a in assertions:
+        got = result.get('assertions', {}).get(a, {})
+        row[a], row[f'{a}.value'] = got.get('state'), got.get('value')
+        row[f'{a}.unit'], row[f'{a}.t_s'] = got.get('unit') or None, got.get('t_s')
+    for code in codes:
+        row[f'{code}.confirmed_s'] = result.get('detections', {}).get(code)
+    row['seconds'], row['cpu_s'] = result.get('seconds'), result.get('cpu_s')
+    row['output'], row['key'] = output or None, job.key
+    return row
+
+
 def _kind(values: list[Any]) -> str:
-    present = [v for v in values if v is not None]
-    if all(isinstance(v, bool) for v in present) and present:
+    """The column type of `values` (Nones aside): bool, int, float (ints and floats), else string."""
+    kinds = {_scalar_kind(v) for v in values if v is not None}
+    if kinds == {'bool'}:
         return 'bool'
-    if all(isinstance(v, int) and not isinstance(v, bool) for v in present):
+    if kinds <= {'int'}:
         return 'int'
-    if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
-        return 'float'
-    return 'string'
+    return 'float' if kinds <= {'int', 'float'} else 'string'
+
+
+def _scalar_kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'bool'
+    if isinstance(value, int):
+        return 'int'
+    return 'float' if isinstance(value, float) else 'string'
 
 
 def _cell(value: Any, kind: str) -> Any:
@@ -199,13 +210,18 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
         _heatmap(page, parts, rows, swept[0], swept[1])
     if points:
         _breaking_points(page, parts, plan, table, points)
-    bad = [r for r in rows if r['status'] != 'passed']
+    bad = [_bad_job(r, swept) for r in rows if r['status'] != 'passed']
     if bad:
-        jobs = [{'job': r['job'], 'bag': r['bag'], 'swept': [_label(r[p]) for p in swept], 'seed': r['seed'],
-                 'status': r['status'], 'message': r['message'] or '', 'output': r['output'] or '',
-                 'output_name': Path(r['output']).name if r['output'] else ''} for r in bad]
-        page.html(str(parts.bad_table(swept, jobs)))
+        page.html(str(parts.bad_table(swept, bad)))
     return page.render()
+
+
+def _bad_job(row: dict[str, Any], swept: list[str]) -> dict[str, Any]:
+    """A job that did not pass, as the report's table lists it."""
+    output = row['output']
+    return {'job': row['job'], 'bag': row['bag'], 'swept': [_label(row[p]) for p in swept], 'seed': row['seed'],
+            'status': row['status'], 'message': row['message'] or '', 'output': output or '',
+            'output_name': Path(output).name if output else ''}
 
 
 def _per_bag(page: Page, parts: Any, rows: list[dict[str, Any]], table: Table) -> None:
@@ -235,16 +251,21 @@ def _per_value(page: Page, parts: Any, rows: list[dict[str, Any]], table: Table,
 def _heatmap(page: Page, parts: Any, rows: list[dict[str, Any]], first: str, second: str) -> None:
     """Jobs passed at each pair of values of the first two swept parameters: a grid and a heatmap."""
     xs, ys = _order([r[second] for r in rows]), _order([r[first] for r in rows])
-    lines = [{'label': _label(y), 'cells': [_passes([r for r in rows if r[first] == y and r[second] == x])
-                                            for x in xs]} for y in ys]
+    groups = [[_group(rows, {first: y, second: x}) for x in xs] for y in ys]
+    lines = [{'label': _label(y), 'cells': [_passes(group) for group in line]}
+             for y, line in zip(ys, groups, strict=True)]
     page.html(str(parts.grid_table(first, second, [_label(x) for x in xs], lines)))
-    rates = [[_rate([r for r in rows if r[first] == y and r[second] == x]) for x in xs] for y in ys]
+    rates = [[_rate(group) for group in line] for line in groups]
     page.figure([{'type': 'heatmap', 'x': [_label(x) for x in xs], 'y': [_label(y) for y in ys], 'z': rates,
                   'zmin': 0, 'zmax': 100, 'colorscale': PASS_COLORS, 'colorbar': {'title': {'text': '% passed'}},
                   'hovertemplate': f'{second} %{{x}}, {first} %{{y}}: %{{z:.0f}}% passed<extra></extra>'}],
-                {'title': title(f'jobs passed: {first} against {second}'), 'height': 320,
-                 'xaxis': {'type': 'category', 'title': {'text': second}},
-                 'yaxis': {'type': 'category', 'title': {'text': first}}}, name=f'heatmap:{first}:{second}')
+                _heatmap_layout(first, second), name=f'heatmap:{first}:{second}')
+
+
+def _heatmap_layout(first: str, second: str) -> dict[str, Any]:
+    return {'title': title(f'jobs passed: {first} against {second}'), 'height': 320,
+            'xaxis': {'type': 'category', 'title': {'text': second}},
+            'yaxis': {'type': 'category', 'title': {'text': first}}}
 
 
 def _breaking_points(page: Page, parts: Any, plan: Plan, table: Table, points: list[BreakingPoint]) -> None:
@@ -257,6 +278,11 @@ def _breaking_points(page: Page, parts: Any, plan: Plan, table: Table, points: l
     page.html(str(parts.points_table(search.parameter, search.until.assertion, search.until.state,
                                      f'{search.tolerance:g}', shown)))
     _search_figure(page, search.parameter, [r for r in table.rows if r['kind'] == 'search'], points, plan)
+
+
+def _group(rows: list[dict[str, Any]], values: dict[str, Any]) -> list[dict[str, Any]]:
+    """The rows with these values of these columns."""
+    return [r for r in rows if all(r[column] == value for column, value in values.items())]
 
 
 def _rate(group: list[dict[str, Any]], column: str = 'status') -> float | None:
@@ -277,16 +303,18 @@ def _pass_rate_figure(page: Page, parameter: str, values: list[Any], rows: list[
                        'yaxis': {'title': {'text': '% passed'}, 'range': [-5, 105]}}, name=f'pass_rate:{parameter}')
 
 
+def _search_trace(parameter: str, state: str, color: str, chosen: list[dict[str, Any]]) -> dict[str, Any]:
+    """The search's jobs of one state, at their parameter value on their bag's line."""
+    return {'type': 'scatter', 'mode': 'markers', 'x': [r[parameter] for r in chosen], 'y': [r['bag'] for r in chosen],
+            'name': state, 'marker': {'size': 10, 'color': color}, 'text': [f'job {r["job"]}' for r in chosen]}
+
+
 def _search_figure(page: Page, parameter: str, search: list[dict[str, Any]], points: list[BreakingPoint],
                    plan: Plan) -> None:
     """Every search job at its parameter value, passed or not, and each bag's breaking point."""
-    data = []
-    for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828'), ('error', '#616161')):
-        chosen = [r for r in search if r['status'] == state]
-        if chosen:
-            data.append({'type': 'scatter', 'mode': 'markers', 'x': [r[parameter] for r in chosen],
-                         'y': [r['bag'] for r in chosen], 'name': state,
-                         'marker': {'size': 10, 'color': color}, 'text': [f'job {r["job"]}' for r in chosen]})
+    data = [_search_trace(parameter, state, color, chosen)
+            for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828'), ('error', '#616161'))
+            for chosen in [[r for r in search if r['status'] == state]] if chosen]
     found = [p for p in points if p.value is not None]
     if found:
         data.append({'type': 'scatter', 'mode': 'markers', 'x': [p.value for p in found], 'name': 'breaking point',
