@@ -62,15 +62,20 @@ def scenario_of(scenario: Scenario | str | Path, *, space: bool = False, mode: s
         raise UsageError(f'{loaded.source or loaded.name}: has an explore: section, a fault space: '
                          f'`bagfault explore` searches it (run or test one of the scenarios it writes)')
     if mode:
-        from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
-        from bagfault.injectors.system import SystemInjector  # noqa: PLC0415
-
-        for injector in loaded.injectors:
-            cls = get_injector_type(injector.type)
-            if cls is not None and issubclass(cls, SystemInjector) and cls.acts_on not in offers:
-                raise UsageError(f'{loaded.source or loaded.name}: injector {injector.id!r} ({injector.type}) needs '
-                                 f'{cls.needs}; `{mode}` has none')
+        _check_offers(loaded, mode, offers)
     return loaded
+
+
+def _check_offers(loaded: Scenario, mode: str, offers: Collection[str]) -> None:
+    """UsageError for an injector of the system or its clock where the mode offers neither."""
+    from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
+    from bagfault.injectors.system import SystemInjector  # noqa: PLC0415
+
+    for injector in loaded.injectors:
+        cls = get_injector_type(injector.type)
+        if cls is not None and issubclass(cls, SystemInjector) and cls.acts_on not in offers:
+            raise UsageError(f'{loaded.source or loaded.name}: injector {injector.id!r} ({injector.type}) needs '
+                             f'{cls.needs}; `{mode}` has none')
 
 
 def _view(address: str | None) -> OpenView | None:
@@ -225,8 +230,7 @@ def _lead(document: object, paths: Sequence[Path], out: Path, stack: contextlib.
     from bagfault.engine.lead import start_lead, wanted_topics  # noqa: PLC0415 - imports nothing heavy
 
     wanted = wanted_topics(observers)
-    if not copying or wanted is None or len(paths) != 1 or not paths[0].is_file() or \
-            not (math.isfinite(start_offset) and start_offset >= 0):
+    if not copying or wanted is None or not _one_file(paths) or not (math.isfinite(start_offset) and start_offset >= 0):
         return None, None
     try:
         activations = [a if isinstance(a, Activation) else Activation.parse(a) for a in activate]
@@ -239,6 +243,11 @@ def _lead(document: object, paths: Sequence[Path], out: Path, stack: contextlib.
     if lead is not None:
         stack.callback(lead.close)
     return file, lead
+
+
+def _one_file(paths: Sequence[Path]) -> bool:
+    """One input, a file (a leading copy's case: an MCAP of its own)."""
+    return len(paths) == 1 and paths[0].is_file()
 
 
 def check(
@@ -337,26 +346,40 @@ def play(
                           offers=('clock',) if clock else (), strict=strict)
               if scenario is not None else Scenario([], [], []))
     paths = _paths(inputs)
-    if not (math.isfinite(rate) and rate > 0):
-        raise UsageError(f'--rate {rate:g}: must be above 0')
+    _check_rate(rate)
     out = Path(record) if record is not None else None
     if out is not None:
         _check_output(out, 'recording', paths, loaded, force=force)
     if not (math.isfinite(clock_hz) and 0 < clock_hz <= 10_000):
         raise UsageError(f'--clock {clock_hz:g}: must be a rate in Hz above 0, at most 10000')
+    result = run_play(loaded, paths, seed=seed_of(loaded, seed), rate=rate, clock=clock, loop=loop, record=out,
+                      delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag(),
+                      wait_for=[t if t == 'all' else _absolute(t) for t in wait_for],
+                      topics=[_absolute(t) for t in topics],
+                      start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
+                      ros_args=[*_remap_args(remap), *ros_args], view=_view(foxglove), ros=ros)
+    return _reported(result, reports, collectors)
+
+
+def _check_rate(rate: float) -> None:
+    if not (math.isfinite(rate) and rate > 0):
+        raise UsageError(f'--rate {rate:g}: must be above 0')
+
+
+def _absolute(topic: str) -> str:
+    """A topic name as given on the command line, made absolute."""
+    return topic if topic.startswith('/') else '/' + topic
+
+
+def _remap_args(remap: Sequence[str]) -> list[str]:
+    """`--remap /FROM:=/TO` options as the node's ROS arguments (`-r FROM:=TO`)."""
     mapped = []
     for item in remap:
         source, sep, target = item.partition(':=')
         if not (sep and source.startswith('/') and target.startswith('/')):
             raise UsageError(f'--remap {item}: must be /FROM:=/TO')
         mapped += ['-r', f'{source}:={target}']
-    result = run_play(loaded, paths, seed=seed_of(loaded, seed), rate=rate, clock=clock, loop=loop, record=out,
-                      delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag(),
-                      wait_for=[t if t == 'all' or t.startswith('/') else '/' + t for t in wait_for],
-                      topics=[t if t.startswith('/') else '/' + t for t in topics],
-                      start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
-                      ros_args=[*mapped, *ros_args], view=_view(foxglove), ros=ros)
-    return _reported(result, reports, collectors)
+    return mapped
 
 
 def record(
@@ -427,17 +450,12 @@ def test(
     if not paths:
         raise UsageError(f'{loaded.name}: no bag given, and the scenario names none under `bags:`')
     under_test = system_of(loaded, system or {})
-    if not (math.isfinite(rate) and rate > 0):
-        raise UsageError(f'--rate {rate:g}: must be above 0')
+    _check_rate(rate)
     if isinstance(repeat, bool) or not isinstance(repeat, int) or not 1 <= repeat <= 1000:
         raise UsageError(f'--repeat {repeat}: must be a whole number from 1 to 1000')
-    outputs: list[Path | None] = [None] * repeat
-    if output is not None:
-        out = Path(output)
-        outputs = [out] if repeat == 1 else [out.with_name(f'{out.stem}.run{n}{out.suffix}')
-                                            for n in range(1, repeat + 1)]
-        for path in outputs:
-            assert path is not None
+    outputs = _run_outputs(output, repeat)
+    for path in outputs:
+        if path is not None:
             _check_output(path, 'recording', paths, loaded, force=force)
     logs = Path(keep_logs) if keep_logs is not None else None
     flag = stop if stop is not None else StopFlag()
@@ -450,12 +468,20 @@ def test(
     return _reported(results[0] if repeat == 1 else fold(results), reports, collectors)
 
 
+def _run_outputs(output: str | Path | None, repeat: int) -> list[Path | None]:
+    """Each run's recording: the output, or with `repeat` above 1 OUT.runN.mcap; None where none is kept."""
+    if output is None:
+        return [None] * repeat
+    out = Path(output)
+    if repeat == 1:
+        return [out]
+    return [out.with_name(f'{out.stem}.run{n}{out.suffix}') for n in range(1, repeat + 1)]
+
+
 def system_of(scenario: Scenario, overrides: Mapping[str, object]) -> SystemUnderTest:
     """The scenario's `system_under_test` with `overrides` in place of its keys (a `ready` condition also in the
     command line's text form, `publisher:/t@5`); ScenarioError if unusable."""
-    ready = overrides.get('ready')
-    if isinstance(ready, list):
-        overrides = {**overrides, 'ready': [ready_spec(r) if isinstance(r, str) else r for r in ready]}
+    overrides = _ready_read(overrides)
     problems: list[Problem] = []
     name = str(scenario.source or scenario.name)
 
@@ -471,6 +497,14 @@ def system_of(scenario: Scenario, overrides: Mapping[str, object]) -> SystemUnde
     if 'cwd' in overrides and isinstance(overrides['cwd'], str):
         system.cwd = Path(overrides['cwd'])  # relative to where the command runs, not to the scenario
     return system
+
+
+def _ready_read(overrides: Mapping[str, object]) -> Mapping[str, object]:
+    """The overrides with `ready` conditions given in the command line's text form read into mappings."""
+    ready = overrides.get('ready')
+    if not isinstance(ready, list):
+        return overrides
+    return {**overrides, 'ready': [ready_spec(r) if isinstance(r, str) else r for r in ready]}
 
 
 def recover(recording: str | Path, output: str | Path | None = None, *, force: bool = False) -> Recovered:
