@@ -5,8 +5,9 @@
 Each bag is a synthetic rover log (/imu 200 Hz, /odom 50 Hz, /scan 10 Hz
 with 720 beams); the sweep is 3 IMU biases x 2 seeds per bag, each job a
 full `run` with the fault manager and one assertion. Reported: wall time,
-jobs per second, the 2-worker speed-up and Ray's time against the local
-pool's. Not a test: numbers depend on the machine.
+jobs per second, a job's CPU seconds (median), the 2-worker speed-up and
+Ray's time against the local pool's. Not a test: numbers depend on the
+machine.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import sys
 import tempfile
 import time
@@ -99,9 +101,11 @@ def main() -> int:
             jobs = len(result.table.rows)
             runs[name] = {'seconds': round(seconds, 2), 'jobs_seconds': round(jobs_phase, 2), 'jobs': jobs,
                           'jobs_per_s': round(jobs / jobs_phase, 3),
-                          'job_seconds_mean': round(sum(r['seconds'] for r in result.table.rows) / jobs, 3)}
+                          'job_seconds_mean': round(sum(r['seconds'] for r in result.table.rows) / jobs, 3),
+                          'job_cpu_seconds_median': statistics.median(r['cpu_s'] for r in result.table.rows)}
             print(f'{name:18} {jobs} jobs in {seconds:6.1f} s, of which jobs {jobs_phase:6.1f} s: '
-                  f'{jobs / jobs_phase:5.2f} jobs/s  (a job {runs[name]["job_seconds_mean"]:.2f} s)', flush=True)
+                  f'{jobs / jobs_phase:5.2f} jobs/s  (a job {runs[name]["job_seconds_mean"]:.2f} s, '
+                  f'{runs[name]["job_cpu_seconds_median"]:.2f} s of CPU)', flush=True)
     one, two, ray = (runs[k]['jobs_seconds'] for k in runs)
     summary = {'speedup_2_workers': round(one / two, 2), 'ray_vs_local_2': round(ray / two, 3),
                'ray_vs_local_2_with_start': round(runs['Ray, 2 CPUs']['seconds'] / runs['local, 2 workers']['seconds'],
