@@ -18,7 +18,7 @@ from bagfault.errors import Problem, ScenarioError, one_line
 from bagfault.io.regular import read_text
 from bagfault.spec import sections
 from bagfault.spec.model import AssertionSpec, Dimension, Explore, ExploreFault, FaultSpec, InjectorSpec, Scenario
-from bagfault.spec.reader import Reader
+from bagfault.spec.reader import Read, Reader
 from bagfault.spec.system import parse_system
 from bagfault.spec.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
 
@@ -120,10 +120,7 @@ def build_scenario(document: ScenarioText, *, validate: bool = True, strict: boo
         scenario.system = parse_system(root['system_under_test'], ('system_under_test',), out.add, base)
     bags = root.get('bags')
     if isinstance(bags, list):
-        if not all(isinstance(b, str) and b for b in bags):
-            out.add(('bags',), f'must be {sections.SCENARIO.key("bags").what}')  # type: ignore[union-attr]
-        else:
-            scenario.bags = [base / b if base is not None else Path(b) for b in bags]
+        scenario.bags = [base / b if base is not None else Path(b) for b in _texts(bags, 'bags', out)]
     scenario.source = source
     if source is not None:
         scenario.msg_paths = [source.parent / p for p in scenario.msg_paths]
@@ -157,33 +154,41 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
     reader = out.reader()
     top = reader.read(sections.SCENARIO, located.data, ())
     assert top is not None
-    if 'injectors' in top.given and 'injector' in top.given:
-        out.warn(('injector',), "both 'injector' and 'injectors' are given; 'injectors' is used, as "
-                                'ros2_fault_injection does')
-    if 'injectors' in top.given:
-        scenario.injectors = [x for i, n in enumerate(top.get('injectors', []))
-                              if (x := _injector(n, ('injectors', i), out))]
-    elif 'injector' in top.given:
-        if 'injector' in top and (injector := _injector(top.get('injector'), ('injector',), out)):
-            scenario.injectors = [injector]
-    else:
-        out.add((), "scenario has no 'injector' or 'injectors' block")
+    scenario.injectors = _injectors(top, out)
     scenario.faults = [f for i, n in enumerate(top.get('faults', [])) if (f := _fault(n, ('faults', i), out))]
     scenario.assertions = [a for i, n in enumerate(top.get('assertions', []))
                            if (a := _assertion(n, ('assertions', i), out))]
     if 'seed' in top.given and 'seed' in top:  # (absent: None, so --seed or 0 decides later)
         scenario.seed = top.get('seed')
     if 'msg_paths' in top:
-        paths = top.get('msg_paths')
-        if not all(isinstance(p, str) and p for p in paths):
-            out.add(('msg_paths',), f'must be {sections.SCENARIO.key("msg_paths").what}')  # type: ignore[union-attr]
-        else:
-            scenario.msg_paths = [Path(p) for p in paths]
+        scenario.msg_paths = [Path(p) for p in _texts(top.get('msg_paths'), 'msg_paths', out)]
     if 'fault_manager' in top.given:
         scenario.fault_manager = top.get('fault_manager', {})
     if 'explore' in top:
         scenario.explore = _explore(top.get('explore'), ('explore',), scenario, out)
     return scenario
+
+
+def _injectors(top: Read, out: _Collector) -> list[InjectorSpec]:
+    """The injectors of the `injectors:` list, or the one `injector:` (the list wins, as in the anchor)."""
+    if 'injectors' in top.given and 'injector' in top.given:
+        out.warn(('injector',), "both 'injector' and 'injectors' are given; 'injectors' is used, as "
+                                'ros2_fault_injection does')
+    if 'injectors' in top.given:
+        return [x for i, n in enumerate(top.get('injectors', [])) if (x := _injector(n, ('injectors', i), out))]
+    if 'injector' not in top.given:
+        out.add((), "scenario has no 'injector' or 'injectors' block")
+        return []
+    injector = _injector(top.get('injector'), ('injector',), out) if 'injector' in top else None
+    return [injector] if injector else []
+
+
+def _texts(items: list[Any], key: str, out: _Collector) -> list[str]:
+    """A top-level list of non-empty texts (paths); [] and a problem when one is not."""
+    if all(isinstance(p, str) and p for p in items):
+        return items
+    out.add((key,), f'must be {sections.SCENARIO.key(key).what}')  # type: ignore[union-attr]
+    return []
 
 
 def _explore(node: dict[str, Any], path: PathKey, scenario: Scenario, out: _Collector) -> Explore | None:
@@ -246,30 +251,44 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
     if 'seed' in read:
         spec.seed = read.get('seed')
 
+    if _service_endpoints(spec, read, node, path, out):
+        return spec
+    if cls is not None and issubclass(cls, SystemInjector):  # acts on the system: no topic, no service
+        for key in sorted(ENDPOINT_KEYS & read.given):
+            out.add((*path, key), f'injector type {spec.type!r} acts on the running system; it takes no {key}')
+        return spec
+    _topic_endpoints(spec, read, path, out)
+    return spec
+
+
+def _service_endpoints(spec: InjectorSpec, read: Read, node: dict[str, Any], path: PathKey,
+                       out: _Collector) -> bool:
+    """A service injector's two services (under `trigger_service:`, or flat), into `spec`; False for another
+    kind of injector."""
     if 'trigger_service' in read.given:
         service = out.reader().read(sections.TRIGGER_SERVICE, read.get('trigger_service'),
                                     (*path, 'trigger_service'))
         if service is not None:
             spec.proxy_service = service.get('proxy_service', '')
             spec.target_service = service.get('target_service', '')
-        return spec
-    if any(k in node for k in SERVICE_KEYS) or spec.type == 'trigger_service':
-        for key in sorted(SERVICE_KEYS):
-            if key not in read.given:
-                out.add(path, f'missing required key {key!r}')
-        spec.proxy_service = read.get('proxy_service', '')
-        spec.target_service = read.get('target_service', '')
-        return spec
+        return True
+    if not (any(k in node for k in SERVICE_KEYS) or spec.type == 'trigger_service'):
+        return False
+    for key in sorted(SERVICE_KEYS):
+        if key not in read.given:
+            out.add(path, f'missing required key {key!r}')
+    spec.proxy_service = read.get('proxy_service', '')
+    spec.target_service = read.get('target_service', '')
+    return True
 
-    if cls is not None and issubclass(cls, SystemInjector):  # acts on the system: no topic, no service
-        for key in sorted(ENDPOINT_KEYS & read.given):
-            out.add((*path, key), f'injector type {spec.type!r} acts on the running system; it takes no {key}')
-        return spec
+
+def _topic_endpoints(spec: InjectorSpec, read: Read, path: PathKey, out: _Collector) -> None:
+    """A topic injector's input and output topics and depth (under `topic:`, which wins, or flat), into `spec`."""
     endpoint, endpoint_path = read, path
     if 'topic' in read.given:
         nested = out.reader().read(sections.TOPIC, read.get('topic'), (*path, 'topic'))
         if nested is None:
-            return spec
+            return
         endpoint, endpoint_path = nested, (*path, 'topic')
         for key in sorted(ENDPOINT_KEYS & read.given):
             out.warn((*path, key), f"{key!r} is given here and in 'topic'; the one in 'topic' is used, "
@@ -280,7 +299,6 @@ def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | No
     spec.input_topic = endpoint.get('input_topic')
     spec.output_topic = endpoint.get('output_topic')
     spec.qos_depth = endpoint.get('qos_depth', spec.qos_depth)
-    return spec
 
 
 def _fault(node: object, path: PathKey, out: _Collector) -> FaultSpec | None:
