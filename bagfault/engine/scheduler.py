@@ -131,14 +131,19 @@ class FaultScheduler:
                     self._add(number, fault.id, self._windows(windows), 'cli')
             elif fault.after is not None:
                 self._followers.setdefault(fault.after.fault, []).append(fault)
-            elif fault.repeat is not None:
-                self._add(number, fault.id, _repeat(fault), 'scheduled')
-            elif fault.probability_per_second is not None:
-                self._add(number, fault.id, _random(fault, self.random[fault.id]), 'scheduled')
-            elif fault.active_on_startup:
-                self._add(number, fault.id, _plain(*_anchor_window(fault)), 'startup')
-            elif fault.start is not None:
-                self._add(number, fault.id, _plain(*_anchor_window(fault)), 'scheduled')
+            else:
+                self._schedule(number, fault)
+
+    def _schedule(self, number: int, fault: FaultSpec) -> None:
+        """A definition's own schedule: repeated, random, from startup or at its start (none: a trigger's)."""
+        if fault.repeat is not None:
+            self._add(number, fault.id, _repeat(fault), 'scheduled')
+        elif fault.probability_per_second is not None:
+            self._add(number, fault.id, _random(fault, self.random[fault.id]), 'scheduled')
+        elif fault.active_on_startup:
+            self._add(number, fault.id, _plain(*_anchor_window(fault)), 'startup')
+        elif fault.start is not None:
+            self._add(number, fault.id, _plain(*_anchor_window(fault)), 'scheduled')
 
     @staticmethod
     def _windows(windows: list[Activation]) -> Iterator[tuple[int, bool]]:
@@ -193,14 +198,7 @@ class FaultScheduler:
         else:
             del self.active[fault_id]
         for follower in self._followers.get(fault_id, ()):
-            assert follower.after is not None
-            delay = seconds_to_ns(follower.after.delay)
-            if state:
-                self._push(time + delay, follower.id, True, 'scheduled')
-                if follower.duration is not None:
-                    self._push(time + delay + seconds_to_ns(follower.duration), follower.id, False, 'scheduled')
-            elif follower.duration is None:
-                self._push(time + delay, follower.id, False, 'scheduled')
+            self._follow(follower, state, time)
         injector = self.scenario.injector(fault.injector_id)
         return FaultEvent(
             time=time,
@@ -211,6 +209,18 @@ class FaultScheduler:
             details=fault.describe_fault() if source == 'manual' else fault.describe_config(),
         )
 
+    def _follow(self, follower: FaultSpec, state: bool, time: int) -> None:
+        """A fault chained `after` one that switched at `time`: on after its delay (for its duration, if it has
+        one), off after its delay when it has none."""
+        assert follower.after is not None
+        delay = seconds_to_ns(follower.after.delay)
+        if state:
+            self._push(time + delay, follower.id, True, 'scheduled')
+            if follower.duration is not None:
+                self._push(time + delay + seconds_to_ns(follower.duration), follower.id, False, 'scheduled')
+        elif follower.duration is None:
+            self._push(time + delay, follower.id, False, 'scheduled')
+
     def active_of(self, faults: Sequence[FaultSpec]) -> list[ActiveFault]:
         """Those of `faults` active now, with their start time and random streams, in the given order.
 
@@ -218,15 +228,21 @@ class FaultScheduler:
         injector made a run quadratic): a sequence's positions are indexed once, kept while it lives."""
         if len(self.active) * 4 >= len(faults):
             return [ActiveFault(f, self.active[f.id], self.random[f.id]) for f in faults if f.id in self.active]
+        positions = self._positions_of(faults)
+        chosen = sorted(i for fault_id in self.active for i in positions.get(fault_id, ()))
+        return [ActiveFault(f, self.active[f.id], self.random[f.id]) for f in (faults[i] for i in chosen)]
+
+
+    def _positions_of(self, faults: Sequence[FaultSpec]) -> dict[str, list[int]]:
+        """Fault id -> its places in `faults` (an id defined twice is there twice), indexed once per sequence."""
         kept = self._positions.get(id(faults))
         if kept is None or kept[0] is not faults:
             positions: dict[str, list[int]] = {}
             for i, f in enumerate(faults):
-                positions.setdefault(f.id, []).append(i)  # an id defined twice is there twice
+                positions.setdefault(f.id, []).append(i)
             kept = (faults, positions)
             self._positions[id(faults)] = kept
-        chosen = sorted(i for fault_id in self.active for i in kept[1].get(fault_id, ()))
-        return [ActiveFault(f, self.active[f.id], self.random[f.id]) for f in (faults[i] for i in chosen)]
+        return kept[1]
 
 
 def _fault_seed(scenario: Scenario, fault: FaultSpec, seed: int) -> int:
