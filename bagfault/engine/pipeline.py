@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from bagfault.engine.merge import Record
     from bagfault.engine.run import OutputChannel, Run
     from bagfault.io.channel import Data, InputMessage
+    from bagfault.io.mcap_chunks import ChunkRef
     from bagfault.io.sources import InputSet
     from bagfault.spec.model import FaultSpec, InjectorSpec
 
@@ -137,16 +138,7 @@ class Pipeline:
             chunks.reading(ref)
             if chunks.candidate(ref):
                 batches.flush()
-                if chunks.quiet(ref, self.scheduler) and not self._merge.holds(set(ref.channel_ids), ref.start,
-                                                                               ref.end):
-                    chunk = chunks.copy_of(ref)
-                    self.run.read(sum(chunk.counts.values()), ref.end)
-                    self.run.copy_chunk(chunk, topic_of)
-                    self.run.stats.chunks_copied += 1
-                    if chunks.verifier is not None:
-                        chunks.verifier.submit(ref)
-                    if self.progress is not None:
-                        self.progress(self.run.stats.input_messages, ref.end)
+                if self._copied(chunks, ref, topic_of):
                     continue
             for item in source.messages_of(ref, source.records_of(ref, source.read_record(ref))):
                 batches.add(item)
@@ -156,6 +148,22 @@ class Pipeline:
             self.run.stats.chunks_verified = chunks.verifier.wait()
         self._flush_injectors()
         self.run.emit(self._merge.drain())
+
+    def _copied(self, chunks: ChunkCopy, ref: ChunkRef, topic_of: dict[int, str]) -> bool:
+        """Write a chunk as it is when no fault acts on it now and the merge holds nothing of its time; whether
+        it was."""
+        assert self.scheduler is not None
+        if not chunks.quiet(ref, self.scheduler) or self._merge.holds(set(ref.channel_ids), ref.start, ref.end):
+            return False
+        chunk = chunks.copy_of(ref)
+        self.run.read(sum(chunk.counts.values()), ref.end)
+        self.run.copy_chunk(chunk, topic_of)
+        self.run.stats.chunks_copied += 1
+        if chunks.verifier is not None:
+            chunks.verifier.submit(ref)
+        if self.progress is not None:
+            self.progress(self.run.stats.input_messages, ref.end)
+        return True
 
     def _flush_injectors(self) -> None:
         """End of input: injectors release what they hold (reorder windows)."""
@@ -218,18 +226,25 @@ class Pipeline:
                 if event is not None:
                     events.append(event)
                 continue
-            fault = state.configure(change.fault_id, change.key, change.value)
-            for runtime in self._runtimes:
-                if runtime.spec.id == fault.injector_id:  # a new injector takes the new config; the old hands over
-                    held += [(m.log_time, m.order, runtime.rank, next(self._counter), runtime.channel,
-                              m.publish_time, m.data) for m in runtime.injector.flush(time)]
-                    runtime.faults = state.faults_of(runtime.spec.id)
-                    runtime.injector = state.injector(runtime.spec, runtime.msgtype, self.catalog)
-            events.append(FaultEvent(time, fault.id, fault.injector_id, 'config_updated', 'manual',
-                                     describe_config_update(change.key, fault.config_text[change.key])))
+            events.append(self._reconfigure(change, time, held))
         self._refresh_active()
         records: list[Record] = [(e.time, order, EVENT_RANK, next(self._counter), e) for e in events]
         self.run.emit(self._merge.release(records + held, time, is_sorted=False))
+
+    def _reconfigure(self, change: FaultChange, time: int, held: list[Record]) -> FaultEvent:
+        """A config value changed from outside: its injector made anew with it (the old one's held messages
+        added to `held`); the `config_updated` event."""
+        assert change.key is not None
+        state = self.state
+        fault = state.configure(change.fault_id, change.key, change.value)
+        for runtime in self._runtimes:
+            if runtime.spec.id == fault.injector_id:  # a new injector takes the new config; the old hands over
+                held += [(m.log_time, m.order, runtime.rank, next(self._counter), runtime.channel,
+                          m.publish_time, m.data) for m in runtime.injector.flush(time)]
+                runtime.faults = state.faults_of(runtime.spec.id)
+                runtime.injector = state.injector(runtime.spec, runtime.msgtype, self.catalog)
+        return FaultEvent(time, fault.id, fault.injector_id, 'config_updated', 'manual',
+                          describe_config_update(change.key, fault.config_text[change.key]))
 
     def _segment(self, batch: list[InputMessage], start: int, stop: int, first_order: int) -> None:
         copies, routes, counter = self.copies, self.routes, self._counter
