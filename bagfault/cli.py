@@ -12,7 +12,7 @@ import sys
 import time
 import traceback
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from bagfault import __version__, api, settings
 from bagfault.errors import BagfaultError, LatencyError, UsageError, interrupt_inside
@@ -336,30 +336,22 @@ def _cmd_record(args: argparse.Namespace) -> int:
 def _system_overrides(args: argparse.Namespace) -> dict[str, object]:
     """`system_under_test` keys given on the command line, in their YAML form (`--ready` as written: the API
     reads it)."""
-    out: dict[str, object] = {}
-    if args.command_line is not None:
-        out['command'] = args.command_line
-    if args.shell:
-        out['shell'] = True
-    if args.env:
-        pairs = [item.partition('=') for item in args.env]
-        bad = [item for item, (name, sep, _) in zip(args.env, pairs, strict=True) if not (name and sep)]
-        if bad:
-            raise UsageError(f'--env {bad[0]}: must be NAME=VALUE')
-        out['env'] = {name: value for name, _, value in pairs}
-    if args.cwd is not None:
-        out['cwd'] = args.cwd
-    if args.ready:
-        out['ready'] = list(args.ready)
-    if args.record_topic:
-        out['record'] = list(args.record_topic)
-    if args.stop_timeout is not None:
-        out['stop_timeout'] = args.stop_timeout
-    if args.tail is not None:
-        out['tail'] = args.tail
-    if args.no_sim_time:
-        out['use_sim_time'] = False
-    return out
+    given = [('command', args.command_line), ('shell', True if args.shell else None),
+             ('env', _env_pairs(args.env) if args.env else None), ('cwd', args.cwd),
+             ('ready', list(args.ready) if args.ready else None),
+             ('record', list(args.record_topic) if args.record_topic else None),
+             ('stop_timeout', args.stop_timeout), ('tail', args.tail),
+             ('use_sim_time', False if args.no_sim_time else None)]
+    return {key: value for key, value in given if value is not None}
+
+
+def _env_pairs(items: list[str]) -> dict[str, str]:
+    """`--env NAME=VALUE` options as a mapping."""
+    pairs = [item.partition('=') for item in items]
+    bad = [item for item, (name, sep, _) in zip(items, pairs, strict=True) if not (name and sep)]
+    if bad:
+        raise UsageError(f'--env {bad[0]}: must be NAME=VALUE')
+    return {name: value for name, _, value in pairs}
 
 
 def _cmd_test(args: argparse.Namespace) -> int:
@@ -382,6 +374,12 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         print(f'bagfault: interrupted; finished jobs are kept in {_under(args.output_dir, "jobs")}, --resume '
               'continues', file=sys.stderr)
         return EXIT_ERROR
+    _print_campaign(result, args.output_dir)
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _print_campaign(result: Any, output_dir: Path | str) -> None:  # an api.campaign result
+    """A campaign's counts, breaking points, notes and where its tables and report are."""
     c = result.counts
     campaign = result.plan.campaign
     search = f', {len(result.table.rows) - len(result.table.sweep_rows())} search jobs' \
@@ -394,10 +392,9 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         print(f'breaking point {point.parameter} on {point.bag.name}: {where} ({point.note})')
     for note in result.notes:
         print(f'note: {note}')
-    parquet = [_under(args.output_dir, 'results.parquet')] if result.parquet else []
-    print(f'results   {", ".join([*parquet, _under(args.output_dir, "results.csv")])}')
-    print(f'report    {_under(args.output_dir, "report.html")}')
-    return EXIT_FAILED if result.failed else EXIT_OK
+    parquet = [_under(output_dir, 'results.parquet')] if result.parquet else []
+    print(f'results   {", ".join([*parquet, _under(output_dir, "results.csv")])}')
+    print(f'report    {_under(output_dir, "report.html")}')
 
 
 def _cmd_explore(args: argparse.Namespace) -> int:
@@ -415,14 +412,7 @@ def _cmd_explore(args: argparse.Namespace) -> int:
     print(f'{args.scenario}: {len(result.runs)} of {result.budget} runs ({result.ran} now, on {result.engine}): '
           f'{len(shrunk)} failure{"s" if len(shrunk) != 1 else ""} found')
     for failure in result.failures:
-        if failure.minimal is None:
-            print(f'  {failure.name}: {failure.note}')
-            continue
-        replay = failure.replay.status if failure.replay is not None else 'not replayed'
-        print(f'  {failure.name}: fails {", ".join(sorted(failure.assertions))}')
-        print(f'      minimal: {failure.minimal.describe()}')
-        print(f'      found at run {failure.found_at_run}, shrunk in {failure.shrink_runs} runs, replay {replay}: '
-              f'{_under(args.output_dir, f"failures/{failure.name}.min.yaml")}')
+        _print_failure(failure, args.output_dir)
     for path in result.saved:
         print(f'saved     {path}')
     for warning in result.warnings:
@@ -430,6 +420,18 @@ def _cmd_explore(args: argparse.Namespace) -> int:
     print(f'results   {_under(args.output_dir, "explore.json")}')
     print(f'report    {_under(args.output_dir, "report.html")}')
     return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _print_failure(failure: Any, output_dir: Path) -> None:  # one of an api.explore result's failures
+    """One failure an exploration found: what fails, its minimal cause, how it was found and its replay."""
+    if failure.minimal is None:
+        print(f'  {failure.name}: {failure.note}')
+        return
+    replay = failure.replay.status if failure.replay is not None else 'not replayed'
+    print(f'  {failure.name}: fails {", ".join(sorted(failure.assertions))}')
+    print(f'      minimal: {failure.minimal.describe()}')
+    print(f'      found at run {failure.found_at_run}, shrunk in {failure.shrink_runs} runs, replay {replay}: '
+          f'{_under(output_dir, f"failures/{failure.name}.min.yaml")}')
 
 
 def _under(folder: Path | str, name: str) -> str:
