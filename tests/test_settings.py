@@ -101,15 +101,15 @@ def test_a_system_gets_the_users_environment_without_bagfaults_blas_setting(monk
     from bagfault.spec.system import SystemUnderTest
 
     system = SystemUnderTest(command=['true'])
-    monkeypatch.delenv('OPENBLAS_NUM_THREADS', raising=False)
-    monkeypatch.delenv('BAGFAULT_SET_OPENBLAS_NUM_THREADS', raising=False)
+    # an environment of the test's own: what one_blas_thread sets goes with it
+    monkeypatch.setattr(os, 'environ', {k: v for k, v in os.environ.items() if 'OPENBLAS' not in k})
     settings.one_blas_thread()  # as the command does
     assert os.environ['OPENBLAS_NUM_THREADS'] == '1'
     env = system_env(system, 7)
     assert 'OPENBLAS_NUM_THREADS' not in env and 'BAGFAULT_SET_OPENBLAS_NUM_THREADS' not in env
     assert env['ROS_DOMAIN_ID'] == '7'
-    monkeypatch.delenv('BAGFAULT_SET_OPENBLAS_NUM_THREADS')  # now the user's own value
-    monkeypatch.setenv('OPENBLAS_NUM_THREADS', '3')
+    del os.environ['BAGFAULT_SET_OPENBLAS_NUM_THREADS']  # now the user's own value
+    os.environ['OPENBLAS_NUM_THREADS'] = '3'
     settings.one_blas_thread()
     assert system_env(system, 7)['OPENBLAS_NUM_THREADS'] == '3'
     assert 'BAGFAULT_SET_OPENBLAS_NUM_THREADS' not in os.environ
