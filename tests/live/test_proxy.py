@@ -204,7 +204,11 @@ faults:
         bias = 1.0 if start <= time_ns < end else 0.0
         assert message.linear_acceleration.x == raw[stamp].linear_acceleration.x + bias
         biased += bias == 1.0
-    assert 150 <= biased <= 250  # about 2 s of a 100 Hz stream
+    # every message the proxy received inside the window went out biased; about 2 s of a 100 Hz stream, less what a
+    # busy machine lost before the proxy (the recording's raw topic shows the same losses: 535 of 600 beside a suite)
+    received = sum(start <= t < end for t, _ in topics['/sensors/imu_raw'])
+    assert biased == received
+    assert 50 <= received <= 250
     # sim time: the recording's clock is the bag's clock
     assert abs(min(t for t, _ in topics['/sensors/imu_raw']) - min(raw)) < NS
 
