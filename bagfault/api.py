@@ -565,8 +565,7 @@ def explore(space: Scenario | str | Path, inputs: Sequence[str | Path] = (), dir
         raise UsageError(f'--workers {workers}: must be 1 or more')
     if budget is not None and (isinstance(budget, bool) or not 1 <= budget <= 100_000):
         raise UsageError(f'--budget {budget}: must be a whole number from 1 to 100000')
-    if not (math.isfinite(rate) and rate > 0):
-        raise UsageError(f'--rate {rate:g}: must be above 0')
+    _check_rate(rate)
     options = ExploreOptions(budget=budget, seed=None if seed is None else seed_of(loaded, seed), workers=workers,
                              ray=ray, rate=rate, resume=resume, force=force,
                              save_failures=Path(save_failures) if save_failures is not None else None,

@@ -111,7 +111,7 @@ BLAS_THREADS_OURS = 'BAGFAULT_SET_OPENBLAS_NUM_THREADS'  # marks the value as ba
 
 
 def one_blas_thread() -> None:
-    """Load numpy, in this process and the ones bagfault starts for itself, without OpenBLAS's thread pool.
+    """Have numpy load without OpenBLAS's thread pool, in this process and the ones bagfault starts for itself.
 
     bagfault multiplies no matrices; OpenBLAS starts a thread per core when numpy loads and they spin
     (0.05-0.09 s of CPU per process here, a tenth of what a run without faults spends beyond a copy). The command
