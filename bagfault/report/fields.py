@@ -29,9 +29,11 @@ from bagfault.io.types import TypeCatalog
 from bagfault.units import NS
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
     from pathlib import Path
 
     from bagfault.engine.result import RunResult
+    from bagfault.spec.model import FaultSpec, InjectorSpec
 
 COLUMNS, ROWS = 300, 360
 CLOUD_POINTS, THUMB_WIDTH = 4000, 160
@@ -104,30 +106,56 @@ class MediaPlot:
 
 def plan(result: RunResult) -> tuple[list[FieldPlot], list[MediaPlot]]:
     """Fields touched by faults that were active during the run, and faulted cloud/image topics."""
+    activated = _first_activations(result)
+    plots, media = [], []
+    for spec in result.scenario.injectors:
+        found = _message_injector(spec)
+        if found is None:
+            continue
+        cls, input_topic, output_topic = found
+        active = [f for f in result.scenario.faults_of(spec.id) if f.id in activated]
+        plots += [FieldPlot(spec.id, input_topic, output_topic, path, faults=sorted(set(faults)))
+                  for path, faults in _plotted_fields(cls, active).items()]
+        media += _media_plots(spec.id, cls, (input_topic, output_topic), active,
+                              [activated[f.id] - (result.stats.origin or 0) for f in active])
+    return plots, media
+
+
+def _media_plots(injector_id: str, cls: type[Injector], topics: tuple[str, str], active: list[FaultSpec],
+                 starts: list[int]) -> list[MediaPlot]:
+    """The plot of a cloud or image injector whose faults were active (from the first, `starts` in ns from time
+    zero); none for other types."""
+    kinds = set(cls.message_types) & {CLOUD, IMAGE}
+    if not active or len(kinds) != 1:
+        return []
+    return [MediaPlot(injector_id, kinds.pop(), *topics, sorted(f.id for f in active), min(starts) / NS)]
+
+
+def _first_activations(result: RunResult) -> dict[str, int]:
+    """Fault id -> when it first became active."""
     activated: dict[str, int] = {}
     for event in result.stats.events:
         if event.state == 'active':
             activated.setdefault(event.fault_id, event.time)
-    origin = result.stats.origin or 0
-    plots, media = [], []
-    for spec in result.scenario.injectors:
-        cls = get_injector_type(spec.type)
-        if cls is None or not issubclass(cls, Injector) or not spec.input_topic or not spec.output_topic:
-            continue
-        fields: dict[str, list[str]] = {}
-        active = [f for f in result.scenario.faults_of(spec.id) if f.id in activated]
-        for fault in active:
-            for key in fault.config:
-                for path in cls.plot_fields(key, fault.config):
-                    fields.setdefault(path, []).append(fault.id)
-        plots += [FieldPlot(spec.id, spec.input_topic, spec.output_topic, path, faults=sorted(set(faults)))
-                  for path, faults in fields.items()]
-        kinds = set(cls.message_types) & {CLOUD, IMAGE}
-        if active and len(kinds) == 1:
-            start = min(activated[f.id] for f in active)
-            media.append(MediaPlot(spec.id, kinds.pop(), spec.input_topic, spec.output_topic,
-                                   sorted(f.id for f in active), (start - origin) / NS))
-    return plots, media
+    return activated
+
+
+def _message_injector(spec: InjectorSpec) -> tuple[type[Injector], str, str] | None:
+    """The injector type and topics of a spec that changes messages from one topic to another (None for others)."""
+    cls = get_injector_type(spec.type)
+    if cls is None or not issubclass(cls, Injector) or not spec.input_topic or not spec.output_topic:
+        return None
+    return cls, spec.input_topic, spec.output_topic
+
+
+def _plotted_fields(cls: type[Injector], active: list[FaultSpec]) -> dict[str, list[str]]:
+    """Field path -> the active faults whose config keys change it (as the injector type says)."""
+    fields: dict[str, list[str]] = {}
+    for fault in active:
+        for key in fault.config:
+            for path in cls.plot_fields(key, fault.config):
+                fields.setdefault(path, []).append(fault.id)
+    return fields
 
 
 class _ImageBuilder:
@@ -178,41 +206,50 @@ def _read(paths: list[Path], topic: str, fields: list[str], origin: int, duratio
         codec = catalog.codec(msgtype)
         if codec is None:
             return out
-        resolved, angles = {}, {}
-        for text in fields:
-            found = angle_of(text)
-            if found is not None:
-                angles[text] = found
-                continue
-            try:
-                resolved[text] = FieldPath.parse(text).resolve(msgtype, codec.store)
-            except FieldPathError:
-                continue
+        resolved, angles = _resolved(fields, msgtype, codec.store)
         for text in angles:
             out[text] = ([], [])
-        arrays = {text for text in resolved if '[*]' in text}
         for text in resolved:
-            out[text] = _ImageBuilder(duration) if text in arrays else ([], [])
+            out[text] = _ImageBuilder(duration) if '[*]' in text else ([], [])
         for channel, time, _, data in inputs.messages():
-            if channel not in channels:
-                continue
-            message = codec.decode(data)
-            seconds = (time - origin) / NS
-            for text, (path_text, angle) in angles.items():
-                quaternion = _attribute_path(message, path_text)
-                series = out[text]
-                assert not isinstance(series, _ImageBuilder)
-                series[0].append(seconds)
-                series[1].append(float('nan') if quaternion is None else euler_deg(quaternion, angle))
-            for text, path in resolved.items():
-                target = out[text]
-                if isinstance(target, _ImageBuilder):
-                    target.add(seconds, path.read(message))
-                else:
-                    values = np.asarray(path.read(message), dtype=float)
-                    target[0].append(seconds)   # the value itself; nan and inf stay what they are
-                    target[1].append(float(values.mean()) if values.size else float('nan'))
+            if channel in channels:
+                _sample(out, codec.decode(data), (time - origin) / NS, resolved, angles)
     return out
+
+
+def _resolved(fields: list[str], msgtype: str, store: Any) -> tuple[dict[str, FieldPath], dict[str, tuple[str, str]]]:
+    """The fields as paths of the type, and the Euler angles of quaternions (roll/pitch/yaw of a path);
+    a field the type does not have is left out."""
+    resolved, angles = {}, {}
+    for text in fields:
+        found = angle_of(text)
+        if found is not None:
+            angles[text] = found
+            continue
+        try:
+            resolved[text] = FieldPath.parse(text).resolve(msgtype, store)
+        except FieldPathError:
+            continue
+    return resolved, angles
+
+
+def _sample(out: dict[str, tuple[list[float], list[float]] | _ImageBuilder], message: Any, seconds: float,
+            resolved: dict[str, FieldPath], angles: dict[str, tuple[str, str]]) -> None:
+    """One message's value of every field: an angle in degrees, a scalar (an array's mean), or an image column."""
+    for text, (path_text, angle) in angles.items():
+        quaternion = _attribute_path(message, path_text)
+        series = out[text]
+        assert not isinstance(series, _ImageBuilder)
+        series[0].append(seconds)
+        series[1].append(float('nan') if quaternion is None else euler_deg(quaternion, angle))
+    for text, path in resolved.items():
+        target = out[text]
+        if isinstance(target, _ImageBuilder):
+            target.add(seconds, path.read(message))
+        else:
+            values = np.asarray(path.read(message), dtype=float)
+            target[0].append(seconds)   # the value itself; nan and inf stay what they are
+            target[1].append(float(values.mean()) if values.size else float('nan'))
 
 
 def _attribute_path(message: Any, path: str) -> Any:
@@ -285,28 +322,52 @@ def thumbnail(message: Any) -> np.ndarray | None:
 def _media(plot: MediaPlot, paths: list[Path], topic: str, origin: int,
            ) -> tuple[tuple[list[float], list[float]], Any]:
     """Point counts over time and the first message at or after the fault start, as a snapshot."""
-    counts: tuple[list[float], list[float]] = ([], [])
-    snapshot: Any = None
     with InputSet(paths) as inputs:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
         channels = {i for i, c in enumerate(inputs.channels) if c.topic == topic and c.msgtype == plot.msgtype}
         codec = catalog.codec(plot.msgtype)
         if not channels or codec is None:
-            return counts, None
-        for channel, time, _, data in inputs.messages():
-            if channel not in channels:
-                continue
-            seconds = (time - origin) / NS
-            if plot.msgtype == CLOUD:
-                message = codec.decode(data)
-                counts[0].append(seconds)
-                counts[1].append(float(message.width * message.height))
-                if snapshot is None and seconds >= plot.start_s:
-                    snapshot = cloud_xy(message)
-            elif snapshot is None and seconds >= plot.start_s:
-                snapshot = thumbnail(codec.decode(data))
-                break
+            return ([], []), None
+        timed = (((time - origin) / NS, data) for channel, time, _, data in inputs.messages() if channel in channels)
+        if plot.msgtype == CLOUD:
+            return _cloud_counts(timed, codec, plot.start_s)
+        return ([], []), _first_image(timed, codec, plot.start_s)
+
+
+def _first_image(timed: Iterator[tuple[float, Any]], codec: Any, start_s: float) -> Any:
+    """A thumbnail of the first image at or after `start_s` (None if there is none)."""
+    for seconds, data in timed:
+        if seconds >= start_s:
+            return thumbnail(codec.decode(data))
+    return None
+
+
+def _cloud_counts(timed: Iterator[tuple[float, Any]], codec: Any, start_s: float,
+                  ) -> tuple[tuple[list[float], list[float]], Any]:
+    """A cloud topic's point count over time, and the x and y of its first cloud at or after `start_s`."""
+    counts: tuple[list[float], list[float]] = ([], [])
+    snapshot: Any = None
+    for seconds, data in timed:
+        message = codec.decode(data)
+        counts[0].append(seconds)
+        counts[1].append(float(message.width * message.height))
+        if snapshot is None and seconds >= start_s:
+            snapshot = cloud_xy(message)
     return counts, snapshot
+
+
+def _fill(plot: FieldPlot, before: tuple[list[float], list[float]] | _ImageBuilder | None,
+          after: tuple[list[float], list[float]] | _ImageBuilder | None, axis: tuple[float, float] | None) -> None:
+    """A plot's series or images before and after; a scan's ranges along its angles."""
+    scan = axis is not None and plot.field == 'ranges[*]'
+    for side, data in (('before', before), ('after', after)):
+        if isinstance(data, _ImageBuilder):
+            first, step = axis if axis is not None and scan else (0.0, 1.0)
+            setattr(plot, f'{side}_image', data.image(first, step))
+        elif data is not None:
+            setattr(plot, side, data)
+    if scan:
+        plot.element_axis = 'angle (deg)'
 
 
 def collect(result: RunResult) -> tuple[list[FieldPlot], list[MediaPlot]]:
@@ -319,21 +380,21 @@ def collect(result: RunResult) -> tuple[list[FieldPlot], list[MediaPlot]]:
     by_topic: dict[tuple[str, str], list[FieldPlot]] = {}
     for plot in plots:
         by_topic.setdefault((plot.input_topic, plot.output_topic), []).append(plot)
+    _fill_series(result, by_topic, origin, duration)
+    for item in media:
+        item.counts_before, item.snapshot_before = _media(item, list(result.inputs), item.input_topic, origin)
+        item.counts_after, item.snapshot_after = _media(item, [result.output], item.output_topic, origin)
+    return plots, media
+
+
+def _fill_series(result: RunResult, by_topic: dict[tuple[str, str], list[FieldPlot]], origin: int,
+                 duration: float) -> None:
+    """Each topic pair's plots, read once from the inputs and once from the output."""
+    assert result.output is not None
     for (input_topic, output_topic), group in by_topic.items():
         fields = [p.field for p in group]
         before = _read(list(result.inputs), input_topic, fields, origin, duration)
         after = _read([result.output], output_topic, fields, origin, duration)
         axis = _scan_axis(list(result.inputs), input_topic)
         for plot in group:
-            for side, data in (('before', before.get(plot.field)), ('after', after.get(plot.field))):
-                if isinstance(data, _ImageBuilder):
-                    first, step = axis if axis and plot.field == 'ranges[*]' else (0.0, 1.0)
-                    setattr(plot, f'{side}_image', data.image(first, step))
-                elif data is not None:
-                    setattr(plot, side, data)
-            if axis and plot.field == 'ranges[*]':
-                plot.element_axis = 'angle (deg)'
-    for item in media:
-        item.counts_before, item.snapshot_before = _media(item, list(result.inputs), item.input_topic, origin)
-        item.counts_after, item.snapshot_after = _media(item, [result.output], item.output_topic, origin)
-    return plots, media
+            _fill(plot, before.get(plot.field), after.get(plot.field), axis)

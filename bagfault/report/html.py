@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from collections.abc import Sequence
 
     from bagfault.report.fields import ArrayImage, FieldPlot, MediaPlot
-    from bagfault.report.rates import RateTracker
+    from bagfault.report.rates import RateSeries, RateTracker
 
 STATE_COLORS = {'PREFAILED': '#f4b400', 'PREPASSED': '#9ccc65', 'CONFIRMED': '#d62728', 'HEALED': '#2ca02c',
                 'CLEARED': '#9e9e9e'}
@@ -38,28 +38,7 @@ def _duration(report: dict[str, Any]) -> float:
 
 def _timeline(page: Page, report: dict[str, Any], rates: RateTracker | None) -> None:
     """Fault windows as bars, assertion decisions and event-topic messages as markers, one row each."""
-    data: list[dict[str, Any]] = []
-    for start, end, fault in _windows(report):
-        data.append({'type': 'scatter', 'mode': 'lines', 'x': [start, end], 'y': [fault, fault],
-                     'line': {'width': 14, 'color': 'rgba(214,39,40,0.6)'}, 'name': fault, 'showlegend': False,
-                     'hovertemplate': f'{fault}: %{{x:.3f}} s<extra></extra>'})
-    for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828')):
-        decided = [a for a in report['assertions'] if a['state'] == state and a['t_s'] is not None]
-        if decided:
-            data.append({'type': 'scatter', 'mode': 'markers', 'x': [a['t_s'] for a in decided],
-                         'y': ['assertions'] * len(decided), 'text': [a['id'] for a in decided],
-                         'marker': {'symbol': 'diamond', 'size': 11, 'color': color}, 'name': f'{state}',
-                         'hovertemplate': '%{text} ' + state + ' at %{x:.3f} s<extra></extra>'})
-    markers = [('/fault_injection/events', [e['t_s'] for e in report['fault_events']]),
-               ('/fault_manager/events', [e['t_s'] for e in report.get('fault_manager', {}).get('events', [])])]
-    if rates is not None:
-        markers += [(topic, rates.seconds(topic).tolist()) for topic in sorted(rates.times)
-                    if rates.is_event_topic(topic)]
-    for topic, times in markers:
-        if times:
-            data.append({'type': 'scatter', 'mode': 'markers', 'x': times, 'y': [topic] * len(times),
-                         'marker': {'symbol': 'line-ns-open', 'size': 12}, 'name': topic, 'showlegend': False,
-                         'hovertemplate': f'{topic} at %{{x:.3f}} s<extra></extra>'})
+    data = _fault_bars(report) + _decisions(report) + _event_markers(report, rates)
     if not data:
         page.paragraph('No fault changed state and no assertion was decided.')
         return
@@ -69,6 +48,40 @@ def _timeline(page: Page, report: dict[str, Any], rates: RateTracker | None) -> 
                        'yaxis': {'type': 'category', 'automargin': True}, 'showlegend': True,
                        'legend': LEGEND},
                 timed=True, name='timeline')
+
+
+def _fault_bars(report: dict[str, Any]) -> list[dict[str, Any]]:
+    """A bar per fault window, on the fault's row."""
+    return [{'type': 'scatter', 'mode': 'lines', 'x': [start, end], 'y': [fault, fault],
+             'line': {'width': 14, 'color': 'rgba(214,39,40,0.6)'}, 'name': fault, 'showlegend': False,
+             'hovertemplate': f'{fault}: %{{x:.3f}} s<extra></extra>'}
+            for start, end, fault in _windows(report)]
+
+
+def _decisions(report: dict[str, Any]) -> list[dict[str, Any]]:
+    """The assertions' decisions as markers, passed and failed apart."""
+    data = []
+    for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828')):
+        decided = [a for a in report['assertions'] if a['state'] == state and a['t_s'] is not None]
+        if decided:
+            data.append({'type': 'scatter', 'mode': 'markers', 'x': [a['t_s'] for a in decided],
+                         'y': ['assertions'] * len(decided), 'text': [a['id'] for a in decided],
+                         'marker': {'symbol': 'diamond', 'size': 11, 'color': color}, 'name': f'{state}',
+                         'hovertemplate': '%{text} ' + state + ' at %{x:.3f} s<extra></extra>'})
+    return data
+
+
+def _event_markers(report: dict[str, Any], rates: RateTracker | None) -> list[dict[str, Any]]:
+    """A row of markers per event topic that has messages: bagfault's, the fault manager's, the system's."""
+    markers = [('/fault_injection/events', [e['t_s'] for e in report['fault_events']]),
+               ('/fault_manager/events', [e['t_s'] for e in report.get('fault_manager', {}).get('events', [])])]
+    if rates is not None:
+        markers += [(topic, rates.seconds(topic).tolist()) for topic in sorted(rates.times)
+                    if rates.is_event_topic(topic)]
+    return [{'type': 'scatter', 'mode': 'markers', 'x': times, 'y': [topic] * len(times),
+             'marker': {'symbol': 'line-ns-open', 'size': 12}, 'name': topic, 'showlegend': False,
+             'hovertemplate': f'{topic} at %{{x:.3f}} s<extra></extra>'}
+            for topic, times in markers if times]
 
 
 def _assertions(page: Page, report: dict[str, Any]) -> None:
@@ -87,6 +100,35 @@ def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) 
     """Per-code state bands over bag time with confirmations marked; events folded into counts."""
     end = _duration(report)
     codes = sorted({c['fault_code'] for c in summary.get('status_changes', [])})
+    if codes:
+        page.figure(_state_bands(summary, codes, end),
+                    {'height': 110 + 34 * len(codes), 'xaxis': {'title': {'text': 'bag time (s)'}, 'range': [0, end]},
+                     'yaxis': {'type': 'category', 'automargin': True},
+                     'legend': LEGEND}, timed=True, name='fault_manager_states')
+    snapshots = [{'code': s['fault_code'], 't': s['t_s'], 'black_box': s['black_box'],
+                  'frame': json.dumps(s['freeze_frame'], indent=1, sort_keys=True)[:4000]}
+                 for s in summary['snapshots']]
+    page.html(macros().fault_manager(summary, _fault_rows(summary), snapshots))
+
+
+def _state_bands(summary: dict[str, Any], codes: list[str], end: float) -> list[dict[str, Any]]:
+    """A band per code and status held, a legend entry per status that occurs, a star per confirmation."""
+    data = _bands(summary, codes, end)
+    shown = {d['name'] for d in data}
+    data += [{'type': 'scatter', 'mode': 'lines', 'x': [None], 'y': [None], 'name': status,
+              'line': {'width': 10, 'color': color}, 'legendgroup': status}
+             for status, color in STATE_COLORS.items() if status in shown]
+    confirmed = [e for e in summary['events'] if e['event_type'] == 'fault_confirmed']
+    if confirmed:
+        data.append({'type': 'scatter', 'mode': 'markers', 'x': [e['t_s'] for e in confirmed],
+                     'y': [e['fault_code'] for e in confirmed], 'name': 'confirmed (FaultEvent)',
+                     'marker': {'symbol': 'star', 'size': 13, 'color': '#000'},
+                     'hovertemplate': '%{y} confirmed at %{x:.3f} s<extra></extra>'})
+    return data
+
+
+def _bands(summary: dict[str, Any], codes: list[str], end: float) -> list[dict[str, Any]]:
+    """Each code's statuses as bands, each held until the next change (or the end of the bag)."""
     data: list[dict[str, Any]] = []
     for code in codes:
         changes = [c for c in summary['status_changes'] if c['fault_code'] == code]
@@ -96,34 +138,19 @@ def _fault_manager(page: Page, report: dict[str, Any], summary: dict[str, Any]) 
                          'line': {'width': 16, 'color': STATE_COLORS.get(change['status'], '#607d8b')},
                          'name': change['status'], 'legendgroup': change['status'], 'showlegend': False,
                          'hovertemplate': f'{code} {change["status"]} %{{x:.3f}} s<extra></extra>'})
-    shown = {d['name'] for d in data}
-    for status, color in STATE_COLORS.items():  # legend entries, one per state that occurs
-        if status in shown:
-            data.append({'type': 'scatter', 'mode': 'lines', 'x': [None], 'y': [None], 'name': status,
-                         'line': {'width': 10, 'color': color}, 'legendgroup': status})
-    confirmed = [e for e in summary['events'] if e['event_type'] == 'fault_confirmed']
-    if confirmed:
-        data.append({'type': 'scatter', 'mode': 'markers', 'x': [e['t_s'] for e in confirmed],
-                     'y': [e['fault_code'] for e in confirmed], 'name': 'confirmed (FaultEvent)',
-                     'marker': {'symbol': 'star', 'size': 13, 'color': '#000'},
-                     'hovertemplate': '%{y} confirmed at %{x:.3f} s<extra></extra>'})
-    if codes:
-        page.figure(data, {'height': 110 + 34 * len(codes), 'xaxis': {'title': {'text': 'bag time (s)'},
-                                                                       'range': [0, end]},
-                           'yaxis': {'type': 'category', 'automargin': True},
-                           'legend': LEGEND}, timed=True, name='fault_manager_states')
+    return data
+
+
+def _fault_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """The final fault table, each code with its count of confirmed, updated and cleared events."""
     counts: dict[str, dict[str, int]] = {}
     for event in summary['events']:
         counts.setdefault(event['fault_code'], {}).setdefault(event['event_type'], 0)
         counts[event['fault_code']][event['event_type']] += 1
     kinds = ('fault_confirmed', 'fault_updated', 'fault_cleared')
-    rows = [{'code': f['fault_code'], 'severity': f['severity'], 'status': f['status'],
+    return [{'code': f['fault_code'], 'severity': f['severity'], 'status': f['status'],
              'occurrences': f['occurrence_count'], 'first': f['first_occurred_s'], 'last': f['last_occurred_s'],
              'counts': [counts.get(f['fault_code'], {}).get(k, 0) for k in kinds]} for f in summary['faults']]
-    snapshots = [{'code': s['fault_code'], 't': s['t_s'], 'black_box': s['black_box'],
-                  'frame': json.dumps(s['freeze_frame'], indent=1, sort_keys=True)[:4000]}
-                 for s in summary['snapshots']]
-    page.html(macros().fault_manager(summary, rows, snapshots))
 
 
 INF_COLOR, NAN_COLOR = '#ff00ff', '#000000'
@@ -187,39 +214,49 @@ def _fields(page: Page, report: dict[str, Any], plots: Sequence[FieldPlot]) -> N
         windows = _windows(report, set(plot.faults))
         heading = f'{plot.field} on {plot.output_topic} ({", ".join(plot.faults)})'
         if plot.before_image is not None or plot.after_image is not None:
-            images = [i for i in (plot.before_image, plot.after_image) if i is not None and i.values.size]
-            finite = [i.values[np.isfinite(i.values)] for i in images]
-            values = np.concatenate(finite) if finite else np.zeros(0)
-            scale = (float(values.min()), float(values.max())) if values.size else (0.0, 1.0)
-            for side, image, topic in (('before', plot.before_image, plot.input_topic),
-                                       ('after', plot.after_image, plot.output_topic)):
-                if image is not None:
-                    page.figure(*_heatmap(image, f'{heading}: {side} ({topic}); inf magenta, nan black',
-                                          plot.element_axis, windows, scale), timed=True,
-                                name=f'image:{side}:{plot.output_topic}:{plot.field}')
-            continue
-        bx, by = (np.asarray(v, dtype=float) for v in plot.before)
-        ax, ay = (np.asarray(v, dtype=float) for v in plot.after)
-        difference = ay - _aligned(bx, by, ax) if bx.size and ax.size else np.zeros(0)
-        angle = angle_of(plot.field)
-        if angle is not None:  # degrees on a circle: 179 after -179 is 2 more, not 358 less
-            difference = (difference + 180.0) % 360.0 - 180.0
-        data = [{'type': 'scatter', 'mode': 'lines', 'name': name, **xy, **extra}
-                for name, xy, extra in (
-                    (f'before: {plot.input_topic}', _xy(bx, by), {}),
-                    (f'after: {plot.output_topic}', _xy(ax, ay), {}),
-                    ('after - before', _xy(ax[: difference.size], difference),
-                     {'xaxis': 'x', 'yaxis': 'y2', 'line': {'color': '#7f7f7f'}}))]
-        shown = np.concatenate([by[np.isfinite(by)], ay[np.isfinite(ay)]])
-        bounds = (float(shown.min()), float(shown.max())) if shown.size else (0.0, 0.0)
-        data += [*_non_finite(bx, by, 'before', bounds), *_non_finite(ax, ay, 'after', bounds)]
-        page.figure(data, {'title': title(heading), 'height': 380, 'margin': {'t': 56},
-                           'xaxis': {'title': {'text': 'bag time (s)'}, 'anchor': 'y2'},
-                           'yaxis': {'domain': [0.38, 1], 'title': {'text': plot.field if angle is None else
-                                                                     f'{angle[1]} of {angle[0]} (deg)'}},
-                           'yaxis2': {'domain': [0, 0.28], 'title': {'text': 'after - before'}},
-                           'shapes': shade(windows), 'legend': LEGEND},
-                    timed=True, name=f'field:{plot.output_topic}:{plot.field}')
+            _image_figures(page, plot, heading, windows)
+        else:
+            _series_figure(page, plot, heading, windows)
+
+
+def _image_figures(page: Page, plot: FieldPlot, heading: str, windows: list[tuple[float, float, str]]) -> None:
+    """An array field before and after as heatmaps on one colour scale."""
+    images = [i for i in (plot.before_image, plot.after_image) if i is not None and i.values.size]
+    finite = [i.values[np.isfinite(i.values)] for i in images]
+    values = np.concatenate(finite) if finite else np.zeros(0)
+    scale = (float(values.min()), float(values.max())) if values.size else (0.0, 1.0)
+    for side, image, topic in (('before', plot.before_image, plot.input_topic),
+                               ('after', plot.after_image, plot.output_topic)):
+        if image is not None:
+            page.figure(*_heatmap(image, f'{heading}: {side} ({topic}); inf magenta, nan black',
+                                  plot.element_axis, windows, scale), timed=True,
+                        name=f'image:{side}:{plot.output_topic}:{plot.field}')
+
+
+def _series_figure(page: Page, plot: FieldPlot, heading: str, windows: list[tuple[float, float, str]]) -> None:
+    """A scalar field before and after, and their difference below (angles on the circle)."""
+    bx, by = (np.asarray(v, dtype=float) for v in plot.before)
+    ax, ay = (np.asarray(v, dtype=float) for v in plot.after)
+    difference = ay - _aligned(bx, by, ax) if bx.size and ax.size else np.zeros(0)
+    angle = angle_of(plot.field)
+    if angle is not None:  # degrees on a circle: 179 after -179 is 2 more, not 358 less
+        difference = (difference + 180.0) % 360.0 - 180.0
+    data = [{'type': 'scatter', 'mode': 'lines', 'name': name, **xy, **extra}
+            for name, xy, extra in (
+                (f'before: {plot.input_topic}', _xy(bx, by), {}),
+                (f'after: {plot.output_topic}', _xy(ax, ay), {}),
+                ('after - before', _xy(ax[: difference.size], difference),
+                 {'xaxis': 'x', 'yaxis': 'y2', 'line': {'color': '#7f7f7f'}}))]
+    shown = np.concatenate([by[np.isfinite(by)], ay[np.isfinite(ay)]])
+    bounds = (float(shown.min()), float(shown.max())) if shown.size else (0.0, 0.0)
+    data += [*_non_finite(bx, by, 'before', bounds), *_non_finite(ax, ay, 'after', bounds)]
+    page.figure(data, {'title': title(heading), 'height': 380, 'margin': {'t': 56},
+                       'xaxis': {'title': {'text': 'bag time (s)'}, 'anchor': 'y2'},
+                       'yaxis': {'domain': [0.38, 1], 'title': {'text': plot.field if angle is None else
+                                                                 f'{angle[1]} of {angle[0]} (deg)'}},
+                       'yaxis2': {'domain': [0, 0.28], 'title': {'text': 'after - before'}},
+                       'shapes': shade(windows), 'legend': LEGEND},
+                timed=True, name=f'field:{plot.output_topic}:{plot.field}')
 
 
 def _xy(x: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
@@ -316,34 +353,42 @@ def _rates(page: Page, report: dict[str, Any], rates: RateTracker | None, topics
         page.paragraph('No topic has enough messages for a rate.')
         return
     rows = len(shown)
-    gap = 0.3 / rows
     data: list[dict[str, Any]] = []
     layout: dict[str, Any] = {'height': 60 + ROW_PX * rows, 'showlegend': False, 'annotations': [],
                               'shapes': shade(_windows(report)), 'margin': {'l': 60, 'r': 20, 't': 24, 'b': 36}}
     for number, topic in enumerate(shown, start=1):
-        series = rates.series(topic)
-        x, y = envelope(*_broken_at(series.times, series.rates, series.gaps))
-        top = 1 - (number - 1) / rows
-        axis = '' if number == 1 else str(number)
-        layout[f'yaxis{axis}'] = {'domain': [max(0.0, top - 1 / rows + gap), top], 'rangemode': 'tozero',
-                                  'tickfont': {'size': 9}}
-        layout[f'xaxis{axis}'] = {'anchor': f'y{axis}', 'showticklabels': number == rows,
-                                  **({'range': [0, _duration(report)]} if number == 1 else {'matches': 'x'}),
-                                  **({'title': {'text': 'bag time (s)'}} if number == rows else {})}
-        data.append({'type': 'scatter', 'mode': 'lines', 'x': x, 'y': y, 'name': topic, 'xaxis': f'x{axis}',
-                     'yaxis': f'y{axis}', 'line': {'width': 1.2},
-                     'hovertemplate': f'{topic} %{{y:.2f}} Hz at %{{x:.3f}} s<extra></extra>'})
-        if series.gaps:
-            data.append({'type': 'scatter', 'mode': 'markers', 'x': [a for a, _ in series.gaps],
-                         'y': [0.0] * len(series.gaps), 'name': f'{topic} gaps', 'xaxis': f'x{axis}',
-                         'yaxis': f'y{axis}', 'marker': {'symbol': 'x', 'color': '#c62828', 'size': 8},
-                         'customdata': [b - a for a, b in series.gaps],
-                         'hovertemplate': 'gap of %{customdata:.3f} s from %{x:.3f} s<extra></extra>'})
-        layout['annotations'].append({'text': f'{topic}  ~{series.nominal_hz:.3g} Hz, window {series.window} msg',
-                                      'xref': 'paper', 'yref': f'y{axis} domain', 'x': 0, 'y': 1.02,
-                                      'xanchor': 'left', 'yanchor': 'bottom', 'showarrow': False,
-                                      'font': {'size': 11}})
+        data += _rate_row(layout, number, rows, topic, rates.series(topic), _duration(report))
     page.figure(data, layout, timed=True, name='rates')
+
+
+def _rate_row(layout: dict[str, Any], number: int, rows: int, topic: str, series: RateSeries,
+              duration: float) -> list[dict[str, Any]]:
+    """Row `number` of `rows` (from 1, top down): its axes and title into `layout`, its traces returned (the rate,
+    and its gaps as markers)."""
+    gap = 0.3 / rows
+    x, y = envelope(*_broken_at(series.times, series.rates, series.gaps))
+    top = 1 - (number - 1) / rows
+    axis = '' if number == 1 else str(number)
+    layout[f'yaxis{axis}'] = {'domain': [max(0.0, top - 1 / rows + gap), top], 'rangemode': 'tozero',
+                              'tickfont': {'size': 9}}
+    layout[f'xaxis{axis}'] = {'anchor': f'y{axis}', 'showticklabels': number == rows,
+                              **({'range': [0, duration]} if number == 1 else {'matches': 'x'}),
+                              **({'title': {'text': 'bag time (s)'}} if number == rows else {})}
+    data: list[dict[str, Any]] = [
+        {'type': 'scatter', 'mode': 'lines', 'x': x, 'y': y, 'name': topic, 'xaxis': f'x{axis}',
+         'yaxis': f'y{axis}', 'line': {'width': 1.2},
+         'hovertemplate': f'{topic} %{{y:.2f}} Hz at %{{x:.3f}} s<extra></extra>'}]
+    if series.gaps:
+        data.append({'type': 'scatter', 'mode': 'markers', 'x': [a for a, _ in series.gaps],
+                     'y': [0.0] * len(series.gaps), 'name': f'{topic} gaps', 'xaxis': f'x{axis}',
+                     'yaxis': f'y{axis}', 'marker': {'symbol': 'x', 'color': '#c62828', 'size': 8},
+                     'customdata': [b - a for a, b in series.gaps],
+                     'hovertemplate': 'gap of %{customdata:.3f} s from %{x:.3f} s<extra></extra>'})
+    layout['annotations'].append({'text': f'{topic}  ~{series.nominal_hz:.3g} Hz, window {series.window} msg',
+                                  'xref': 'paper', 'yref': f'y{axis} domain', 'x': 0, 'y': 1.02,
+                                  'xanchor': 'left', 'yanchor': 'bottom', 'showarrow': False,
+                                  'font': {'size': 11}})
+    return data
 
 
 def render(

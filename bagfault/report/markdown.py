@@ -34,21 +34,8 @@ def render(report: dict[str, Any]) -> str:
         '## Fault timeline',
         '',
     ]
-    if report['fault_events']:
-        lines += ['| t (s) | fault | injector | state | source | config |', '|---:|---|---|---|---|---|']
-        lines += [
-            f'| {e["t_s"]:.3f} | {e["fault_id"]} | {e["injector_id"]} | {e["state"]} | {e["source"]} | '
-            f'`{_cell(e["details"])}` |'
-            for e in report['fault_events']
-        ]
-    else:
-        lines.append('No fault changed state during the bag.')
-    if report['assertions']:
-        lines += ['', '## Assertions', '', '| result | assertion | type | t (s) | message |', '|---|---|---|---:|---|']
-        mark = {'passed': 'PASS', 'failed': 'FAIL', 'pending': 'PENDING'}
-        for a in report['assertions']:
-            t = '' if a['t_s'] is None else f'{a["t_s"]:.3f}'
-            lines.append(f'| {mark[a["state"]]} | {a["id"]} | {a["type"]} | {t} | {_cell(a["message"])} |')
+    lines += _timeline(report['fault_events'])
+    lines += _assertions(report['assertions'])
     if 'fault_manager' in report:
         lines += fault_manager_section(report['fault_manager'])
     lines += ['', '## Topics written', '', '| topic | messages |', '|---|---:|']
@@ -56,6 +43,29 @@ def render(report: dict[str, Any]) -> str:
     if report['notes']:
         lines += ['', '## Notes', ''] + [f'- {note}' for note in report['notes']]
     return '\n'.join(lines) + '\n'
+
+
+def _timeline(events: list[dict[str, Any]]) -> list[str]:
+    """The fault timeline's table, or a line saying nothing changed."""
+    if not events:
+        return ['No fault changed state during the bag.']
+    return ['| t (s) | fault | injector | state | source | config |', '|---:|---|---|---|---|---|'] + [
+        f'| {e["t_s"]:.3f} | {e["fault_id"]} | {e["injector_id"]} | {e["state"]} | {e["source"]} | '
+        f'`{_cell(e["details"])}` |'
+        for e in events
+    ]
+
+
+def _assertions(assertions: list[dict[str, Any]]) -> list[str]:
+    """The assertion table (nothing without assertions)."""
+    if not assertions:
+        return []
+    lines = ['', '## Assertions', '', '| result | assertion | type | t (s) | message |', '|---|---|---|---:|---|']
+    mark = {'passed': 'PASS', 'failed': 'FAIL', 'pending': 'PENDING'}
+    for a in assertions:
+        t = '' if a['t_s'] is None else f'{a["t_s"]:.3f}'
+        lines.append(f'| {mark[a["state"]]} | {a["id"]} | {a["type"]} | {t} | {_cell(a["message"])} |')
+    return lines
 
 
 def fault_manager_section(summary: dict[str, Any]) -> list[str]:
@@ -70,21 +80,7 @@ def fault_manager_section(summary: dict[str, Any]) -> list[str]:
                      f'{fault["occurrence_count"]} | {fault["first_occurred_s"]:.3f} | '
                      f'{fault["last_occurred_s"]:.3f} | '
                      f'{", ".join(fault["reporting_sources"])} |')
-    changes = [e for e in summary['events'] if e['event_type'] != 'fault_updated']
-    if changes:
-        lines += ['', '| t (s) | event | code | status | auto-cleared |', '|---:|---|---|---|---|']
-        shown = changes[:200]
-        lines += [f'| {e["t_s"]:.3f} | {e["event_type"]} | {e["fault_code"]} | {e["status"]} | '
-                  f'{", ".join(e["auto_cleared_codes"])} |' for e in shown]
-        if len(changes) > len(shown):
-            lines.append(f'| | ... {len(changes) - len(shown)} more events | | | |')
-    updates: dict[str, int] = {}
-    for event in summary['events']:
-        if event['event_type'] == 'fault_updated':
-            updates[event['fault_code']] = updates.get(event['fault_code'], 0) + 1
-    if updates:
-        folded = ', '.join(f'{code} {count}' for code, count in sorted(updates.items()))
-        lines += ['', f'fault_updated events (folded): {folded}']
+    lines += _fault_manager_events(summary['events'])
     for cluster in summary['clusters']:
         lines.append(f'- cluster {cluster["cluster_id"]} ({cluster["rule_name"]}): {cluster["count"]} faults, '
                      f'shown as {cluster["representative_code"]}')
@@ -96,4 +92,25 @@ def fault_manager_section(summary: dict[str, Any]) -> list[str]:
             if snapshot['black_box'] else ''
         lines += ['', f'### Snapshot of {snapshot["fault_code"]} at {snapshot["t_s"]:.3f} s{box}', '', '```json',
                   json.dumps(snapshot['freeze_frame'], indent=1, sort_keys=True)[:4000], '```']
+    return lines
+
+
+def _fault_manager_events(events: list[dict[str, Any]]) -> list[str]:
+    """The fault manager's state changes (the first 200) and its fault_updated events folded into counts."""
+    lines: list[str] = []
+    changes = [e for e in events if e['event_type'] != 'fault_updated']
+    if changes:
+        lines += ['', '| t (s) | event | code | status | auto-cleared |', '|---:|---|---|---|---|']
+        shown = changes[:200]
+        lines += [f'| {e["t_s"]:.3f} | {e["event_type"]} | {e["fault_code"]} | {e["status"]} | '
+                  f'{", ".join(e["auto_cleared_codes"])} |' for e in shown]
+        if len(changes) > len(shown):
+            lines.append(f'| | ... {len(changes) - len(shown)} more events | | | |')
+    updates: dict[str, int] = {}
+    for event in events:
+        if event['event_type'] == 'fault_updated':
+            updates[event['fault_code']] = updates.get(event['fault_code'], 0) + 1
+    if updates:
+        folded = ', '.join(f'{code} {count}' for code, count in sorted(updates.items()))
+        lines += ['', f'fault_updated events (folded): {folded}']
     return lines

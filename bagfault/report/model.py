@@ -43,25 +43,10 @@ def fault_windows(result: RunResult) -> list[dict[str, Any]]:
 def build(result: RunResult) -> dict[str, Any]:
     """Plain, JSON-ready dictionary with stable keys."""
     stats = result.stats
-    origin = stats.origin
-    lines = {spec.id: int(result.scenario.located.where(spec.path).split(':')[0]) if spec.path else None
-             for spec in result.scenario.assertions}
-    assertions = [
-        {'id': r.id, 'type': r.type, 'state': r.state, 't_s': seconds(r.time, origin), 'stamp_ns': r.time,
-         'message': r.message, 'line': lines.get(r.id), 'wall_s': round(r.wall_ns / NS, 6),
-         'value': r.value, 'unit': r.unit, 'margin': r.margin, 'margin_unit': r.margin_unit}
-        for r in result.assertions
-    ]
+    assertions = _assertions(result)
     counts = {state: sum(a['state'] == state for a in assertions) for state in ('passed', 'failed', 'pending')}
     statuses = [e for e in result.assertion_events if isinstance(e, ScenarioStatus)]
-    extra: dict[str, Any] = {}
-    if result.fault_manager is not None:
-        extra['fault_manager'] = result.fault_manager
-    if result.system is not None:
-        extra['system_under_test'] = system_section(result)
-    if result.repeats:
-        extra['repeats'] = repeats_section(result)
-    return extra | {
+    return _sections(result) | {
         'schema_version': SCHEMA_VERSION,
         'tool': {'name': 'bagfault', 'version': __version__},
         'mode': result.mode,
@@ -70,37 +55,85 @@ def build(result: RunResult) -> dict[str, Any]:
         'seed': result.seed,
         'inputs': [str(p) for p in result.inputs],
         'output': str(result.output) if result.output else None,
-        'time': {
-            'origin_ns': origin,
-            'first_ns': stats.first_time,
-            'last_ns': stats.last_time,
-            'duration_s': seconds(stats.last_time, stats.first_time),
-            'wall_s': None if result.wall_seconds is None else round(result.wall_seconds, 3),
-        },
+        'time': _time(result),
         'messages': {'read': stats.input_messages, 'written': stats.output_messages,
                      'per_topic_written': dict(sorted(stats.per_topic_out.items())),
                      'malformed': dict(sorted(stats.malformed.items()))},
-        'fault_events': [
-            {'t_s': seconds(e.time, origin), 'stamp_ns': e.time, 'fault_id': e.fault_id,
-             'injector_id': e.injector_id, 'state': e.state, 'source': e.source, 'details': e.details}
-            for e in stats.events
-        ],
+        'fault_events': _fault_events(result),
         'fault_windows': fault_windows(result),
-        'injectors': [
-            {'id': i.id, 'type': i.type, 'input_topic': i.input_topic, 'output_topic': i.output_topic,
-             'faults': [f.id for f in result.scenario.faults_of(i.id)]}
-            for i in result.scenario.injectors
-        ],
+        'injectors': _injectors(result),
         'assertions': assertions,
         'assertion_counts': counts,
-        'assertion_events': [
-            {'t_s': seconds(e.time, origin), 'assertion_id': e.assertion_id, 'state': e.state, 'message': e.message}
-            for e in result.assertion_events if isinstance(e, AssertionEvent)
-        ],
+        'assertion_events': _assertion_events(result),
         'final_status': statuses[-1].state if statuses else None,
         'notes': list(result.notes),
         'warnings': list(result.warnings),
     }
+
+
+def _time(result: RunResult) -> dict[str, Any]:
+    """Time zero, the first and last message, the bag's span and the run's wall time."""
+    stats = result.stats
+    return {
+        'origin_ns': stats.origin,
+        'first_ns': stats.first_time,
+        'last_ns': stats.last_time,
+        'duration_s': seconds(stats.last_time, stats.first_time),
+        'wall_s': None if result.wall_seconds is None else round(result.wall_seconds, 3),
+    }
+
+
+def _assertion_events(result: RunResult) -> list[dict[str, Any]]:
+    """Each assertion's changes of state, in bag time."""
+    return [
+        {'t_s': seconds(e.time, result.stats.origin), 'assertion_id': e.assertion_id, 'state': e.state,
+         'message': e.message}
+        for e in result.assertion_events if isinstance(e, AssertionEvent)
+    ]
+
+
+def _fault_events(result: RunResult) -> list[dict[str, Any]]:
+    """Each fault's changes of state, in bag time, with the injector and the config it applied."""
+    origin = result.stats.origin
+    return [
+        {'t_s': seconds(e.time, origin), 'stamp_ns': e.time, 'fault_id': e.fault_id,
+         'injector_id': e.injector_id, 'state': e.state, 'source': e.source, 'details': e.details}
+        for e in result.stats.events
+    ]
+
+
+def _injectors(result: RunResult) -> list[dict[str, Any]]:
+    """Each injector: its type, topics and the faults declared on it."""
+    return [
+        {'id': i.id, 'type': i.type, 'input_topic': i.input_topic, 'output_topic': i.output_topic,
+         'faults': [f.id for f in result.scenario.faults_of(i.id)]}
+        for i in result.scenario.injectors
+    ]
+
+
+def _assertions(result: RunResult) -> list[dict[str, Any]]:
+    """Each assertion's verdict, with the scenario line it is declared on."""
+    origin = result.stats.origin
+    lines = {spec.id: int(result.scenario.located.where(spec.path).split(':')[0]) if spec.path else None
+             for spec in result.scenario.assertions}
+    return [
+        {'id': r.id, 'type': r.type, 'state': r.state, 't_s': seconds(r.time, origin), 'stamp_ns': r.time,
+         'message': r.message, 'line': lines.get(r.id), 'wall_s': round(r.wall_ns / NS, 6),
+         'value': r.value, 'unit': r.unit, 'margin': r.margin, 'margin_unit': r.margin_unit}
+        for r in result.assertions
+    ]
+
+
+def _sections(result: RunResult) -> dict[str, Any]:
+    """The sections a run has only with a fault manager, a system under test or repeats."""
+    extra: dict[str, Any] = {}
+    if result.fault_manager is not None:
+        extra['fault_manager'] = result.fault_manager
+    if result.system is not None:
+        extra['system_under_test'] = system_section(result)
+    if result.repeats:
+        extra['repeats'] = repeats_section(result)
+    return extra
 
 
 def system_section(result: RunResult) -> dict[str, Any]:

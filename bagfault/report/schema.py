@@ -42,11 +42,7 @@ def _limits(minimum: float | None, maximum: float | None, choices: Sequence[str]
             markdown: bool = False, exclusive: bool = False) -> list[str]:
     """A key's range, choices and whether it is required, as the text tables or the markdown tables say it
     (`exclusive`: the minimum itself is refused)."""
-    out = []
-    if minimum is not None and exclusive:
-        out.append(f'> {_bound(minimum)}' if markdown else f'above {_bound(minimum)}')
-    elif minimum is not None:
-        out.append(f'{"≥" if markdown else "min"} {_bound(minimum)}')
+    out = [] if minimum is None else [_lower(minimum, markdown=markdown, exclusive=exclusive)]
     if maximum is not None:
         out.append(f'{"≤" if markdown else "max"} {_bound(maximum)}')
     if choices:
@@ -56,6 +52,13 @@ def _limits(minimum: float | None, maximum: float | None, choices: Sequence[str]
     return out
 
 
+def _lower(minimum: float, *, markdown: bool, exclusive: bool) -> str:
+    """A key's lower bound as the text or markdown tables say it."""
+    if exclusive:
+        return f'> {_bound(minimum)}' if markdown else f'above {_bound(minimum)}'
+    return f'{"≥" if markdown else "min"} {_bound(minimum)}'
+
+
 def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str:
     """Human table or JSON of one or all injector types."""
     data: dict[str, Any] = schema_dict(type_name)
@@ -63,22 +66,29 @@ def render_schema(type_name: str | None = None, *, as_json: bool = False) -> str
         return json.dumps(data, indent=2, sort_keys=True)
     lines = []
     for name, entry in data.items():
-        kinds = ', '.join(entry['message_types']) or 'any message type'
-        live = ' (live mode only)' if entry['live_only'] and not entry['needs'] else ''
-        lines.append(f'{name}: {entry["description"]}{live}')
-        lines.append(f'  needs: {entry["needs"]}' if entry['needs'] else f'  messages: {kinds}')
-        for title in ('options', 'fields'):
-            fields = entry[title]
-            if not fields:
-                continue
-            lines.append('  injector options:' if title == 'options' else '  fault config keys:')
-            for field in fields:
-                limits = _limits(field['min'], field['max'], field['choices'], required=field['required'])
-                extra = f' [{", ".join(limits)}]' if limits else ''
-                default = '' if field['default'] in (None, '') else f' (default {field["default"]})'
-                lines.append(f'    {field["key"]:<36} {field["type"]:<16} {field["description"]}{default}{extra}')
-        lines.append('')
+        lines += _type_lines(name, entry)
     return '\n'.join(lines).rstrip()
+
+
+def _type_lines(name: str, entry: dict[str, Any]) -> list[str]:
+    """One injector type as text: what it acts on, its options and its fault config keys."""
+    kinds = ', '.join(entry['message_types']) or 'any message type'
+    live = ' (live mode only)' if entry['live_only'] and not entry['needs'] else ''
+    lines = [f'{name}: {entry["description"]}{live}',
+             f'  needs: {entry["needs"]}' if entry['needs'] else f'  messages: {kinds}']
+    for title in ('options', 'fields'):
+        if entry[title]:
+            lines.append('  injector options:' if title == 'options' else '  fault config keys:')
+            lines += [_field_line(field) for field in entry[title]]
+    return [*lines, '']
+
+
+def _field_line(field: dict[str, Any]) -> str:
+    """An option or config key as a line of text: name, type, meaning, default and limits."""
+    limits = _limits(field['min'], field['max'], field['choices'], required=field['required'])
+    extra = f' [{", ".join(limits)}]' if limits else ''
+    default = '' if field['default'] in (None, '') else f' (default {field["default"]})'
+    return f'    {field["key"]:<36} {field["type"]:<16} {field["description"]}{default}{extra}'
 
 
 def _row(field: dict[str, Any]) -> str:
@@ -107,13 +117,7 @@ def render_markdown() -> str:
         lines += _section_rows(section)
     lines += ['## Injector types', '']
     for name, entry in schema_dict().items():
-        kinds = ', '.join(f'`{k}`' for k in entry['message_types']) or 'any message type'
-        live = ' Live mode only.' if entry['live_only'] and not entry['needs'] else ''
-        acts = f'Needs {entry["needs"]}.' if entry['needs'] else f'Messages: {kinds}.'
-        lines += [f'### `{name}`', '', f'{entry["description"]}{live} {acts}', '']
-        for title, part in (('Injector options', 'options'), ('Fault `config` keys', 'fields')):
-            if entry[part]:
-                lines += [f'{title}:', '', HEADER, *(_row(f) for f in entry[part]), '']
+        lines += _type_markdown(name, entry)
     lines += ['## Assertion types', '', 'Every assertion has `id` and `type`; the keys of each type:', '']
     for name in sorted(ASSERTION_TYPES):
         cls = ASSERTION_TYPES[name]
@@ -121,6 +125,18 @@ def render_markdown() -> str:
         lines += [f'### `{name}`', '', f'{cls.description}{within}', '', HEADER,
                   *(_row(f.to_dict()) for f in cls.fields), '']
     return '\n'.join(lines)
+
+
+def _type_markdown(name: str, entry: dict[str, Any]) -> list[str]:
+    """One injector type as markdown: what it acts on, and tables of its options and fault config keys."""
+    kinds = ', '.join(f'`{k}`' for k in entry['message_types']) or 'any message type'
+    live = ' Live mode only.' if entry['live_only'] and not entry['needs'] else ''
+    acts = f'Needs {entry["needs"]}.' if entry['needs'] else f'Messages: {kinds}.'
+    lines = [f'### `{name}`', '', f'{entry["description"]}{live} {acts}', '']
+    for title, part in (('Injector options', 'options'), ('Fault `config` keys', 'fields')):
+        if entry[part]:
+            lines += [f'{title}:', '', HEADER, *(_row(f) for f in entry[part]), '']
+    return lines
 
 
 def _section_rows(section: Any) -> list[str]:
@@ -206,7 +222,6 @@ def _section_json(section: Any, ref: Callable[[str], dict[str, Any]]) -> dict[st
 def json_schema(kind: str) -> dict[str, Any]:
     """A JSON Schema (2020-12) of a scenario or a campaign file, for editors (the YAML language server): every
     section's keys, each injector type's options, each assertion type's keys, every fault config key."""
-    from bagfault.assertions.registry import ASSERTION_TYPES  # noqa: PLC0415
     from bagfault.spec.sections import CAMPAIGN_SECTIONS, SCENARIO_SECTIONS  # noqa: PLC0415
 
     if kind not in ('scenario', 'campaign'):
@@ -218,37 +233,48 @@ def json_schema(kind: str) -> dict[str, Any]:
 
     defs = {s.name: _section_json(s, ref) for s in sections}
     if kind == 'scenario':
-        types = sorted(injector_types().items())
-        injector = defs['injector']
-        injector['properties']['type'] = {'anyOf': [{'enum': [name for name, _ in types]}, {'type': 'string'}],
-                                          'description': injector['properties']['type']['description']}
-        injector['allOf'] = [{'if': {'properties': {'type': {'const': name}}, 'required': ['type']},
-                              'then': {'properties': {f.name: _field_json(f) for f in cls.options}}}
-                             for name, cls in types if cls.options]
-        config: dict[str, Any] = {}
-        for _, injector_type in types:
-            for f in injector_type.fields:
-                config.setdefault(f.name, _field_json(f))
-        defs['fault']['properties']['config'] = {'type': 'object', 'properties': config,
-                                                 'description': "The fault config keys of its injector's type."}
-        assertion = defs['assertion']
-        assertion['properties']['type'] = {'anyOf': [{'enum': sorted(ASSERTION_TYPES)}, {'type': 'string'}],
-                                           'description': assertion['properties']['type']['description']}
-        rules = []
-        for name, cls in sorted(ASSERTION_TYPES.items()):
-            fields = cls.fields
-            then: dict[str, Any] = {'properties': {f.name: _field_json(f) for f in fields}}
-            if cls.takes_within:
-                then['properties']['within'] = {'type': 'number', 'minimum': 0,
-                                                'description': 'Deadline, seconds from time zero.'}
-            required = [f.name for f in fields if f.required]
-            if required:
-                then['required'] = required
-            rules.append({'if': {'properties': {'type': {'const': name}}, 'required': ['type']}, 'then': then})
-        assertion['allOf'] = rules
+        _typed_injectors(defs)
+        _typed_assertions(defs['assertion'])
     top = defs.pop(sections[0].name)
     return {'$schema': 'https://json-schema.org/draft/2020-12/schema', 'title': f'bagfault {kind} file',
             **top, '$defs': defs}
+
+
+def _typed_injectors(defs: dict[str, Any]) -> None:
+    """The injector section's types and each type's options; the fault's config keys of every type."""
+    types = sorted(injector_types().items())
+    injector = defs['injector']
+    injector['properties']['type'] = {'anyOf': [{'enum': [name for name, _ in types]}, {'type': 'string'}],
+                                      'description': injector['properties']['type']['description']}
+    injector['allOf'] = [{'if': {'properties': {'type': {'const': name}}, 'required': ['type']},
+                          'then': {'properties': {f.name: _field_json(f) for f in cls.options}}}
+                         for name, cls in types if cls.options]
+    config: dict[str, Any] = {}
+    for _, injector_type in types:
+        for f in injector_type.fields:
+            config.setdefault(f.name, _field_json(f))
+    defs['fault']['properties']['config'] = {'type': 'object', 'properties': config,
+                                             'description': "The fault config keys of its injector's type."}
+
+
+def _typed_assertions(assertion: dict[str, Any]) -> None:
+    """The assertion section's types, and each type's keys (and `within` where it takes one)."""
+    from bagfault.assertions.registry import ASSERTION_TYPES  # noqa: PLC0415
+
+    assertion['properties']['type'] = {'anyOf': [{'enum': sorted(ASSERTION_TYPES)}, {'type': 'string'}],
+                                       'description': assertion['properties']['type']['description']}
+    rules = []
+    for name, cls in sorted(ASSERTION_TYPES.items()):
+        fields = cls.fields
+        then: dict[str, Any] = {'properties': {f.name: _field_json(f) for f in fields}}
+        if cls.takes_within:
+            then['properties']['within'] = {'type': 'number', 'minimum': 0,
+                                            'description': 'Deadline, seconds from time zero.'}
+        required = [f.name for f in fields if f.required]
+        if required:
+            then['required'] = required
+        rules.append({'if': {'properties': {'type': {'const': name}}, 'required': ['type']}, 'then': then})
+    assertion['allOf'] = rules
 
 
 def render_sections() -> str:
