@@ -68,18 +68,24 @@ class Node:
                          if c.subscription_topic == subscription and c.publisher_topic == publisher), None)
         if declared is not None or subscription is None or publisher is None:
             return declared
+        if self._chained(subscription, publisher):
+            return MessageContext('callback_chain', subscription, publisher)
+        return None
+
+    def _chained(self, subscription: str, publisher: str) -> bool:
+        """True when a callback of the subscription, or one it passes variables to (transitively), publishes."""
         reached = [str(c['callback_name']) for c in self.callbacks
                    if c['callback_type'] == 'subscription_callback' and c.get('topic_name') == subscription]
         seen = set(reached)
         while reached:
             callback = reached.pop()
             if callback in self.publishers.get(publisher, ()):
-                return MessageContext('callback_chain', subscription, publisher)
+                return True
             for write, read in self.passings:
                 if write == callback and read not in seen:
                     seen.add(read)
                     reached.append(read)
-        return None
+        return False
 
 
 @dataclass(frozen=True)
@@ -156,21 +162,19 @@ def _node(raw: object, warnings: list[str]) -> Node:
     where = f'node {name}'
     node = Node(name)
     for number, callback in enumerate(read.get('callbacks')):
-        cb_where = f'{where}: callbacks[{number}]'
-        if isinstance(callback, dict) and 'callback_type' not in callback and 'type' in callback:
-            warnings.append(f"{where}: callback {callback.get('callback_name', number)!r} says 'type:'; "
-                            "caret_analyze reads 'callback_type:' (accepted here as an alias)")
-            callback = {**callback, 'callback_type': callback['type']}
-        written = callback.get('callback_type') if isinstance(callback, dict) else None
-        needed: tuple[str, ...] = ('callback_name', 'symbol',
-                                   'period_ns' if written == 'timer_callback' else 'topic_name')
-        kind = _read(sections.CALLBACK, callback, cb_where, needed if written in CALLBACK_TYPES else ()).get(
-            'callback_type')
-        if kind not in CALLBACK_TYPES:
-            continue  # caret_analyze reads timer and subscription callbacks only (service callbacks are ignored)
-        node.callbacks.append({**callback, 'construction_order': callback.get('construction_order', 0)})
+        _callback(node, callback, where, number, warnings)
     for number, group in enumerate(read.get('callback_groups')):
         _read(sections.CALLBACK_GROUP, group, f'{where}: callback_groups[{number}]')
+    _links(node, read, where)
+    for number, context in enumerate(read.get('message_contexts')):
+        found = _context(node, context, f'{where}: message_contexts[{number}]', warnings)
+        if found is not None:
+            node.contexts.append(found)
+    return node
+
+
+def _links(node: Node, read: Read, where: str) -> None:
+    """The node's variable passings, publishers and subscriptions."""
     for number, passing in enumerate(read.get('variable_passings')):
         link = _read(sections.VARIABLE_PASSING, passing, f'{where}: variable_passings[{number}]')
         write, reader = str(link.get('callback_name_write')), str(link.get('callback_name_read'))
@@ -184,32 +188,78 @@ def _node(raw: object, warnings: list[str]) -> Node:
     for number, subscribe in enumerate(read.get('subscribes')):
         node.subscribes.append(str(_read(sections.SUBSCRIBE, subscribe,
                                          f'{where}: subscribes[{number}]').get('topic_name')))
-    for number, context in enumerate(read.get('message_contexts')):
-        ctx_where = f'{where}: message_contexts[{number}]'
-        written = context.get('context_type') if isinstance(context, dict) else None
-        needed = ('subscription_topic_name', 'publisher_topic_name') if written in CONTEXT_TYPES else ()
-        block = _read(sections.MESSAGE_CONTEXT, context, ctx_where, needed)
-        kind = block.get('context_type')
-        if kind == UNDEFINED:
-            continue  # no context: a callback chain may take its place
-        if kind not in CONTEXT_TYPES:
-            warnings.append(f'{ctx_where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)}); '
-                            'context dropped')
-            continue
-        subscribed, published = _topic(block.get('subscription_topic_name')), _topic(block.get('publisher_topic_name'))
-        missing = [f'{role} {topic}' for role, topic, known in (('subscribe to', subscribed, node.subscribes),
-                                                                  ('publish', published, node.publishes))
-                   if topic is not None and topic not in known]
-        if missing:  # caret finds no subscription or publisher struct for it, and the context is not made
-            warnings.append(f'{ctx_where}: the node does not {" or ".join(missing)}; context dropped')
-            continue
-        node.contexts.append(MessageContext(kind, subscribed, published))
-    return node
+
+
+def _callback(node: Node, callback: Any, where: str, number: int, warnings: list[str]) -> None:
+    """The node's callback `number`, kept when it is a timer or subscription callback (all caret_analyze reads);
+    'type:' is taken for 'callback_type:' with a warning."""
+    if isinstance(callback, dict) and 'callback_type' not in callback and 'type' in callback:
+        warnings.append(f"{where}: callback {callback.get('callback_name', number)!r} says 'type:'; "
+                        "caret_analyze reads 'callback_type:' (accepted here as an alias)")
+        callback = {**callback, 'callback_type': callback['type']}
+    written = callback.get('callback_type') if isinstance(callback, dict) else None
+    needed: tuple[str, ...] = ('callback_name', 'symbol',
+                               'period_ns' if written == 'timer_callback' else 'topic_name')
+    kind = _read(sections.CALLBACK, callback, f'{where}: callbacks[{number}]',
+                 needed if written in CALLBACK_TYPES else ()).get('callback_type')
+    if kind in CALLBACK_TYPES:  # (service callbacks are ignored)
+        node.callbacks.append({**callback, 'construction_order': callback.get('construction_order', 0)})
+
+
+def _context(node: Node, context: Any, where: str, warnings: list[str]) -> MessageContext | None:
+    """One declared message context, or None when caret_analyze would not make it (no context, an unknown type,
+    a topic the node does not have: the last two with a warning)."""
+    written = context.get('context_type') if isinstance(context, dict) else None
+    needed = ('subscription_topic_name', 'publisher_topic_name') if written in CONTEXT_TYPES else ()
+    block = _read(sections.MESSAGE_CONTEXT, context, where, needed)
+    kind = block.get('context_type')
+    if kind == UNDEFINED:
+        return None  # no context: a callback chain may take its place
+    if kind not in CONTEXT_TYPES:
+        warnings.append(f'{where}: unknown context_type {kind!r} (known: {", ".join(CONTEXT_TYPES)}); '
+                        'context dropped')
+        return None
+    subscribed, published = _topic(block.get('subscription_topic_name')), _topic(block.get('publisher_topic_name'))
+    missing = [f'{role} {topic}' for role, topic, known in (('subscribe to', subscribed, node.subscribes),
+                                                              ('publish', published, node.publishes))
+               if topic is not None and topic not in known]
+    if missing:  # caret finds no subscription or publisher struct for it, and the context is not made
+        warnings.append(f'{where}: the node does not {" or ".join(missing)}; context dropped')
+        return None
+    return MessageContext(kind, subscribed, published)
 
 
 def load_architecture(path: str | Path) -> Architecture:
     """Read and check an architecture file; LatencyError names the file and the problem."""
     file = Path(path)
+    try:
+        top = _read(sections.ARCHITECTURE, _load_yaml(file), 'architecture')
+    except LatencyError as exc:
+        raise LatencyError(f'{file}: {one_line(exc)}') from None
+    named_paths, executors, raw_nodes = top.get('named_paths'), top.get('executors'), top.get('nodes')
+    warnings: list[str] = []
+    nodes, skipped = _nodes(raw_nodes, warnings)
+    paths: dict[str, NamedPath] = {}
+    dropped: dict[str, str] = {}
+    for number, raw in enumerate(named_paths):
+        try:
+            name, chain = _named_path(raw, number)
+        except LatencyError as exc:
+            raise LatencyError(f'{file}: {one_line(exc)}') from None
+        if name in paths:
+            warnings.append(f'path {name} is defined more than once; the first is used')
+            continue
+        foreign = _foreign_topic(chain, nodes)
+        if foreign:
+            warnings.append(f'path {name}: {foreign}; path dropped')
+            dropped[name] = foreign
+            continue
+        paths[name] = NamedPath(name, chain, _problems(chain, nodes, skipped))
+    return Architecture(file, paths, nodes, list(executors), warnings, dropped)
+
+
+def _load_yaml(file: Path) -> dict[str, Any]:
+    """The file's YAML mapping; LatencyError naming the file when it cannot be read or is no mapping."""
     try:
         data = yaml.safe_load(read_text(file))
     except FileNotFoundError:
@@ -220,12 +270,11 @@ def load_architecture(path: str | Path) -> Architecture:
         raise LatencyError(f'{file}: invalid YAML: {one_line(exc)}') from None
     if not isinstance(data, dict):
         raise LatencyError(f'{file}: Failed to parse yaml: not a mapping')
-    try:
-        top = _read(sections.ARCHITECTURE, data, 'architecture')
-    except LatencyError as exc:
-        raise LatencyError(f'{file}: {one_line(exc)}') from None
-    named_paths, executors, raw_nodes = top.get('named_paths'), top.get('executors'), top.get('nodes')
-    warnings: list[str] = []
+    return data
+
+
+def _nodes(raw_nodes: list[Any], warnings: list[str]) -> tuple[dict[str, Node], dict[str, str]]:
+    """The nodes by name, and those skipped (one caret_analyze rejects, or a name defined twice) with why."""
     nodes: dict[str, Node] = {}
     skipped: dict[str, str] = {}
     names = [n.get('node_name') for n in raw_nodes if isinstance(n, dict)]
@@ -242,28 +291,17 @@ def load_architecture(path: str | Path) -> Architecture:
             warnings.append(f'{skipped[node.name]}; node skipped')
             continue
         nodes[node.name] = node
-    paths: dict[str, NamedPath] = {}
-    dropped: dict[str, str] = {}
-    for number, raw in enumerate(named_paths):
-        try:
-            named = _read(sections.NAMED_PATH, raw, f'named_paths[{number}]')
-            name = str(named.get('path_name'))
-            links = [_read(sections.CHAIN_NODE, e, f'path {name}: node_chain[{i}]')
-                     for i, e in enumerate(named.get('node_chain'))]
-            chain = [PathNode(str(link.get('node_name')), _topic(link.get('subscribe_topic_name')),
-                              _topic(link.get('publish_topic_name'))) for link in links]
-        except LatencyError as exc:
-            raise LatencyError(f'{file}: {one_line(exc)}') from None
-        if name in paths:
-            warnings.append(f'path {name} is defined more than once; the first is used')
-            continue
-        foreign = _foreign_topic(chain, nodes)
-        if foreign:
-            warnings.append(f'path {name}: {foreign}; path dropped')
-            dropped[name] = foreign
-            continue
-        paths[name] = NamedPath(name, chain, _problems(chain, nodes, skipped))
-    return Architecture(file, paths, nodes, list(executors), warnings, dropped)
+    return nodes, skipped
+
+
+def _named_path(raw: object, number: int) -> tuple[str, list[PathNode]]:
+    """A named path's name and node chain; LatencyError at a missing key."""
+    named = _read(sections.NAMED_PATH, raw, f'named_paths[{number}]')
+    name = str(named.get('path_name'))
+    links = [_read(sections.CHAIN_NODE, e, f'path {name}: node_chain[{i}]')
+             for i, e in enumerate(named.get('node_chain'))]
+    return name, [PathNode(str(link.get('node_name')), _topic(link.get('subscribe_topic_name')),
+                           _topic(link.get('publish_topic_name'))) for link in links]
 
 
 def _foreign_topic(chain: list[PathNode], nodes: dict[str, Node]) -> str | None:
@@ -293,8 +331,12 @@ def _problems(chain: list[PathNode], nodes: dict[str, Node], skipped: dict[str, 
         problems.append('a path needs at least one node')
     elif len(chain) == 1 and (chain[0].subscribe_topic is None or chain[0].publish_topic is None):
         problems.append('a one-node path needs its subscribe and publish topics')
-    for before, after in itertools.pairwise(chain):
-        if before.publish_topic is None or before.publish_topic != after.subscribe_topic:
-            problems.append(f'{before.node_name} publishes {before.publish_topic} but {after.node_name} '
-                            f'subscribes {after.subscribe_topic}')
-    return problems
+    return problems + _broken_links(chain)
+
+
+def _broken_links(chain: list[PathNode]) -> list[str]:
+    """Each pair of neighbours where the first's publish topic is not the next's subscribe topic."""
+    return [f'{before.node_name} publishes {before.publish_topic} but {after.node_name} '
+            f'subscribes {after.subscribe_topic}'
+            for before, after in itertools.pairwise(chain)
+            if before.publish_topic is None or before.publish_topic != after.subscribe_topic]

@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from bagfault.events import FaultEvent
+    from bagfault.io.types import Codec
 
 
 
@@ -57,19 +58,14 @@ class SeriesCollector:
 
 def read_series(paths: Sequence[Path], topics: Sequence[str]) -> tuple[dict[str, TopicSeries], list[FaultEvent]]:
     """Series of the given topics and the recorded fault events of one or more bags."""
-    from bagfault.events import FAULT_EVENT_TOPIC, FaultEvent  # noqa: PLC0415
+    from bagfault.events import FaultEvent  # noqa: PLC0415
 
     with InputSet(list(paths)) as inputs:
         catalog = TypeCatalog(inputs.channels, inputs.ros_distro)
-        stamped = {}
-        for channel in inputs.channels:
-            if channel.topic in topics:
-                codec = catalog.codec(channel.msgtype)
-                stamped[channel.topic] = codec is not None and has_header(channel.msgtype, codec.store)
+        stamped = _stamped(inputs, catalog, topics)
         collector = SeriesCollector(stamped)
         wanted = {i: c.topic for i, c in enumerate(inputs.channels) if c.topic in stamped}
-        events_channel = {i for i, c in enumerate(inputs.channels) if c.topic == FAULT_EVENT_TOPIC}
-        event_codec = catalog.codec(FaultEvent.msgtype) if events_channel else None
+        events_channel, event_codec = _event_channels(inputs, catalog)
         events: list[FaultEvent] = []
         for index, time, _, data in inputs.messages():
             topic = wanted.get(index)
@@ -81,6 +77,24 @@ def read_series(paths: Sequence[Path], topics: Sequence[str]) -> tuple[dict[str,
         for topic in topics:
             series.setdefault(topic, TopicSeries.empty())
         return series, events
+
+
+def _event_channels(inputs: InputSet, catalog: TypeCatalog) -> tuple[set[int], Codec | None]:
+    """The channels of recorded fault events, and their codec (None without such channels)."""
+    from bagfault.events import FAULT_EVENT_TOPIC, FaultEvent  # noqa: PLC0415
+
+    channels = {i for i, c in enumerate(inputs.channels) if c.topic == FAULT_EVENT_TOPIC}
+    return channels, catalog.codec(FaultEvent.msgtype) if channels else None
+
+
+def _stamped(inputs: InputSet, catalog: TypeCatalog, topics: Sequence[str]) -> dict[str, bool]:
+    """Each of the topics the bags have: whether its type has a header stamp (a type not decodable has none)."""
+    stamped = {}
+    for channel in inputs.channels:
+        if channel.topic in topics:
+            codec = catalog.codec(channel.msgtype)
+            stamped[channel.topic] = codec is not None and has_header(channel.msgtype, codec.store)
+    return stamped
 
 
 def fault_windows(events: Sequence[FaultEvent]) -> dict[str, list[tuple[int, int | None]]]:

@@ -97,22 +97,29 @@ def response_cases(starts: np.ndarray, matched: np.ndarray, ends: np.ndarray) ->
         outputs.setdefault(index, []).append(end)
     records = sorted(((start, end) for index, start in enumerate(starts.tolist())
                       for end in outputs.get(index, [None])), key=lambda r: (r[0], r[1] is None, r[1] or 0))
-    # reversed walk: a record without an end takes the earliest end after it; one end per start (the least)
+    cases = _cases(_responses(records))
+    return {name: (np.array([s for s, _ in rows], dtype=np.int64), np.array([r for _, r in rows]) / MS)
+            for name, rows in cases.items()}
+
+
+def _responses(records: list[tuple[int, int | None]]) -> list[tuple[int, int]]:
+    """(start, end) pairs, one end per start (the least), in a reversed walk where a record without an end takes
+    the earliest end after it; the earliest output is left out (it may miss inputs)."""
     by_start: dict[int, int] = {}
     least: int | None = None
     for start, maybe_end in reversed(records):
-        if maybe_end is None:
-            if least is None:
-                continue
-            end = least
-        elif start > maybe_end:
-            continue  # reversed timestamps: caret ignores the record
-        else:
-            end = maybe_end
+        end = least if maybe_end is None else maybe_end
+        if end is None or start > end:
+            continue  # nothing after it yet, or reversed timestamps: caret ignores the record
         if start not in by_start or end < by_start[start]:
             by_start[start] = end
         least = end if least is None else min(least, end)
-    pairs = sorted((s, e) for s, e in by_start.items() if e != least)  # the earliest output may miss inputs
+    return sorted((s, e) for s, e in by_start.items() if e != least)
+
+
+def _cases(pairs: list[tuple[int, int]]) -> dict[str, list[tuple[int, int]]]:
+    """(start, latency ns) rows of each response case: every pair; per output, its latest input (best) and its
+    earliest (worst); and the input before the earliest (worst with external latency)."""
     best: dict[int, int] = {}
     worst: dict[int, int] = {}
     external: dict[int, tuple[int, int]] = {}
@@ -122,12 +129,10 @@ def response_cases(starts: np.ndarray, matched: np.ndarray, ends: np.ndarray) ->
     for start, end in pairs:
         best[end] = max(best.get(end, start), start)
         worst[end] = min(worst.get(end, start), start)
-    cases = {'all': [(s, e - s) for s, e in pairs],
-             'best': sorted((s, e - s) for e, s in best.items()),
-             'worst': sorted((s, e - s) for e, s in worst.items()),
-             'worst-with-external-latency': sorted((p, e - p) for e, (_, p) in external.items())}
-    return {name: (np.array([s for s, _ in rows], dtype=np.int64), np.array([r for _, r in rows]) / MS)
-            for name, rows in cases.items()}
+    return {'all': [(s, e - s) for s, e in pairs],
+            'best': sorted((s, e - s) for e, s in best.items()),
+            'worst': sorted((s, e - s) for e, s in worst.items()),
+            'worst-with-external-latency': sorted((p, e - p) for e, (_, p) in external.items())}
 
 
 def measured_hops(architecture: Architecture, path: NamedPath, notes: list[str],
@@ -160,20 +165,8 @@ def path_latency(
     last = series.get(topics[-1], TopicSeries.empty())
     index = np.arange(last.times.size)
     valid = np.full(last.times.size, len(topics) > 1)  # a path cut at its first topic measures nothing
-    for node, in_topic, out_topic, context in reversed(hops):
-        source = series.get(in_topic, TopicSeries.empty())
-        target = series.get(out_topic, TopicSeries.empty())
-        kind = context.context_type if context else ''
-        if kind == 'tilde':
-            notes.append(f'node {node}: context tilde cannot be followed on bag data; using the latest message')
-        safe = np.clip(index, 0, None)
-        if kind in STAMP_CONTEXTS:
-            if source.stamps is None or target.stamps is None:
-                raise LatencyError(f'node {node}: inherit_unique_stamp needs header stamps on {in_topic} and '
-                                   f'{out_topic}')
-            found = _latest_same_stamp(source.times, source.stamps, target.times[safe], target.stamps[safe])
-        else:
-            found = _latest_before(source.times, target.times[safe])
+    for hop in reversed(hops):
+        found = _hop_inputs(hop, series, np.clip(index, 0, None), notes)
         valid &= found >= 0
         index = np.where(valid, found, -1)
     first = series.get(topics[0], TopicSeries.empty())
@@ -188,6 +181,23 @@ def path_latency(
     dropped = int(first.times.size - np.unique(matched).size)
     return PathResult(path.name, topics, sample_times, first.times[matched], latency, dropped,
                       int(first.times.size), response_cases(starts, matched, sample_times), notes)
+
+
+def _hop_inputs(hop: tuple[str, str, str, MessageContext | None], series: dict[str, TopicSeries],
+                outputs: np.ndarray, notes: list[str]) -> np.ndarray:
+    """For each of the hop's output messages (indexes into its output topic), the index of the input message it
+    reflects (-1 for none): the same header stamp for inherit_unique_stamp, else the latest before it."""
+    node, in_topic, out_topic, context = hop
+    source = series.get(in_topic, TopicSeries.empty())
+    target = series.get(out_topic, TopicSeries.empty())
+    kind = context.context_type if context else ''
+    if kind == 'tilde':
+        notes.append(f'node {node}: context tilde cannot be followed on bag data; using the latest message')
+    if kind not in STAMP_CONTEXTS:
+        return _latest_before(source.times, target.times[outputs])
+    if source.stamps is None or target.stamps is None:
+        raise LatencyError(f'node {node}: inherit_unique_stamp needs header stamps on {in_topic} and {out_topic}')
+    return _latest_same_stamp(source.times, source.stamps, target.times[outputs], target.stamps[outputs])
 
 
 STATISTICS = ('min', 'mean', 'p50', 'p95', 'p99', 'max')

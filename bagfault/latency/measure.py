@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import LatencyError
-from bagfault.latency.architecture import Architecture, load_architecture
+from bagfault.latency.architecture import Architecture, NamedPath, load_architecture
 from bagfault.latency.collect import fault_windows, read_series
 from bagfault.latency.compute import PathResult, by_fault, path_latency, statistics
 from bagfault.units import NS
@@ -51,21 +51,35 @@ class LatencyReport:
         }
 
 
+def _check_named(arch_file: str | Path, architecture: Architecture, path: str) -> None:
+    """LatencyError when the path asked for was dropped or is not in the file."""
+    if path in architecture.dropped:
+        raise LatencyError(f'{arch_file}: path {path} was dropped: {architecture.dropped[path]}')
+    if path not in architecture.paths:
+        raise LatencyError(f'{arch_file}: no path {path!r} (paths: {", ".join(architecture.paths)})')
+
+
+def _paths(arch_file: str | Path, architecture: Architecture, path: str | None,
+           ) -> tuple[list[NamedPath], dict[str, list[str]]]:
+    """The paths to measure (the one named, or all) and the problems of those that cannot be; LatencyError when
+    the one named is dropped, missing or cannot be measured."""
+    if path is not None:
+        _check_named(arch_file, architecture, path)
+    wanted = [architecture.paths[path]] if path else list(architecture.paths.values())
+    usable = [p for p in wanted if p.usable]
+    unusable = {p.name: p.problems for p in wanted if not p.usable}
+    if path is not None and not usable:
+        raise LatencyError(f'{arch_file}: path {path} cannot be measured: {"; ".join(unusable[path])}')
+    return usable, unusable
+
+
 def measure(arch_file: str | Path, bags: Sequence[str | Path], *, path: str | None = None,
             stamp_origin: bool = False) -> LatencyReport:
     """Load the architecture, read the path topics of the bags, compute every usable path."""
     from pathlib import Path as _Path  # noqa: PLC0415
 
     architecture = load_architecture(arch_file)
-    if path is not None and path in architecture.dropped:
-        raise LatencyError(f'{arch_file}: path {path} was dropped: {architecture.dropped[path]}')
-    if path is not None and path not in architecture.paths:
-        raise LatencyError(f'{arch_file}: no path {path!r} (paths: {", ".join(architecture.paths)})')
-    wanted = [architecture.paths[path]] if path else list(architecture.paths.values())
-    usable = [p for p in wanted if p.usable]
-    unusable = {p.name: p.problems for p in wanted if not p.usable}
-    if path is not None and not usable:
-        raise LatencyError(f'{arch_file}: path {path} cannot be measured: {"; ".join(unusable[path])}')
+    usable, unusable = _paths(arch_file, architecture, path)
     topics = sorted({t for p in usable for t in p.topics})
     series, events = read_series([_Path(b) for b in bags], topics)
     starts = [s.times[0] for s in series.values() if s.times.size]
