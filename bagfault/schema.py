@@ -62,13 +62,17 @@ class Key:
         """A config value converted to the key's type, or FieldValueError."""
         coerced = _to_number(value) if self.type == 'number' and not self.finite else _COERCE[self.type](value)
         if isinstance(coerced, (int, float)) and not isinstance(coerced, bool):
-            if self.minimum is not None and coerced < self.minimum:
-                raise FieldValueError(f'{_show(value)} is below the minimum {_show(self.minimum)}')
-            if self.maximum is not None and coerced > self.maximum:
-                raise FieldValueError(f'{_show(value)} is above the maximum {_show(self.maximum)}')
+            self._check_range(value, coerced)
         if self.choices and coerced not in self.choices:
             raise FieldValueError(f'{_show(value)} is not one of {", ".join(self.choices)}')
         return coerced
+
+    def _check_range(self, value: object, number: float) -> None:
+        """FieldValueError when the number (`value` as written) is below the minimum or above the maximum."""
+        if self.minimum is not None and number < self.minimum:
+            raise FieldValueError(f'{_show(value)} is below the minimum {_show(self.minimum)}')
+        if self.maximum is not None and number > self.maximum:
+            raise FieldValueError(f'{_show(value)} is above the maximum {_show(self.maximum)}')
 
     def to_dict(self) -> dict[str, Any]:
         """A config key as `bagfault schema --json` prints it (stable keys, the published type names)."""

@@ -223,17 +223,61 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
     assert read is not None
     config.thresholds = _thresholds(read, Thresholds())
     for number, node in enumerate(read.get('overrides', [])):
-        where = (*PREFIX, 'overrides', number)
-        override = reader.read(sections.OVERRIDE, node, where)
-        if override is not None and 'auto_confirm_after_sec' in override.given:
-            (warn or problem)((*where, 'auto_confirm_after_sec'), 'ignored, as medkit ignores it: a per-source '
-                              "override carries the debounce thresholds and healing_enabled only (medkit's "
-                              'EntityThresholdResolver); timed confirmation uses the global auto_confirm_after_sec')
-        if override is not None and 'source' in override:
-            thresholds = _thresholds(override, config.thresholds)
-            thresholds = replace(thresholds, auto_confirm_after_sec=config.thresholds.auto_confirm_after_sec)
-            config.overrides.append((override.get('source'), thresholds))
-    diagnostics = read.get('diagnostics')
+        override = _override(node, (*PREFIX, 'overrides', number), reader, config.thresholds)
+        if override is not None:
+            config.overrides.append(override)
+    _diagnostics(config, read.get('diagnostics'), reader)
+    config.conditions = _conditions(read.get('conditions', []), reader)
+    if 'correlation' in read.given:
+        config.correlation = parse_correlation(section['correlation'], (*PREFIX, 'correlation'), problem,
+                                               warn or no_warning)
+    if 'snapshots' in read:
+        config.snapshots = _snapshots(read.get('snapshots'), (*PREFIX, 'snapshots'), reader)
+    config.clears = _clears(read.get('clear', []), reader)
+    return config
+
+
+def _conditions(nodes: list[Any], reader: Reader) -> list[Condition]:
+    """The conditions on topics that report to the fault manager (those refused left out)."""
+    out = []
+    for number, node in enumerate(nodes):
+        condition = _condition(node, (*PREFIX, 'conditions', number), reader)
+        if condition:
+            out.append(condition)
+    return out
+
+
+def _clears(nodes: list[Any], reader: Reader) -> list[Clear]:
+    """The scheduled clears (those refused left out)."""
+    out = []
+    for number, node in enumerate(nodes):
+        clear = _clear(node, (*PREFIX, 'clear', number), reader)
+        if clear is not None:
+            out.append(clear)
+    return out
+
+
+def _override(node: object, where: tuple[Any, ...], reader: Reader, default: Thresholds,
+              ) -> tuple[str, Thresholds] | None:
+    """A per-source override: the source and its thresholds (the global auto_confirm_after_sec, as medkit
+    keeps it; one given here is ignored with a warning). None without a source."""
+    override = reader.read(sections.OVERRIDE, node, where)
+    if override is None:
+        return None
+    if 'auto_confirm_after_sec' in override.given:
+        (reader.warn or reader.problem)(
+            (*where, 'auto_confirm_after_sec'), 'ignored, as medkit ignores it: a per-source override carries the '
+            "debounce thresholds and healing_enabled only (medkit's EntityThresholdResolver); timed confirmation "
+            'uses the global auto_confirm_after_sec')
+    if 'source' not in override:
+        return None
+    thresholds = replace(_thresholds(override, default), auto_confirm_after_sec=default.auto_confirm_after_sec)
+    return override.get('source'), thresholds
+
+
+def _diagnostics(config: FaultManagerConfig, diagnostics: object, reader: Reader) -> None:
+    """`diagnostics: true` (on /diagnostics) or `{topic, codes}`: where the fault manager hears diagnostic arrays
+    and the codes it maps their names to."""
     if diagnostics is True:
         config.diagnostics_topic = '/diagnostics'
     elif isinstance(diagnostics, dict):
@@ -243,29 +287,22 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
         config.diagnostics_topic = block.get('topic', '/diagnostics')
         for name, code in block.get('codes', {}).items():
             if not isinstance(code, str) or not valid_code(code):
-                problem((*path, 'codes', name), f'{code!r} is not a fault code')
+                reader.problem((*path, 'codes', name), f'{code!r} is not a fault code')
             else:
                 config.diagnostics_codes[str(name)] = code
     elif diagnostics not in (None, False):
-        problem((*PREFIX, 'diagnostics'), 'must be true or a mapping {topic, codes}')
-    for number, node in enumerate(read.get('conditions', [])):
-        condition = _condition(node, (*PREFIX, 'conditions', number), reader)
-        if condition:
-            config.conditions.append(condition)
-    if 'correlation' in read.given:
-        config.correlation = parse_correlation(section['correlation'], (*PREFIX, 'correlation'), problem,
-                                               warn or no_warning)
-    if 'snapshots' in read:
-        config.snapshots = _snapshots(read.get('snapshots'), (*PREFIX, 'snapshots'), reader)
-    for number, node in enumerate(read.get('clear', [])):
-        path = (*PREFIX, 'clear', number)
-        clear = reader.read(sections.CLEAR, node, path)
-        if clear is None:
-            continue
-        code = _code(clear, path, problem)
-        if 'at' in clear and code:
-            config.clears.append(Clear(code, clear.get('at'), clear.get('skip_correlation_auto_clear')))
-    return config
+        reader.problem((*PREFIX, 'diagnostics'), 'must be true or a mapping {topic, codes}')
+
+
+def _clear(node: object, path: tuple[Any, ...], reader: Reader) -> Clear | None:
+    """A scheduled clear of a code, at a time (None when the entry is refused)."""
+    clear = reader.read(sections.CLEAR, node, path)
+    if clear is None:
+        return None
+    code = _code(clear, path, reader.problem)
+    if 'at' in clear and code:
+        return Clear(code, clear.get('at'), clear.get('skip_correlation_auto_clear'))
+    return None
 
 
 def _condition(node: object, path: tuple[Any, ...], reader: Reader) -> Condition | None:
@@ -273,28 +310,39 @@ def _condition(node: object, path: tuple[Any, ...], reader: Reader) -> Condition
     if read is None or 'when' not in read or 'topic' not in read:
         return None
     when = reader.read(sections.WHEN, read.get('when'), (*path, 'when'))
+    name = _test_name(when, path, reader)
+    if when is None or name is None:
+        return None
+    code = _code(read, path, reader.problem)
+    severity = _severity(read, path, reader.problem)
+    test = _test(name, when.get(name), path, reader)
+    if test is None:
+        return None
+    topic = read.get('topic')
+    source = read.get('source', f'/bagfault/conditions{topic}')
+    return Condition(topic, when.get('field'), code, severity, source, **test) if code else None
+
+
+def _test_name(when: Read | None, path: tuple[Any, ...], reader: Reader) -> str | None:
+    """The one test a condition's `when` gives (above, below, outside or not_finite), or None: no field, no test
+    or several (a problem), or a test whose value was refused."""
     if when is None or 'field' not in when:
         return None
     tests = [k for k in ('above', 'below', 'outside', 'not_finite') if k in when.given]
     if len(tests) != 1:
         reader.problem((*path, 'when'), 'give exactly one of above, below, outside, not_finite')
         return None
-    if tests[0] not in when:
+    return tests[0] if tests[0] in when else None
+
+
+def _test(name: str, value: Any, path: tuple[Any, ...], reader: Reader) -> dict[str, Any] | None:
+    """A condition's test as Condition's keyword (`outside` as a (low, high) pair); None when refused."""
+    if name != 'outside':
+        return {name: value}
+    if not (len(value) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+        reader.problem((*path, 'when', 'outside'), 'must be [low, high]')
         return None
-    code = _code(read, path, reader.problem)
-    severity = _severity(read, path, reader.problem)
-    kwargs: dict[str, Any] = {}
-    value = when.get(tests[0])
-    if tests[0] == 'outside':
-        if not (len(value) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
-            reader.problem((*path, 'when', 'outside'), 'must be [low, high]')
-            return None
-        kwargs['outside'] = (float(value[0]), float(value[1]))
-    else:
-        kwargs[tests[0]] = value
-    topic = read.get('topic')
-    source = read.get('source', f'/bagfault/conditions{topic}')
-    return Condition(topic, when.get('field'), code, severity, source, **kwargs) if code else None
+    return {'outside': (float(value[0]), float(value[1]))}
 
 
 def _snapshots(node: object, path: tuple[Any, ...], reader: Reader) -> Snapshots:
@@ -322,17 +370,21 @@ def snapshot_regex(pattern: str) -> Any:
     return re2.compile(pattern)
 
 
+def _pattern_items(node: object, path: tuple[Any, ...], problem: Problem) -> list[tuple[Any, tuple[Any, ...]]]:
+    """Each pattern as {match, topics} with where it is, from either layout (none, with a problem, from others)."""
+    if isinstance(node, dict):
+        return [({'match': key, 'topics': value}, (*path, key)) for key, value in node.items()]
+    if isinstance(node, list):
+        return [(item, (*path, number)) for number, item in enumerate(node)]
+    problem(path, 'must map regular expressions to topic lists')
+    return []
+
+
 def _snapshot_patterns(node: object, path: tuple[Any, ...], problem: Problem, warn: Problem | None = None,
                        ) -> tuple[tuple[str, tuple[str, ...]], ...]:
     """medkit's `{REGEX: [topics]}` map or a list of `{match: REGEX, topics: [...]}`; kept sorted by regex, as
     medkit's std::map holds them, so the lexicographically first matching regex wins."""
-    if isinstance(node, dict):
-        items = [({'match': key, 'topics': value}, (*path, key)) for key, value in node.items()]
-    elif isinstance(node, list):
-        items = [(item, (*path, number)) for number, item in enumerate(node)]
-    else:
-        problem(path, 'must map regular expressions to topic lists')
-        return ()
+    items = _pattern_items(node, path, problem)
     patterns: dict[str, tuple[str, ...]] = {}
     for item, where in items:
         if not isinstance(item, dict) or not isinstance(item.get('match'), str):

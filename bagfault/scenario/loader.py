@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bagfault.errors import Problem, ScenarioError, one_line
 from bagfault.io.regular import read_text
@@ -21,6 +21,10 @@ from bagfault.spec.model import AssertionSpec, Dimension, Explore, ExploreFault,
 from bagfault.spec.reader import Read, Reader
 from bagfault.spec.system import parse_system
 from bagfault.spec.yamlnodes import LocatedYaml, PathKey, YamlSyntaxError, format_path, load_located
+
+if TYPE_CHECKING:
+    from bagfault.injectors.base import InjectorType
+    from bagfault.schema import Key
 
 ENDPOINT_KEYS = {k.name for k in sections.TOPIC.keys}
 SERVICE_KEYS = {k.name for k in sections.TRIGGER_SERVICE.keys}
@@ -114,13 +118,7 @@ def build_scenario(document: ScenarioText, *, validate: bool = True, strict: boo
     name = str(source) if source else '<scenario>'
     out = _Collector(name, located)
     scenario = _build(located, out)
-    base = source.parent if source is not None else None
-    root = located.data if isinstance(located.data, dict) else {}
-    if isinstance(root.get('system_under_test'), dict):  # (not a mapping: told by the top-level read)
-        scenario.system = parse_system(root['system_under_test'], ('system_under_test',), out.add, base)
-    bags = root.get('bags')
-    if isinstance(bags, list):
-        scenario.bags = [base / b if base is not None else Path(b) for b in _texts(bags, 'bags', out)]
+    _beside_file(scenario, located, source, out)
     scenario.source = source
     if source is not None:
         scenario.msg_paths = [source.parent / p for p in scenario.msg_paths]
@@ -130,6 +128,23 @@ def build_scenario(document: ScenarioText, *, validate: bool = True, strict: boo
         check_ids(scenario, out)
         resolve_scenario(scenario, out)
         validate_scenario(scenario, out)
+    _conclude(scenario, out, strict)
+    return scenario
+
+
+def _beside_file(scenario: Scenario, located: LocatedYaml, source: Path | None, out: _Collector) -> None:
+    """The parts whose paths are relative to the scenario's folder: the system under test and the bags."""
+    base = source.parent if source is not None else None
+    root = located.data if isinstance(located.data, dict) else {}
+    if isinstance(root.get('system_under_test'), dict):  # (not a mapping: told by the top-level read)
+        scenario.system = parse_system(root['system_under_test'], ('system_under_test',), out.add, base)
+    bags = root.get('bags')
+    if isinstance(bags, list):
+        scenario.bags = [base / b if base is not None else Path(b) for b in _texts(bags, 'bags', out)]
+
+
+def _conclude(scenario: Scenario, out: _Collector, strict: bool) -> None:
+    """The warnings into the scenario, sealed; ScenarioError listing every problem (warnings too with `strict`)."""
     warnings = sorted(out.warnings, key=_position)
     scenario.warnings = [str(w) for w in warnings]
     scenario.inert_warnings = sum(w in out.inert for w in warnings)
@@ -138,7 +153,6 @@ def build_scenario(document: ScenarioText, *, validate: bool = True, strict: boo
     if problems:
         raise ScenarioError(sorted(problems, key=_position), [] if strict else warnings)
     scenario.seal()
-    return scenario
 
 
 def _position(problem: Any) -> tuple[int, int]:
@@ -158,6 +172,12 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
     scenario.faults = [f for i, n in enumerate(top.get('faults', [])) if (f := _fault(n, ('faults', i), out))]
     scenario.assertions = [a for i, n in enumerate(top.get('assertions', []))
                            if (a := _assertion(n, ('assertions', i), out))]
+    _optional_parts(scenario, top, out)
+    return scenario
+
+
+def _optional_parts(scenario: Scenario, top: Read, out: _Collector) -> None:
+    """The seed, message definitions, fault manager section and fault space, where given."""
     if 'seed' in top.given and 'seed' in top:  # (absent: None, so --seed or 0 decides later)
         scenario.seed = top.get('seed')
     if 'msg_paths' in top:
@@ -166,7 +186,6 @@ def _build(located: LocatedYaml, out: _Collector) -> Scenario:
         scenario.fault_manager = top.get('fault_manager', {})
     if 'explore' in top:
         scenario.explore = _explore(top.get('explore'), ('explore',), scenario, out)
-    return scenario
 
 
 def _injectors(top: Read, out: _Collector) -> list[InjectorSpec]:
@@ -219,46 +238,62 @@ def _explore_fault(node: object, path: PathKey, scenario: Scenario, out: _Collec
         setattr(fault, name, value)
     injector = scenario.injector(fault.injector_id)
     cls = get_injector_type(injector.type) if injector is not None else None
-    reader = out.reader()
     for key, value in read.get('config', {}).items():
-        field = cls.field(str(key)) if cls is not None else None
-        if not isinstance(value, list) or (field is not None and field.type == 'list'):  # (a field's operations)
-            fault.config[key] = value
-            continue
-        declared = sections.Key(str(key), 'dimension', '', minimum=None, maximum=None)
-        ok, ends = reader.dimension(declared, value, (*path, 'config', key))
-        if ok:
-            fault.dimensions.append(Dimension(f'config.{key}', ends[0], ends[1],
-                                              integer=field is not None and field.type == 'integer'))
+        _config_value(fault, str(key), value, cls.field(str(key)) if cls is not None else None, path, out)
     return fault
 
 
-def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | None:
-    from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
-    from bagfault.injectors.system import SystemInjector  # noqa: PLC0415
+def _config_value(fault: ExploreFault, key: str, value: object, field: Key | None, path: PathKey,
+                  out: _Collector) -> None:
+    """A candidate's config key: a [low, high] list is a dimension of the space (an integer one for an integer
+    key), anything else a fixed value (as is a list-typed key's list: a field's operations)."""
+    if not isinstance(value, list) or (field is not None and field.type == 'list'):
+        fault.config[key] = value
+        return
+    declared = sections.Key(key, 'dimension', '', minimum=None, maximum=None)
+    ok, ends = out.reader().dimension(declared, value, (*path, 'config', key))
+    if ok:
+        fault.dimensions.append(Dimension(f'config.{key}', ends[0], ends[1],
+                                          integer=field is not None and field.type == 'integer'))
 
+
+def _injector(node: object, path: PathKey, out: _Collector) -> InjectorSpec | None:
     if not isinstance(node, dict):
         out.add(path, 'an injector must be a mapping')
         return None
-    type_name = node.get('type')
-    cls = get_injector_type(type_name) if isinstance(type_name, str) and type_name else None
+    cls = _named_type(node)
     option_keys = {f.name for f in cls.options} if cls else set()
     read = out.reader().read(sections.INJECTOR, node, path, extra=option_keys,
-                             judge_unknown=cls is not None or not type_name)
+                             judge_unknown=cls is not None or not node.get('type'))
     assert read is not None
     spec = InjectorSpec(id=read.get('id', ''), type=read.get('type', ''), path=path)
     spec.options = {key: node[key] for key in node if key in option_keys}
     if 'seed' in read:
         spec.seed = read.get('seed')
+    _endpoints(spec, cls, read, node, path, out)
+    return spec
+
+
+def _endpoints(spec: InjectorSpec, cls: InjectorType | None, read: Read, node: dict[str, Any], path: PathKey,
+               out: _Collector) -> None:
+    """What the injector acts on, into `spec`: two services, the running system (nothing to read), or topics."""
+    from bagfault.injectors.system import SystemInjector  # noqa: PLC0415
 
     if _service_endpoints(spec, read, node, path, out):
-        return spec
+        return
     if cls is not None and issubclass(cls, SystemInjector):  # acts on the system: no topic, no service
         for key in sorted(ENDPOINT_KEYS & read.given):
             out.add((*path, key), f'injector type {spec.type!r} acts on the running system; it takes no {key}')
-        return spec
+        return
     _topic_endpoints(spec, read, path, out)
-    return spec
+
+
+def _named_type(node: dict[str, Any]) -> InjectorType | None:
+    """The injector type a mapping names (None without a type, or for one not known)."""
+    from bagfault.injectors.registry import get_injector_type  # noqa: PLC0415
+
+    type_name = node.get('type')
+    return get_injector_type(type_name) if isinstance(type_name, str) and type_name else None
 
 
 def _service_endpoints(spec: InjectorSpec, read: Read, node: dict[str, Any], path: PathKey,

@@ -85,18 +85,33 @@ def _skip_unknown_types(scenario: Scenario, out: _Collector) -> None:
     """An injector type neither built in nor given by an installed plugin: the anchor's validator warns
     ('assuming external plugin'), its controller creates no injector and skips that injector's faults, and the
     other injectors run. So here: a warning (an error under --strict), the injector and its faults left out."""
-    unknown = [i for i in scenario.injectors if i.type and get_injector_type(i.type) is None]
+    unknown = _of_unknown_type(scenario)
     if not unknown:
         return
-    known_types = ', '.join(sorted(injector_types()))
     kept = [i for i in scenario.injectors if all(i is not u for u in unknown)]
     gone = {u.id for u in unknown} - {i.id for i in kept}  # (a duplicate id of a known type keeps its faults)
     for injector in unknown:  # one warning, as the anchor's validator gives one (its faults named in it)
-        faults = [f.id for f in scenario.faults if f.injector_id == injector.id and injector.id in gone]
-        which = f' ({", ".join(dict.fromkeys(faults))})' if faults else ''
-        out.ignored((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
-                 f'installed plugin provides it, so injector {injector.id!r} and its faults{which} are skipped '
-                 f'and the others run, as the anchor does ("assuming external plugin"; known: {known_types})')
+        _skipped(scenario, injector, gone, out)
+    _leave_out(scenario, kept, gone)
+
+
+def _of_unknown_type(scenario: Scenario) -> list[InjectorSpec]:
+    """The injectors whose type is neither built in nor given by a plugin."""
+    return [i for i in scenario.injectors if i.type and get_injector_type(i.type) is None]
+
+
+def _leave_out(scenario: Scenario, kept: list[InjectorSpec], gone: set[str]) -> None:
+    """Only the injectors kept, and only the faults of injectors not gone (the others' ids noted as skipped)."""
     scenario.skipped_faults = [f.id for f in scenario.faults if f.injector_id in gone]
     scenario.injectors = kept
     scenario.faults = [f for f in scenario.faults if f.injector_id not in gone]
+
+
+def _skipped(scenario: Scenario, injector: InjectorSpec, gone: set[str], out: _Collector) -> None:
+    """The warning of an injector of an unknown type, naming the faults skipped with it."""
+    faults = [f.id for f in scenario.faults if f.injector_id == injector.id and injector.id in gone]
+    which = f' ({", ".join(dict.fromkeys(faults))})' if faults else ''
+    known_types = ', '.join(sorted(injector_types()))
+    out.ignored((*injector.path, 'type'), f'unknown injector type {injector.type!r}: not built in and no '
+                f'installed plugin provides it, so injector {injector.id!r} and its faults{which} are skipped '
+                f'and the others run, as the anchor does ("assuming external plugin"; known: {known_types})')

@@ -101,35 +101,50 @@ def parse_system(node: object, path: PathKey, problem: Callable[[PathKey, str], 
         system.cwd = (base / read.get('cwd')) if base is not None else Path(read.get('cwd'))
     system.ready = [c for i, item in enumerate(read.get('ready', []))
                     if (c := _condition(item, (*path, 'ready', i), problem))]
-    record = read.get('record')
+    system.record = _record(read.get('record'), path, problem)
+    system.publishes = _publishes(read.get('publishes', []), path, problem)
+    return system
+
+
+def _record(record: object, path: PathKey, problem: Callable[[PathKey, str], None]) -> Literal['all'] | list[str]:
+    """What `test` records of the system: 'all' or a list of topics (a problem and 'all' for anything else)."""
     if record == 'all':
-        system.record = 'all'
-    elif isinstance(record, list) and all(isinstance(t, str) and t for t in record):
-        system.record = list(record)
-    else:
-        problem((*path, 'record'), "must be 'all' or a list of topics")
-    publishes = read.get('publishes', [])
+        return 'all'
+    if isinstance(record, list) and all(isinstance(t, str) and t for t in record):
+        return list(record)
+    problem((*path, 'record'), "must be 'all' or a list of topics")
+    return 'all'
+
+
+def _publishes(publishes: object, path: PathKey, problem: Callable[[PathKey, str], None]) -> list[str]:
+    """The topics the system publishes, made absolute (a problem and none for anything but topics)."""
     publishes = [publishes] if isinstance(publishes, str) else publishes
     if isinstance(publishes, list) and all(isinstance(t, str) and t.strip() for t in publishes):
-        system.publishes = [t if t.startswith('/') else f'/{t}' for t in publishes]
-    else:
-        problem((*path, 'publishes'), 'must be a topic or a list of topics')
-    return system
+        return [t if t.startswith('/') else f'/{t}' for t in publishes]
+    problem((*path, 'publishes'), 'must be a topic or a list of topics')
+    return []
 
 
 def _command(read: Read, shell: bool, path: PathKey, problem: Callable[[PathKey, str], None]) -> list[str]:
     """The command line: one string for the shell, else split as a shell would (or given as a list)."""
     command = read.get('command')
-    argv: list[str] = []
-    if isinstance(command, str) and command.strip():
-        argv = [command] if shell else shlex.split(command)
-    elif isinstance(command, list) and command and all(isinstance(c, (str, int, float)) for c in command):
-        argv = [str(c) for c in command]
-    elif 'command' in read.given:
-        problem((*path, 'command'), 'must be a command line: a string or a list of arguments')
+    argv = _argv(command, shell)
+    if argv is None:
+        argv = []
+        if 'command' in read.given:
+            problem((*path, 'command'), 'must be a command line: a string or a list of arguments')
     if any('\0' in part for part in argv):
         problem((*path, 'command'), 'holds a NUL character, which no command line can carry')
     return argv
+
+
+def _argv(command: object, shell: bool) -> list[str] | None:
+    """A command's arguments (one string for the shell), or None when it is no command line."""
+    if isinstance(command, str) and command.strip():
+        return [command] if shell else shlex.split(command)
+    if isinstance(command, list) and command and all(isinstance(c, (str, int, float)) for c in command):
+        return [str(c) for c in command]
+    return None
 
 
 def _env(env: dict[Any, Any], path: PathKey, problem: Callable[[PathKey, str], None]) -> dict[str, str]:
@@ -160,18 +175,23 @@ def _condition(item: object, path: PathKey, problem: Callable[[PathKey, str], No
         kind: ReadyKind = 'message' if read.get('message') else 'publisher'
         return ReadyCondition(kind, name=read.get('topic'), timeout=timeout)
     if 'subscribes' in read.given:
-        value = read.get('subscribes')
-        if value == 'played':
-            return ReadyCondition('subscribes', timeout=timeout)
-        if isinstance(value, list) and value and all(isinstance(t, str) for t in value):
-            return ReadyCondition('subscribes', topics=tuple(value), timeout=timeout)
-        problem((*path, 'subscribes'), "must be 'played' or a list of topics")
-        return None
+        return _subscribes(read.get('subscribes'), timeout, path, problem)
     if 'service' in read.given:
         return ReadyCondition('service', name=read.get('service'), timeout=timeout) if 'service' in read else None
     if 'delay' in read.given:
         return ReadyCondition('delay', seconds=read.get('delay', 0.0))
     problem(path, 'needs one of topic, subscribes, service or delay')
+    return None
+
+
+def _subscribes(value: object, timeout: float, path: PathKey, problem: Callable[[PathKey, str], None],
+                ) -> ReadyCondition | None:
+    """Ready once the system subscribes to what is played, or to the topics listed."""
+    if value == 'played':
+        return ReadyCondition('subscribes', timeout=timeout)
+    if isinstance(value, list) and value and all(isinstance(t, str) for t in value):
+        return ReadyCondition('subscribes', topics=tuple(value), timeout=timeout)
+    problem((*path, 'subscribes'), "must be 'played' or a list of topics")
     return None
 
 

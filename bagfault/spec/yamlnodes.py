@@ -102,7 +102,8 @@ class _Converter:
     def fail(self, node: yaml.Node, message: str) -> YamlSyntaxError:
         return YamlSyntaxError(f'{node.start_mark.line + 1}:{node.start_mark.column + 1}: {message}')
 
-    def convert(self, node: yaml.Node, path: PathKey) -> Any:
+    def count(self, node: yaml.Node) -> None:
+        """Count a node the file writes, or one reached again through an alias; YamlSyntaxError past the limits."""
         if id(node) in self.seen:  # reached again through an alias
             self.expanded += 1
             if self.expanded > MAX_EXPANDED:
@@ -112,6 +113,9 @@ class _Converter:
             self.seen.add(id(node))
             if len(self.seen) > MAX_NODES:
                 raise self.fail(node, f'more than {MAX_NODES} values: a scenario file holds at most that many')
+
+    def convert(self, node: yaml.Node, path: PathKey) -> Any:
+        self.count(node)
         if len(path) > MAX_DEPTH:
             raise self.fail(node, f'nested more than {MAX_DEPTH} levels deep')
         if node.tag not in STANDARD_TAGS:
