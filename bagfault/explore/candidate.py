@@ -133,15 +133,7 @@ def scenario_data(base: dict[str, Any], space: Explore, candidate: Candidate) ->
     """The plain scenario of a candidate (see the module's docstring); `base` the space file's data."""
     data = {k: copy.deepcopy(v) for k, v in base.items() if k != 'explore'}
     undrawn = space.ids - set(candidate.ids)
-    faults = [f for f in data.get('faults') or [] if isinstance(f, dict)]
-    gone = set(undrawn)
-    while True:  # faults chained after an undrawn candidate (or after such a fault) never start: left out
-        chained = {str(f.get('id')) for f in faults
-                   if isinstance(f.get('after'), dict) and str(f['after'].get('fault')) in gone} - gone
-        if not chained:
-            break
-        gone |= chained
-    faults = [f for f in faults if str(f.get('id')) not in gone]
+    faults, gone = _kept_faults(data.get('faults') or [], undrawn)
     by_id = {f.id: f for f in space.faults}
     data['faults'] = faults + [fault_entry(by_id[d.fault], d) for d in candidate.faults]
     if isinstance(data.get('assertions'), list):
@@ -149,17 +141,45 @@ def scenario_data(base: dict[str, Any], space: Explore, candidate: Candidate) ->
     return data
 
 
+def _kept_faults(faults: list[Any], undrawn: set[str]) -> tuple[list[dict[str, Any]], set[str]]:
+    """The space file's faults that still start without the undrawn candidates, and the ids of those left out."""
+    entries = [f for f in faults if isinstance(f, dict)]
+    gone = _with_chained(entries, undrawn)
+    return [f for f in entries if str(f.get('id')) not in gone], gone
+
+
+def _with_chained(faults: list[dict[str, Any]], undrawn: set[str]) -> set[str]:
+    """The undrawn candidates and the faults chained after them (or after such a fault): none of them starts."""
+    gone = set(undrawn)
+    while True:
+        chained = {str(f.get('id')) for f in faults
+                   if isinstance(f.get('after'), dict) and str(f['after'].get('fault')) in gone} - gone
+        if not chained:
+            return gone
+        gone |= chained
+
+
 def kept_assertions(assertions: list[Any], gone: set[str]) -> list[Any]:
     """The assertions that name none of the faults `gone`, nor (as a sequence) a step left out."""
-    dropped = {str(a.get('id')) for a in assertions
-               if isinstance(a, dict) and any(str(a.get(key)) in gone for key in REFERENCES if key in a)}
+    dropped = {str(a.get('id')) for a in assertions if _names_any(a, gone)}
     while True:
-        more = {str(a.get('id')) for a in assertions if isinstance(a, dict) and isinstance(a.get('steps'), list)
-                and any(str(step) in dropped for step in a['steps'])} - dropped
+        more = {str(a.get('id')) for a in assertions if _has_step_in(a, dropped)} - dropped
         if not more:
             break
         dropped |= more
     return [a for a in assertions if not (isinstance(a, dict) and str(a.get('id')) in dropped)]
+
+
+def _names_any(assertion: object, faults: set[str]) -> bool:
+    """True for an assertion that refers to one of the faults (after, during, ...)."""
+    return isinstance(assertion, dict) and any(str(assertion.get(key)) in faults for key in REFERENCES
+                                               if key in assertion)
+
+
+def _has_step_in(assertion: object, assertions: set[str]) -> bool:
+    """True for a sequence assertion one of whose steps is one of the assertions."""
+    return isinstance(assertion, dict) and isinstance(assertion.get('steps'), list) and any(
+        str(step) in assertions for step in assertion['steps'])
 
 
 def dump(data: dict[str, Any], header: str = '') -> str:
@@ -179,19 +199,25 @@ def relocated(data: dict[str, Any], source: Path, target: Path) -> dict[str, Any
     msg_paths, the system's cwd and path_latency's architecture files (absolute ones stay)."""
     out = copy.deepcopy(data)
     origin, there = source.resolve().parent, target.resolve().parent
-
-    def move(path: Any) -> Any:
-        if not isinstance(path, str) or not path or Path(path).is_absolute():
-            return path
-        return os.path.relpath(origin / path, there)
-
     for key in ('bags', 'msg_paths'):
         if isinstance(out.get(key), list):
-            out[key] = [move(p) for p in out[key]]
+            out[key] = [_moved(p, origin, there) for p in out[key]]
     system = out.get('system_under_test')
     if isinstance(system, dict) and 'cwd' in system:
-        system['cwd'] = move(system['cwd'])
+        system['cwd'] = _moved(system['cwd'], origin, there)
     for assertion in out.get('assertions') or []:
-        if isinstance(assertion, dict) and assertion.get('type') == 'path_latency' and 'architecture' in assertion:
-            assertion['architecture'] = move(assertion['architecture'])
+        if _has_architecture(assertion):
+            assertion['architecture'] = _moved(assertion['architecture'], origin, there)
     return out
+
+
+def _has_architecture(assertion: object) -> bool:
+    """True for a path_latency assertion that names its architecture file."""
+    return isinstance(assertion, dict) and assertion.get('type') == 'path_latency' and 'architecture' in assertion
+
+
+def _moved(path: Any, origin: Path, there: Path) -> Any:
+    """A path relative to `origin` made relative to `there` (an absolute one, or no path, as it is)."""
+    if not isinstance(path, str) or not path or Path(path).is_absolute():
+        return path
+    return os.path.relpath(origin / path, there)

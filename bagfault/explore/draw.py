@@ -160,8 +160,26 @@ class Search:
         return candidate
 
     def _mutate(self, parent: Candidate) -> Candidate:
+        kind = self.rng.choices(('nudge', 'stronger', 'add', 'shift', 'drop'), (35, 30, 15, 15, 5))[0]
+        regrouped = self._regroup(kind, parent)
+        if regrouped is not None:
+            return regrouped
+        drawn = self.rng.choice(parent.faults)
+        fault = self.space.fault(drawn.fault)
+        assert fault is not None
+        if not fault.dimensions:
+            return self._fresh()
+        if kind == 'stronger':
+            return parent.replaced(self._stronger(fault, drawn))
+        dimension = self.rng.choice(fault.dimensions)
+        step = self.rng.choice((0.05, 0.15, 0.3)) * dimension.span
+        value = quantize(dimension, drawn.value(dimension.name) + self.rng.gauss(0.0, step))
+        return parent.replaced(drawn.replaced(dimension.name, value))
+
+    def _regroup(self, kind: str, parent: Candidate) -> Candidate | None:
+        """`add` a fault (the one least often paired with those drawn, over one of them), `drop` one, or `shift`
+        one over another; None for another kind, or when the candidate has too many or too few faults for it."""
         rng, space = self.rng, self.space
-        kind = rng.choices(('nudge', 'stronger', 'add', 'shift', 'drop'), (35, 30, 15, 15, 5))[0]
         faults = list(parent.faults)
         if kind == 'add' and len(faults) < space.max_faults:
             rest = [f for f in space.faults if f.id not in parent.ids]
@@ -173,20 +191,13 @@ class Search:
         if kind == 'shift' and len(faults) > 1:
             moved, anchor = rng.sample(faults, 2)
             return parent.replaced(self._over(moved, anchor))
-        drawn = rng.choice(faults)
-        chosen = space.fault(drawn.fault)
-        assert chosen is not None
-        fault = chosen
-        if not fault.dimensions:
-            return self._fresh()
-        if kind == 'stronger':
-            for dimension in fault.dimensions:
-                if dimension.name != 'start':
-                    value = drawn.value(dimension.name)
-                    drawn = drawn.replaced(dimension.name, quantize(
-                        dimension, value + rng.uniform(0.1, 0.6) * (dimension.high - value)))
-            return parent.replaced(drawn)
-        dimension = rng.choice(fault.dimensions)
-        step = rng.choice((0.05, 0.15, 0.3)) * dimension.span
-        value = quantize(dimension, drawn.value(dimension.name) + rng.gauss(0.0, step))
-        return parent.replaced(drawn.replaced(dimension.name, value))
+        return None
+
+    def _stronger(self, fault: ExploreFault, drawn: Drawn) -> Drawn:
+        """Every dimension but the start moved part of the way toward its strongest end."""
+        for dimension in fault.dimensions:
+            if dimension.name != 'start':
+                value = drawn.value(dimension.name)
+                drawn = drawn.replaced(dimension.name, quantize(
+                    dimension, value + self.rng.uniform(0.1, 0.6) * (dimension.high - value)))
+        return drawn

@@ -112,6 +112,12 @@ class _Folder:
         if self.log.exists() and not resume:
             raise ExploreError(f'{self.directory}: holds an exploration already (runs.jsonl); --resume continues it, '
                                'or choose another -o')
+        self._check_files(force or resume)
+        return self._stored() if resume and self.log.exists() else {}
+
+    def _check_files(self, force: bool) -> None:
+        """The folder is inside no input folder, and its files replace no input nor (unless forced) a file
+        bagfault did not write."""
         protected = Protected.of([(name, path) for name, path in self.read])
         where = self.directory.resolve()
         for name, path in self.read:
@@ -119,13 +125,15 @@ class _Folder:
                 raise ExploreError(f'{self.directory}: would be inside {name} {path}; choose another -o')
         if self.directory.is_dir():
             for name in FILES:
-                check_output(self.directory / name, 'an exploration file', protected, force=force or resume)
+                check_output(self.directory / name, 'an exploration file', protected, force=force)
+
+    def _stored(self) -> dict[int, RunRecord]:
+        """The runs runs.jsonl holds, by index (a line cut short by a kill left out)."""
         stored: dict[int, RunRecord] = {}
-        if resume and self.log.exists():
-            for line in read_text(self.log).splitlines():
-                with contextlib.suppress(ValueError, KeyError, TypeError):  # a line cut short by a kill
-                    record = RunRecord.from_json(json.loads(line))
-                    stored[record.index] = record
+        for line in read_text(self.log).splitlines():
+            with contextlib.suppress(ValueError, KeyError, TypeError):
+                record = RunRecord.from_json(json.loads(line))
+                stored[record.index] = record
         return stored
 
     def open(self) -> None:
@@ -145,25 +153,35 @@ class _Folder:
             stream.write(json.dumps(record.to_json(), sort_keys=True) + '\n')
 
 
+def _space(scenario: Scenario, bags: Sequence[Path]) -> Explore:
+    """The scenario's fault space; ExploreError without one, or without a bag to explore."""
+    if scenario.explore is None:
+        raise ExploreError(f'{scenario.name}: no explore: section (the fault space to search)')
+    if not bags:
+        raise ExploreError(f'{scenario.name}: no bag given, and the scenario names none under `bags:`')
+    return scenario.explore
+
+
+def _budget(budget: int) -> int:
+    """The runs in all; ExploreError below one."""
+    if budget < 1:
+        raise ExploreError(f'--budget {budget}: must be 1 or more')
+    return budget
+
+
 class Explorer:
     """One exploration: the loop of the module's docstring."""
 
     def __init__(self, scenario: Scenario, bags: Sequence[Path], directory: Path, options: ExploreOptions,
                  progress: ExploreProgress | None = None, *, job: Job) -> None:
-        if scenario.explore is None:
-            raise ExploreError(f'{scenario.name}: no explore: section (the fault space to search)')
-        if not bags:
-            raise ExploreError(f'{scenario.name}: no bag given, and the scenario names none under `bags:`')
         self.scenario = scenario
-        self.space: Explore = scenario.explore
+        self.space: Explore = _space(scenario, bags)
         self.bags = [Path(b) for b in bags]
         self.options = options
         self.job = job  # a run in its process (`bagfault.api.job`)
         self.mode: Literal['run', 'test'] = 'test' if scenario.system is not None else 'run'
         self.confirm = self.space.confirm or (2 if self.mode == 'test' else 1)
-        self.budget = options.budget or self.space.budget
-        if self.budget < 1:
-            raise ExploreError(f'--budget {self.budget}: must be 1 or more')
+        self.budget = _budget(options.budget or self.space.budget)
         self.seed = options.seed if options.seed is not None else scenario.seed or 0
         self.source = (scenario.source or Path('space.yaml')).resolve()
         self.base: dict[str, Any] = load_located(scenario.text).data
@@ -210,37 +228,27 @@ class Explorer:
             return []
         requests = [_Request(f.minimal, 'replay', f) for f in self.replays[:left] if f.minimal is not None]
         del self.replays[:left]
-        # the shrinks of the smallest failures first, at most half a round of them; each keeps a run for its replay
-        shrinking = sorted((self.failures[n - 1] for n in self.waiting), key=lambda f: (len(f.assertions), f.number))
-        for failure in shrinking[:max(1, self.space.batch // 2)]:
-            if len(requests) >= left - len(self.waiting):
-                break
-            shrinker = self.shrinks[failure.number][1]
-            requests.append(_Request(self.waiting[failure.number], shrinker.purpose, failure))
+        requests += self._shrink_requests(left - len(self.waiting) - len(requests))
         reserve = RESERVE * len(self.waiting)
         while len(requests) < self.space.batch and len(self.runs) + len(requests) < self.budget - reserve:
             candidate, purpose = self.search.propose()
             requests.append(_Request(candidate, purpose))
         return requests
 
+    def _shrink_requests(self, room: int) -> list[_Request]:
+        """The shrink steps waiting, those of the smallest failures first: at most half a round of them and
+        `room` (each shrink keeps a run for its replay)."""
+        shrinking = sorted((self.failures[n - 1] for n in self.waiting), key=lambda f: (len(f.assertions), f.number))
+        requests = []
+        for failure in shrinking[:max(1, self.space.batch // 2)][:max(0, room)]:
+            shrinker = self.shrinks[failure.number][1]
+            requests.append(_Request(self.waiting[failure.number], shrinker.purpose, failure))
+        return requests
+
     def _run_round(self, engine: Any, requests: list[_Request], stored: dict[int, RunRecord],
                    scratch: Path) -> dict[int, RunRecord]:
         first = len(self.runs)
-        last = first + len(requests)  # a stopped round's log may hold any of its runs, in the order they ended
-        specs: dict[int, dict[str, Any]] = {}
-        texts: list[tuple[str, Path]] = []
-        for number, request in enumerate(requests):
-            text, source = self._scenario(request)
-            texts.append((text, source))
-            index = first + number
-            kept = stored.get(index)
-            if kept is not None and (kept.scenario_sha256, kept.purpose) == (digest(text), request.purpose):
-                continue
-            if kept is not None or any(i >= last for i in stored):  # the resumed log diverges here: what
-                stored = {i: r for i, r in stored.items() if i < index}  # follows is run again
-                self.folder.keep([*self.runs, *(stored[i] for i in range(first, index) if i in stored)])
-            specs[index] = self._spec(text, source, self._output(request, index, scratch),
-                                      clock_check=request.purpose == 'baseline')
+        specs, texts, stored = self._specs(requests, stored, scratch)
         results: dict[int, dict[str, Any]] = {}
 
         def done(position: int, result: dict[str, Any]) -> None:
@@ -267,6 +275,33 @@ class Explorer:
             output.unlink(missing_ok=True)
         return stored
 
+    def _specs(self, requests: list[_Request], stored: dict[int, RunRecord], scratch: Path,
+               ) -> tuple[dict[int, dict[str, Any]], list[tuple[str, Path]], dict[int, RunRecord]]:
+        """The round's jobs by run index (those a resumed log holds, unchanged, left out), each request's scenario
+        text and file, and the stored runs still valid (from where the resumed log diverges, none)."""
+        first = len(self.runs)
+        last = first + len(requests)  # a stopped round's log may hold any of its runs, in the order they ended
+        specs: dict[int, dict[str, Any]] = {}
+        texts: list[tuple[str, Path]] = []
+        for number, request in enumerate(requests):
+            text, source = self._scenario(request)
+            texts.append((text, source))
+            index = first + number
+            kept = stored.get(index)
+            if kept is not None and (kept.scenario_sha256, kept.purpose) == (digest(text), request.purpose):
+                continue
+            if kept is not None or any(i >= last for i in stored):  # the resumed log diverges here: what
+                stored = self._cut_log(stored, first, index)        # follows is run again
+            specs[index] = self._spec(text, source, self._output(request, index, scratch),
+                                      clock_check=request.purpose == 'baseline')
+        return specs, texts, stored
+
+    def _cut_log(self, stored: dict[int, RunRecord], first: int, index: int) -> dict[int, RunRecord]:
+        """The stored runs before `index`, and runs.jsonl rewritten to hold only them (the round from `first`)."""
+        stored = {i: r for i, r in stored.items() if i < index}
+        self.folder.keep([*self.runs, *(stored[i] for i in range(first, index) if i in stored)])
+        return stored
+
     def _record(self, index: int, request: _Request, text: str, outcome: Outcome,
                 seconds: float | None) -> RunRecord:
         return RunRecord(index, request.purpose, request.candidate, digest(text), self.seed, outcome, seconds,
@@ -280,6 +315,16 @@ class Explorer:
             self._could_not_run(record)
         if request.purpose in ('search', 'refine'):
             self.search_runs += 1
+        self._tell(record, request)
+        if request.failure is not None and request.purpose != 'replay':
+            self._step(request.failure, record)
+        self.search.observe(record, [f.assertions for f in self.failures])
+        self.progress.update(len(self.runs), self.budget, sum(f.state != 'unconfirmed' for f in self.failures),
+                             self.search.best())
+
+    def _tell(self, record: RunRecord, request: _Request) -> None:
+        """A replay's outcome to its failure; a new failure found; one found again by the search counted."""
+        outcome = record.outcome
         known = {f.assertions: f for f in self.failures}
         if request.purpose == 'replay':
             assert request.failure is not None
@@ -289,11 +334,6 @@ class Explorer:
             self._found(record)
         elif outcome.status == 'failed' and request.purpose in ('search', 'refine'):
             known[outcome.failing].hits += 1
-        if request.failure is not None and request.purpose != 'replay':
-            self._step(request.failure, record)
-        self.search.observe(record, [f.assertions for f in self.failures])
-        self.progress.update(len(self.runs), self.budget, sum(f.state != 'unconfirmed' for f in self.failures),
-                             self.search.best())
 
     def _could_not_run(self, record: RunRecord) -> None:
         """A run that could not run decides nothing; the baseline, or ERRORS in a row, end the exploration."""

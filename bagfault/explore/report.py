@@ -31,23 +31,25 @@ def render_report(document: dict[str, Any]) -> str:
         page.html(str(parts.warnings(document['baseline_warnings'])))
     if failures:
         page.section('Failures')
-        rows = []
-        for f in failures:
-            files = [('original', f['original'])]
-            if f['minimal']:
-                files.append(('minimal', f['minimal']))
-            if f['faulty_bag']:
-                files.append(('faulty bag', f['faulty_bag']))
-            replay = f['replay']['status'] if f['replay'] else 'not replayed'
-            rows.append({**f, 'cause': cause(f['minimal_faults'] or f['original_faults']), 'files': files,
-                         'replay': replay})
-        page.html(str(parts.failures(rows)))
+        page.html(str(parts.failures([_failure_row(f) for f in failures])))
     _margins_figure(page, document)
     for f in failures:
         steps = [{**s, 'cause': cause(s['faults'])} for s in f['steps']]
         page.html(str(parts.shrink_path(f['name'], cause(f['original_faults']), steps)))
         _shrink_figure(page, document, f)
     return page.render()
+
+
+def _failure_row(failure: dict[str, Any]) -> dict[str, Any]:
+    """A failure's row: its cause (the minimal one when shrunk), its files and how its replay went."""
+    files = [('original', failure['original'])]
+    if failure['minimal']:
+        files.append(('minimal', failure['minimal']))
+    if failure['faulty_bag']:
+        files.append(('faulty bag', failure['faulty_bag']))
+    replay = failure['replay']['status'] if failure['replay'] else 'not replayed'
+    return {**failure, 'cause': cause(failure['minimal_faults'] or failure['original_faults']), 'files': files,
+            'replay': replay}
 
 
 def _margins_figure(page: Page, document: dict[str, Any]) -> None:
@@ -59,26 +61,7 @@ def _margins_figure(page: Page, document: dict[str, Any]) -> None:
     base = {k: m for k, (m, _) in baseline['margins'].items() if m is not None and m > 0}
     traces = []
     for assertion in document['assertions']:
-        xs, ys, failed_x = [], [], []
-        for run in runs:
-            if run['status'] == 'error':
-                continue
-            margin = run['margins'].get(assertion, [None, ''])[0]
-            if assertion in run['failing']:
-                failed_x.append(run['index'])
-            elif margin is not None and assertion in base:
-                xs.append(run['index'])
-                ys.append(margin / base[assertion])
-        if xs:
-            traces.append({'type': 'scatter', 'mode': 'markers', 'name': assertion, 'x': xs, 'y': ys,
-                           'marker': {'size': 5}, 'legendgroup': assertion,
-                           'hovertemplate': f'{assertion}: run %{{x}}, %{{y:.3f}} of the baseline margin'
-                                            '<extra></extra>'})
-        if failed_x:
-            traces.append({'type': 'scatter', 'mode': 'markers', 'name': f'{assertion} failed', 'x': failed_x,
-                           'y': [-0.05] * len(failed_x), 'legendgroup': assertion,
-                           'marker': {'symbol': 'x', 'size': 7, 'color': '#c62828'},
-                           'hovertemplate': f'{assertion} failed in run %{{x}}<extra></extra>'})
+        traces += _margin_traces(assertion, *_margins(runs, assertion, base.get(assertion)))
     if not traces:
         return
     page.section('Margins over the search')
@@ -90,19 +73,45 @@ def _margins_figure(page: Page, document: dict[str, Any]) -> None:
                          'yaxis': {'title': {'text': 'margin / baseline margin'}}}, name='margins')
 
 
+def _margin_traces(assertion: str, xs: list[int], ys: list[float], failed_x: list[int]) -> list[dict[str, Any]]:
+    """An assertion's margins as dots, and its failures as crosses below zero (each only when there are some)."""
+    traces = []
+    if xs:
+        traces.append({'type': 'scatter', 'mode': 'markers', 'name': assertion, 'x': xs, 'y': ys,
+                       'marker': {'size': 5}, 'legendgroup': assertion,
+                       'hovertemplate': f'{assertion}: run %{{x}}, %{{y:.3f}} of the baseline margin<extra></extra>'})
+    if failed_x:
+        traces.append({'type': 'scatter', 'mode': 'markers', 'name': f'{assertion} failed', 'x': failed_x,
+                       'y': [-0.05] * len(failed_x), 'legendgroup': assertion,
+                       'marker': {'symbol': 'x', 'size': 7, 'color': '#c62828'},
+                       'hovertemplate': f'{assertion} failed in run %{{x}}<extra></extra>'})
+    return traces
+
+
+def _margins(runs: list[dict[str, Any]], assertion: str, base: float | None,
+             ) -> tuple[list[int], list[float], list[int]]:
+    """The runs where the assertion held, with its margin as a share of `base` (the baseline's, when above 0),
+    and the runs where it failed; runs that could not run are left out."""
+    xs: list[int] = []
+    ys: list[float] = []
+    failed_x: list[int] = []
+    for run in runs:
+        if run['status'] == 'error':
+            continue
+        margin = run['margins'].get(assertion, [None, ''])[0]
+        if assertion in run['failing']:
+            failed_x.append(run['index'])
+        elif margin is not None and base is not None:
+            xs.append(run['index'])
+            ys.append(margin / base)
+    return xs, ys, failed_x
+
+
 def _shrink_figure(page: Page, document: dict[str, Any], failure: dict[str, Any]) -> None:
     """Each dimension of the faults kept, along the kept steps, as a share of its range."""
-    spans = {(f['id'], d['name']): (d['low'], d['high']) for f in document['space'] for d in f['dimensions']}
     kept = [(failure['found_at_run'], failure['original_faults'])]
     kept += [(s['run'], s['faults']) for s in failure['steps'] if s['kept']]
-    series: dict[tuple[str, str], tuple[list[int], list[float]]] = {}
-    for run, faults in kept:
-        for drawn in faults:
-            for name, value in drawn['values'].items():
-                low, high = spans[(drawn['fault'], name)]
-                xs, ys = series.setdefault((drawn['fault'], name), ([], []))
-                xs.append(run)
-                ys.append((value - low) / (high - low))
+    series = _shares(document, kept)
     if not series or len(kept) < 2:
         return
     traces = [{'type': 'scatter', 'mode': 'lines+markers', 'name': f'{fault}.{name.removeprefix("config.")}',
@@ -112,3 +121,18 @@ def _shrink_figure(page: Page, document: dict[str, Any], failure: dict[str, Any]
                          'height': 320 + 20 * (len(traces) // 4), 'legend': below, 'xaxis': {'title': {'text': 'run'}},
                          'yaxis': {'title': {'text': 'share of its range'}, 'range': [-0.05, 1.05]}},
                 name=f'shrink:{failure["name"]}')
+
+
+def _shares(document: dict[str, Any], kept: list[tuple[int, list[dict[str, Any]]]],
+            ) -> dict[tuple[str, str], tuple[list[int], list[float]]]:
+    """(fault, dimension) -> the runs of the kept steps and the dimension's value there, as a share of its range."""
+    spans = {(f['id'], d['name']): (d['low'], d['high']) for f in document['space'] for d in f['dimensions']}
+    series: dict[tuple[str, str], tuple[list[int], list[float]]] = {}
+    for run, faults in kept:
+        for drawn in faults:
+            for name, value in drawn['values'].items():
+                low, high = spans[(drawn['fault'], name)]
+                xs, ys = series.setdefault((drawn['fault'], name), ([], []))
+                xs.append(run)
+                ys.append((value - low) / (high - low))
+    return series

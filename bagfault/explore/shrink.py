@@ -62,17 +62,22 @@ class Shrinker:
         for sweep in range(PASSES if self.mode != 'faults' else 0):
             before = self.current
             for phase in ('config', 'duration', 'window', 'start'):
-                for fault_id in self.current.ids:
-                    for dimension in self._dimensions(fault_id, phase):
-                        if self._composite():
-                            break
-                        if phase == 'window':
-                            yield from self._window(fault_id)
-                        else:
-                            yield from self._toward(fault_id, dimension, again=sweep > 0)
+                yield from self._phase(phase, again=sweep > 0)
             if self.current == before or failure.note:
                 break
         failure.minimal, failure.state = self.current, 'shrunk'
+
+    def _phase(self, phase: str, *, again: bool) -> Generator[Candidate, tuple[int, Outcome], None]:
+        """One phase of a pass over every fault kept: each dimension of the phase moved toward its weakest end
+        (the window as a whole in the window phase), until the failure turns out to be smaller ones together."""
+        for fault_id in self.current.ids:
+            for dimension in self._dimensions(fault_id, phase):
+                if self._composite():
+                    break
+                if phase == 'window':
+                    yield from self._window(fault_id)
+                else:
+                    yield from self._toward(fault_id, dimension, again=again)
 
     def _composite(self) -> bool:
         """Whether the failure turned out to be smaller ones together (found meanwhile): then its dimensions
@@ -158,37 +163,45 @@ class Shrinker:
         if failing == target:
             return
         label = f'{fault_id}.{name.removeprefix("config.")}'
-        limit = self.space.resolution * dimension.span
         if again:  # a later pass: one step toward the end says whether another value moved its threshold
-            step = quantize(dimension, failing + (limit if target > failing else -limit))
-            if step == failing or not (yield from self._try(fault_id, name, step, f'{label} {failing:g} -> '
-                                                                                   f'{step:g}')):
+            stepped = yield from self._one_step(fault_id, dimension, failing, target, label)
+            if stepped is None or stepped == target:
                 return
-            failing = step
-            if failing == target:
-                return
+            failing = stepped
         at_failing = self.margin(self.kept)
         if (yield from self._try(fault_id, name, target, f'{label} {failing:g} -> {target:g}')):
             return
-        passing, at_passing = target, self.margin(self.latest)
-        side = 1.0 if failing > passing else -1.0  # from passing toward failing
+        yield from self._bracket(fault_id, dimension, label, (failing, at_failing, target, self.margin(self.latest)))
+
+    def _one_step(self, fault_id: str, dimension: Dimension, failing: float, target: float,
+                  label: str) -> Generator[Candidate, tuple[int, Outcome], float | None]:
+        """One resolution step from the failing value toward `target`: the new failing value, or None when the
+        step changes nothing or passes."""
+        limit = self.space.resolution * dimension.span
+        step = quantize(dimension, failing + (limit if target > failing else -limit))
+        if step == failing or not (yield from self._try(fault_id, dimension.name, step,
+                                                        f'{label} {failing:g} -> {step:g}')):
+            return None
+        return step
+
+    def _bracket(self, fault_id: str, dimension: Dimension, label: str,
+                 bracket: tuple[float, float | None, float, float | None],
+                 ) -> Generator[Candidate, tuple[int, Outcome], None]:
+        """Narrow (failing value, its margin, passing value, its margin) to `resolution` of the range: at the
+        margin's linear root while the margins keep to the line (a strength, full mode), else halfway."""
+        name = dimension.name
+        failing, at_failing, passing, at_passing = bracket
+        limit = self.space.resolution * dimension.span
         linear = name.startswith('config.') and self.mode == 'full'  # a strength's margin may follow it; a time's
         # rarely does
         stale = False  # the last guess did not halve the bracket: halve next
         while abs(failing - passing) > limit:
             width = abs(failing - passing)
-            point = None
-            if linear and not stale and at_failing is not None and at_passing is not None \
-                    and at_failing <= 0 < at_passing:
-                root = passing + (failing - passing) * at_passing / (at_passing - at_failing)
-                nearer_failing = (abs(root - passing) + limit / 2) < width / 2
-                point = root + side * limit / 2 if nearer_failing else root - side * limit / 2
-                point = min(max(point, min(failing, passing) + limit / 2), max(failing, passing) - limit / 2)
-            value = quantize(dimension, point if point is not None else (failing + passing) / 2)
-            if value in (failing, passing):
-                point, value = None, quantize(dimension, (failing + passing) / 2)
-                if value in (failing, passing):
-                    break
+            probe = _probe(dimension, _root(failing, at_failing, passing, at_passing, limit)
+                           if linear and not stale else None, failing, passing)
+            if probe is None:
+                break
+            point, value = probe
             before = (failing, at_failing, passing, at_passing)
             if (yield from self._try(fault_id, name, value, f'{label} {failing:g} -> {value:g}')):
                 failing, at_failing = value, self.margin(self.latest)
@@ -245,3 +258,29 @@ class Shrinker:
         if kept:
             self.kept = self.latest
         return kept
+
+
+def _probe(dimension: Dimension, point: float | None, failing: float, passing: float,
+           ) -> tuple[float | None, float] | None:
+    """The guess and the value to try next: the guess quantized, or (None and) halfway when the guess lands on
+    an end of the bracket (or there is none); None when halfway does too (the bracket cannot narrow)."""
+    value = quantize(dimension, point if point is not None else (failing + passing) / 2)
+    if value not in (failing, passing):
+        return point, value
+    value = quantize(dimension, (failing + passing) / 2)
+    return None if value in (failing, passing) else (None, value)
+
+
+def _root(failing: float, at_failing: float | None, passing: float, at_passing: float | None,
+          limit: float) -> float | None:
+    """Where the margin, taken as linear between the failing value and the passing one, crosses zero: just on
+    the side of it nearer the middle of the bracket (half a `limit` away, inside the bracket), so a margin that is
+    linear settles in two runs; None unless the failing margin is at most 0 and the passing one above."""
+    if at_failing is None or at_passing is None or not at_failing <= 0 < at_passing:
+        return None
+    side = 1.0 if failing > passing else -1.0  # from passing toward failing
+    width = abs(failing - passing)
+    root = passing + (failing - passing) * at_passing / (at_passing - at_failing)
+    nearer_failing = (abs(root - passing) + limit / 2) < width / 2
+    point = root + side * limit / 2 if nearer_failing else root - side * limit / 2
+    return min(max(point, min(failing, passing) + limit / 2), max(failing, passing) - limit / 2)
