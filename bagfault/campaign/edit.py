@@ -51,14 +51,10 @@ def set_path(data: Any, path: str, value: Any) -> Any:
 
 
 def _step(node: Any, part: str, parent: str | None, path: str) -> Any:
+    """The node one step down: an item by id in a list of faults, injectors or assertions, else a mapping's key
+    (the anchor's single `injector:` as the list `injectors`); PathError naming what is not there."""
     if parent in BY_ID:
-        if not isinstance(node, list):
-            raise PathError(f'{parent} is not a list')
-        for item in node:
-            if isinstance(item, dict) and item.get('id') == part:
-                return item
-        known = ', '.join(str(i.get('id')) for i in node if isinstance(i, dict))
-        raise PathError(f'no {parent[:-1]} {part!r} (there are: {known or "none"})')
+        return _by_id(node, part, parent)
     if not isinstance(node, dict):
         raise PathError(f'{part!r} is not below a mapping')
     if part == 'injectors' and 'injectors' not in node and isinstance(node.get('injector'), dict):
@@ -66,6 +62,17 @@ def _step(node: Any, part: str, parent: str | None, path: str) -> Any:
     if part not in node:
         raise PathError(f'the scenario has no {part!r} here')
     return node[part]
+
+
+def _by_id(node: Any, part: str, parent: str) -> Any:
+    """The item of the list `parent` whose id is `part`; PathError listing the ids there are."""
+    if not isinstance(node, list):
+        raise PathError(f'{parent} is not a list')
+    for item in node:
+        if isinstance(item, dict) and item.get('id') == part:
+            return item
+    known = ', '.join(str(i.get('id')) for i in node if isinstance(i, dict))
+    raise PathError(f'no {parent[:-1]} {part!r} (there are: {known or "none"})')
 
 
 def expanded(data: Any, values: dict[str, Any], source: Path | None) -> tuple[str, Scenario]:

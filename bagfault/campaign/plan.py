@@ -118,19 +118,22 @@ def bags_of(campaign: Campaign) -> list[Bag]:
     base = campaign.source.parent if campaign.source is not None else Path('.')
     found: list[Bag] = []
     for pattern in campaign.bags:
-        matches: list[Bag]
-        if is_remote(pattern):
-            try:
-                matches = list(list_bags(pattern))
-            except InputError as exc:
-                raise CampaignError(f'{campaign.source}: bags: {exc}') from None
-        else:
-            full = pattern if Path(pattern).is_absolute() else str(base / pattern)
-            matches = [Path(m) for m in sorted(m.rstrip('/') for m in glob.glob(full))]
+        matches = _matches(campaign, pattern, base)
         if not matches:
             raise CampaignError(f'{campaign.source}: bags: {pattern!r} matches no file or folder')
         found += [m for m in matches if m not in found]
     return found
+
+
+def _matches(campaign: Campaign, pattern: str, base: Path) -> list[Bag]:
+    """The bags a bucket URL lists, or a glob (relative to `base`) finds, sorted."""
+    if is_remote(pattern):
+        try:
+            return list(list_bags(pattern))
+        except InputError as exc:
+            raise CampaignError(f'{campaign.source}: bags: {exc}') from None
+    full = pattern if Path(pattern).is_absolute() else str(base / pattern)
+    return [Path(m) for m in sorted(m.rstrip('/') for m in glob.glob(full))]
 
 
 def points(campaign: Campaign) -> list[dict[str, Any]]:
@@ -178,10 +181,8 @@ def grid_size(campaign: Campaign) -> int:
     return math.prod(len(v) for v in campaign.sweep.values())
 
 
-def make_plan(campaign: Campaign) -> Plan:
-    """The sweep's jobs, bag-major, then point, then seed; CampaignError before anything is expanded or hashed
-    when they would be more than MAX_JOBS."""
-    bags = bags_of(campaign)
+def _check_size(campaign: Campaign, bags: list[Bag]) -> None:
+    """CampaignError when the sweep would make more than MAX_JOBS jobs."""
     size = min(campaign.samples, grid_size(campaign)) if campaign.design == 'random' else grid_size(campaign)
     count = len(bags) * size * len(campaign.seeds)
     if count > MAX_JOBS:
@@ -189,6 +190,13 @@ def make_plan(campaign: Campaign) -> Plan:
                             f'{len(campaign.seeds)} seeds'])
         raise CampaignError(f'{campaign.source}: the sweep makes {count:,} jobs ({parts}), more than {MAX_JOBS:,}: '
                             'give fewer values, or design: {random: {samples: N, seed: S}}')
+
+
+def make_plan(campaign: Campaign) -> Plan:
+    """The sweep's jobs, bag-major, then point, then seed; CampaignError before anything is expanded or hashed
+    when they would be more than MAX_JOBS."""
+    bags = bags_of(campaign)
+    _check_size(campaign, bags)
     plan = Plan(campaign, bags)
     for bag in bags:  # each bag hashed once: the jobs are handed the digests (a job on this machine reads no bag twice)
         if isinstance(bag, Path):

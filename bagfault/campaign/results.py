@@ -205,7 +205,15 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
     _per_bag(page, parts, rows, table)
     for parameter in table.parameters:
         _per_value(page, parts, rows, table, parameter, [r[parameter] for r in rows if parameter in c.sweep])
-    swept = list(c.sweep)
+    _rest(page, parts, plan, table, points)
+    return page.render()
+
+
+def _rest(page: Page, parts: Any, plan: Plan, table: Table, points: list[BreakingPoint]) -> None:
+    """The report after the pass rates: the heatmap of two swept parameters, the breaking points, the jobs that
+    did not pass."""
+    rows = table.sweep_rows()
+    swept = list(plan.campaign.sweep)
     if len(swept) >= 2:
         _heatmap(page, parts, rows, swept[0], swept[1])
     if points:
@@ -213,7 +221,6 @@ def render_report(plan: Plan, table: Table, points: list[BreakingPoint], engine:
     bad = [_bad_job(r, swept) for r in rows if r['status'] != 'passed']
     if bad:
         page.html(str(parts.bad_table(swept, bad)))
-    return page.render()
 
 
 def _bad_job(row: dict[str, Any], swept: list[str]) -> dict[str, Any]:
@@ -252,14 +259,18 @@ def _heatmap(page: Page, parts: Any, rows: list[dict[str, Any]], first: str, sec
     """Jobs passed at each pair of values of the first two swept parameters: a grid and a heatmap."""
     xs, ys = _order([r[second] for r in rows]), _order([r[first] for r in rows])
     groups = [[_group(rows, {first: y, second: x}) for x in xs] for y in ys]
-    lines = [{'label': _label(y), 'cells': [_passes(group) for group in line]}
-             for y, line in zip(ys, groups, strict=True)]
-    page.html(str(parts.grid_table(first, second, [_label(x) for x in xs], lines)))
+    page.html(str(parts.grid_table(first, second, [_label(x) for x in xs], _grid_lines(ys, groups))))
     rates = [[_rate(group) for group in line] for line in groups]
     page.figure([{'type': 'heatmap', 'x': [_label(x) for x in xs], 'y': [_label(y) for y in ys], 'z': rates,
                   'zmin': 0, 'zmax': 100, 'colorscale': PASS_COLORS, 'colorbar': {'title': {'text': '% passed'}},
                   'hovertemplate': f'{second} %{{x}}, {first} %{{y}}: %{{z:.0f}}% passed<extra></extra>'}],
                 _heatmap_layout(first, second), name=f'heatmap:{first}:{second}')
+
+
+def _grid_lines(ys: list[Any], groups: list[list[list[dict[str, Any]]]]) -> list[dict[str, Any]]:
+    """The grid table's lines: each value of the first parameter, its jobs passed at each of the second's."""
+    return [{'label': _label(y), 'cells': [_passes(group) for group in line]}
+            for y, line in zip(ys, groups, strict=True)]
 
 
 def _heatmap_layout(first: str, second: str) -> dict[str, Any]:
@@ -296,11 +307,16 @@ def _pass_rate_figure(page: Page, parameter: str, values: list[Any], rows: list[
     numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
     x = values if numeric else [_label(v) for v in values]
     data = [{'type': 'scatter', 'mode': 'lines+markers', 'x': x, 'name': name,
-             'y': [_rate([r for r in rows if r[parameter] == v], column) for v in values]}
+             'y': _rates(rows, parameter, values, column)}
             for name, column in (('job passed', 'status'), *((a, a) for a in assertions))]
     page.figure(data, {'title': title(f'pass rate against {parameter}'), 'height': 320, 'legend': LEGEND,
                        'xaxis': {'title': {'text': parameter}, **({} if numeric else {'type': 'category'})},
                        'yaxis': {'title': {'text': '% passed'}, 'range': [-5, 105]}}, name=f'pass_rate:{parameter}')
+
+
+def _rates(rows: list[dict[str, Any]], parameter: str, values: list[Any], column: str) -> list[float | None]:
+    """The pass rate (%) of a column at each value of a parameter."""
+    return [_rate([r for r in rows if r[parameter] == v], column) for v in values]
 
 
 def _search_trace(parameter: str, state: str, color: str, chosen: list[dict[str, Any]]) -> dict[str, Any]:
@@ -309,12 +325,17 @@ def _search_trace(parameter: str, state: str, color: str, chosen: list[dict[str,
             'name': state, 'marker': {'size': 10, 'color': color}, 'text': [f'job {r["job"]}' for r in chosen]}
 
 
+def _search_traces(parameter: str, search: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The search's jobs as a trace per state that occurs."""
+    return [_search_trace(parameter, state, color, chosen)
+            for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828'), ('error', '#616161'))
+            for chosen in [[r for r in search if r['status'] == state]] if chosen]
+
+
 def _search_figure(page: Page, parameter: str, search: list[dict[str, Any]], points: list[BreakingPoint],
                    plan: Plan) -> None:
     """Every search job at its parameter value, passed or not, and each bag's breaking point."""
-    data = [_search_trace(parameter, state, color, chosen)
-            for state, color in (('passed', '#2a7d2a'), ('failed', '#c62828'), ('error', '#616161'))
-            for chosen in [[r for r in search if r['status'] == state]] if chosen]
+    data = _search_traces(parameter, search)
     found = [p for p in points if p.value is not None]
     if found:
         data.append({'type': 'scatter', 'mode': 'markers', 'x': [p.value for p in found], 'name': 'breaking point',

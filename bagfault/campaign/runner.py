@@ -81,18 +81,26 @@ class _Store:
         if stored and not resume:
             raise CampaignError(f'{self.directory}: holds {len(stored)} results of a campaign already; '
                                 f'--resume continues it (reruns only what is missing or changed), or choose another -o')
-        campaign = self.plan.campaign
-        read = [('the campaign file', campaign.source)] if campaign.source is not None else []
-        read += [('the scenario', campaign.scenario),
-                 *(('the bag', bag) for bag in self.plan.bags if isinstance(bag, Path))]
+        read = self._read()
         protected = Protected.of(read)
+        self._check_outside(read)
+        for name in TABLES if self.directory.is_dir() else ():
+            check_output(self.directory / name, 'a campaign file', protected, force=force)
+
+    def _check_outside(self, read: list[tuple[str, Path]]) -> None:
+        """CampaignError when the folder would be inside a folder the campaign reads."""
         where = self.directory.resolve()
         for name, path in read:
             if path.is_dir() and (where == path.resolve() or path.resolve() in where.parents):
                 raise CampaignError(f'{self.directory}: the campaign folder would be inside {name} {path}; '
                                     'choose another -o')
-        for name in TABLES if self.directory.is_dir() else ():
-            check_output(self.directory / name, 'a campaign file', protected, force=force)
+
+    def _read(self) -> list[tuple[str, Path]]:
+        """What the campaign reads, named: its file, the scenario, the bags on this machine."""
+        campaign = self.plan.campaign
+        read = [('the campaign file', campaign.source)] if campaign.source is not None else []
+        return [*read, ('the scenario', campaign.scenario),
+                *(('the bag', bag) for bag in self.plan.bags if isinstance(bag, Path))]
 
     def open(self, resume: bool) -> None:
         """Make the folders; load what is there when resuming."""
@@ -174,19 +182,24 @@ def run_campaign(campaign: Campaign, directory: Path, *, job: RunJob, workers: i
     described = {**plan.describe(), 'breaking_points': [point.describe() for point in points]}
     write_atomic(directory / 'campaign.json', json.dumps(described, indent=1, sort_keys=True) + '\n', 'json')
     write_atomic(directory / 'report.html', render_report(plan, table, points, description), 'html')
-    notes = []
-    if parquet_available():
-        made = {'campaign': campaign.name, 'version': __version__,
-                'scenario_sha256': hashlib.sha256(read_bytes(campaign.scenario)).hexdigest()}
-        if campaign.source is not None:
-            made['campaign_sha256'] = hashlib.sha256(read_bytes(campaign.source)).hexdigest()
-        write_parquet(table, directory / 'results.parquet', made)
-    else:  # the jobs ran: their table is in results.csv and the report, whatever is missing here
-        notes.append('results.parquet not written: pyarrow is not installed (pip install "bagfault[campaign]"); '
-                     'results.csv holds the same table')
+    notes = _write_parquet(campaign, table, directory)
     rows = table.sweep_rows()
     counts = {s: sum(r['status'] == s for r in rows) for s in ('passed', 'failed', 'error')}
     return CampaignResult(plan, table, points, directory, description, ran, counts, notes, not notes)
+
+
+def _write_parquet(campaign: Campaign, table: Table, directory: Path) -> list[str]:
+    """results.parquet with what made it (campaign, version, digests of the files); without pyarrow, a note
+    saying results.csv holds the table instead."""
+    if not parquet_available():  # the jobs ran: their table is in results.csv and the report, whatever is missing
+        return ['results.parquet not written: pyarrow is not installed (pip install "bagfault[campaign]"); '
+                'results.csv holds the same table']
+    made = {'campaign': campaign.name, 'version': __version__,
+            'scenario_sha256': hashlib.sha256(read_bytes(campaign.scenario)).hexdigest()}
+    if campaign.source is not None:
+        made['campaign_sha256'] = hashlib.sha256(read_bytes(campaign.source)).hexdigest()
+    write_parquet(table, directory / 'results.parquet', made)
+    return []
 
 
 def _write_scenarios(directory: Path, plan: Plan) -> None:
