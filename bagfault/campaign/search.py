@@ -68,6 +68,7 @@ class _Bracket:
     phase: str = 'ends'  # ends: low and high not yet run; bisect; done
     result: BreakingPoint | None = None
     samples: list[Sample] = field(default_factory=list)
+    jobs: int = 0  # run for this bag so far
 
 
 def held(search: Search, results: list[dict[str, Any]]) -> int:
@@ -80,60 +81,75 @@ def find_breaking_points(plan: Plan, run_jobs: RunJobs, first_index: int) -> tup
     """Bisect every bag at once, one round of jobs at a time; the points and every job run for them."""
     search = plan.campaign.search
     assert search is not None
-    seeds = plan.campaign.seeds
-    repeat = search.samples(plan.campaign.mode)
-    runs = [(seed, sample) for seed in seeds for sample in range(repeat)]
+    runs = [(seed, sample) for seed in plan.campaign.seeds for sample in range(search.samples(plan.campaign.mode))]
     brackets = {bag: _Bracket(search.low, search.high) for bag in plan.bags}
-    counts = dict.fromkeys(plan.bags, 0)
     jobs: list[Job] = []
     while True:
-        wanted: list[tuple[Bag, float]] = []
-        for bag, bracket in brackets.items():
-            if bracket.phase == 'ends':
-                wanted += [(bag, bracket.low), (bag, bracket.high)]
-            elif bracket.phase == 'bisect':
-                wanted.append((bag, round((bracket.low + bracket.high) / 2, 12)))
+        wanted = _wanted(brackets)
         if not wanted:
             break
-        round_jobs = {(bag, value): [search_job(plan, first_index + len(jobs) + k * len(runs) + n, bag, value, seed,
-                                                sample) for n, (seed, sample) in enumerate(runs)]
-                      for k, (bag, value) in enumerate(wanted)}
-        batch = [job for group in round_jobs.values() for job in group]
-        jobs += batch
-        results = run_jobs(batch)
-        outcome = {at: Sample(at[1], held(search, [results[job.key] for job in group]), len(group),
-                              next((f'job {job.index}: {results[job.key].get("message", "")}' for job in group
-                                    if results[job.key].get('status') == 'error'), ''))
-                   for at, group in round_jobs.items()}
-        for bag, bracket in brackets.items():
-            counts[bag] += sum(len(group) for (b, _), group in round_jobs.items() if b == bag)
-            bracket.samples += [sample for (b, _), sample in outcome.items() if b == bag]
-            _advance(bag, bracket, outcome, search)
-            if bracket.result is not None:
-                bracket.result.jobs = counts[bag]
-                bracket.result.samples = list(bracket.samples)
+        jobs += _search_round(plan, run_jobs, brackets, _round_jobs(plan, first_index + len(jobs), wanted, runs))
     return [b.result for b in brackets.values() if b.result is not None], jobs
 
 
+def _search_round(plan: Plan, run_jobs: RunJobs, brackets: dict[Bag, _Bracket],
+                  round_jobs: dict[tuple[Bag, float], list[Job]]) -> list[Job]:
+    """Run a round's jobs and move every bag's bracket on from their samples; the jobs run."""
+    search = plan.campaign.search
+    assert search is not None
+    batch = [job for group in round_jobs.values() for job in group]
+    outcome = _outcome(search, round_jobs, run_jobs(batch))
+    for bag, bracket in brackets.items():
+        _take(bag, bracket, outcome, search)
+    return batch
+
+
+def _wanted(brackets: dict[Bag, _Bracket]) -> list[tuple[Bag, float]]:
+    """The values each bag's bracket asks for next: both ends first, then the middle; none once done."""
+    wanted: list[tuple[Bag, float]] = []
+    for bag, bracket in brackets.items():
+        if bracket.phase == 'ends':
+            wanted += [(bag, bracket.low), (bag, bracket.high)]
+        elif bracket.phase == 'bisect':
+            wanted.append((bag, round((bracket.low + bracket.high) / 2, 12)))
+    return wanted
+
+
+def _outcome(search: Search, round_jobs: dict[tuple[Bag, float], list[Job]], results: dict[str, dict[str, Any]],
+             ) -> dict[tuple[Bag, float], Sample]:
+    """Each (bag, value)'s sample: how many of its runs held, and the first run that could not run."""
+    return {at: Sample(at[1], held(search, [results[job.key] for job in group]), len(group),
+                       next((f'job {job.index}: {results[job.key].get("message", "")}' for job in group
+                             if results[job.key].get('status') == 'error'), ''))
+            for at, group in round_jobs.items()}
+
+
+def _round_jobs(plan: Plan, first: int, wanted: list[tuple[Bag, float]], runs: list[tuple[int, int]],
+                ) -> dict[tuple[Bag, float], list[Job]]:
+    """A round's jobs, numbered from `first`: each (seed, sample) run of each value wanted."""
+    return {(bag, value): [search_job(plan, first + k * len(runs) + n, bag, value, seed, sample)
+                           for n, (seed, sample) in enumerate(runs)]
+            for k, (bag, value) in enumerate(wanted)}
+
+
+def _take(bag: Bag, bracket: _Bracket, outcome: dict[tuple[Bag, float], Sample], search: Search) -> None:
+    """A round's samples into the bag's bracket, which moves on; its result, once there, with the jobs it took."""
+    mine = [sample for (b, _), sample in outcome.items() if b == bag]
+    bracket.jobs += sum(sample.runs for sample in mine)
+    bracket.samples += mine
+    _advance(bag, bracket, outcome, search)
+    if bracket.result is not None:
+        bracket.result.jobs = bracket.jobs
+        bracket.result.samples = list(bracket.samples)
+
+
 def _advance(bag: Bag, bracket: _Bracket, outcome: dict[tuple[Bag, float], Sample], search: Search) -> None:
-    broken = next((s for (b, _), s in outcome.items() if b == bag and s.error), None)
-    if broken is not None and bracket.phase != 'done':  # a run that could not run is no sample of the system
-        bracket.phase, bracket.result = 'done', BreakingPoint(
-            bag, search.parameter, None, None,
-            note=f'stopped: a run at {broken.value:g} could not run ({broken.error})')
+    """The bracket's next phase from the round's samples: stopped by a run that could not run (no sample of the
+    system), the ends judged, or the half that holds the edge kept; done within tolerance."""
+    if _stopped(bag, bracket, outcome, search):
         return
     if bracket.phase == 'ends':
-        low, high = outcome[(bag, bracket.low)], outcome[(bag, bracket.high)]
-        if low.held == low.runs:
-            bracket.phase, bracket.result = 'done', BreakingPoint(
-                bag, search.parameter, bracket.low, None, note=f'holds already at low = {bracket.low:g} '
-                f'({low.held} of {low.runs})')
-        elif high.held < high.runs:
-            bracket.phase, bracket.result = 'done', BreakingPoint(
-                bag, search.parameter, None, bracket.high, note=f'does not hold up to high = {bracket.high:g} '
-                f'({high.held} of {high.runs} at high)')
-        else:
-            bracket.phase = 'bisect'
+        _ends(bag, bracket, outcome, search)
     elif bracket.phase == 'bisect':
         mid = round((bracket.low + bracket.high) / 2, 12)
         at = outcome[(bag, mid)]
@@ -142,9 +158,39 @@ def _advance(bag: Bag, bracket: _Bracket, outcome: dict[tuple[Bag, float], Sampl
         else:
             bracket.low = mid
     if bracket.phase == 'bisect' and bracket.high - bracket.low <= search.tolerance:
-        bracket.phase = 'done'
-        below = next(s for s in reversed(bracket.samples) if s.value == bracket.low)
-        above = next(s for s in reversed(bracket.samples) if s.value == bracket.high)
-        bracket.result = BreakingPoint(bag, search.parameter, bracket.high, bracket.low,
-                                       note=f'held in {above.held} of {above.runs} runs at {bracket.high:g}, '
-                                            f'{below.held} of {below.runs} at {bracket.low:g}')
+        _settled(bag, bracket, search)
+
+
+def _stopped(bag: Bag, bracket: _Bracket, outcome: dict[tuple[Bag, float], Sample], search: Search) -> bool:
+    """True (and the bracket done, saying why) when a run of the bag's round could not run."""
+    broken = next((s for (b, _), s in outcome.items() if b == bag and s.error), None)
+    if broken is None or bracket.phase == 'done':
+        return False
+    bracket.phase, bracket.result = 'done', BreakingPoint(
+        bag, search.parameter, None, None, note=f'stopped: a run at {broken.value:g} could not run ({broken.error})')
+    return True
+
+
+def _ends(bag: Bag, bracket: _Bracket, outcome: dict[tuple[Bag, float], Sample], search: Search) -> None:
+    """After both ends: done when it holds already at low or not even at high, else bisect."""
+    low, high = outcome[(bag, bracket.low)], outcome[(bag, bracket.high)]
+    if low.held == low.runs:
+        bracket.phase, bracket.result = 'done', BreakingPoint(
+            bag, search.parameter, bracket.low, None, note=f'holds already at low = {bracket.low:g} '
+            f'({low.held} of {low.runs})')
+    elif high.held < high.runs:
+        bracket.phase, bracket.result = 'done', BreakingPoint(
+            bag, search.parameter, None, bracket.high, note=f'does not hold up to high = {bracket.high:g} '
+            f'({high.held} of {high.runs} at high)')
+    else:
+        bracket.phase = 'bisect'
+
+
+def _settled(bag: Bag, bracket: _Bracket, search: Search) -> None:
+    """The bracket within tolerance: the breaking point between its ends, with the samples there."""
+    bracket.phase = 'done'
+    below = next(s for s in reversed(bracket.samples) if s.value == bracket.low)
+    above = next(s for s in reversed(bracket.samples) if s.value == bracket.high)
+    bracket.result = BreakingPoint(bag, search.parameter, bracket.high, bracket.low,
+                                   note=f'held in {above.held} of {above.runs} runs at {bracket.high:g}, '
+                                        f'{below.held} of {below.runs} at {bracket.low:g}')
