@@ -239,7 +239,9 @@ def test_explore_finds_the_shortest_pause_that_fails_the_watchdog(short_bag: Pat
     """A process fault as an explore dimension: the controller paused from 2.0 s for [0.1, 2.5] s against the
     1.0 s watchdog. The output comes every 20 ms, so a pause fails it when it is longer than about 1.0 s
     (by hand: the gap is the pause, give or take one period): the shrunk minimal failure lies there, within
-    the resolution (10 % of the range: 0.24 s) and what a loaded machine adds to a pause's edges."""
+    the resolution (10 % of the range: 0.24 s) and what a loaded machine adds to a pause's edges. At rate 2 the
+    watchdog's second is half a second of wall time: at rate 4 a quarter second's stall of a loaded machine
+    (a second suite beside this one) failed the watchdog with no pause, and the shrink ended at 0.1 s."""
     from support.loop import rclpy_available
 
     from bagfault import api
@@ -259,7 +261,7 @@ explore:
   batch: 2
   resolution: 0.1
 """)
-    result = api.explore(path, directory=tmp_path / 'out', workers=2, rate=4.0, seed=1)
+    result = api.explore(path, directory=tmp_path / 'out', workers=2, rate=2.0, seed=1)
     assert [r.outcome.status for r in result.runs].count('error') == 0, [r.outcome.message for r in result.runs]
     assert result.runs[0].outcome.status == 'passed'  # no fault drawn: nothing fails
     (failure,) = result.failures
@@ -296,7 +298,7 @@ def test_a_link_delay_between_planner_and_controller_shows_in_their_latency(test
     median_inside, median_outside = statistics.median(inside), statistics.median(outside)
     assert min(inside) >= 0.24, sorted(inside)
     assert 0.245 <= median_inside <= 0.30 and median_outside <= 0.03, (sorted(inside), sorted(outside))
-    assert 0.22 <= median_inside - median_outside <= 0.28
+    assert 0.22 <= median_inside - median_outside <= 0.30  # (beside a second suite: 0.285, the release ticks late)
     assert "link 'cmd_link': pid" in result.stdout and 'remapped to /bagfault/link/cmd_vel' in result.stdout
 
 

@@ -307,7 +307,11 @@ def test_a_best_effort_publisher_that_comes_later_is_heard_through_the_default_q
     assert graph.stop(proxy, signal.SIGINT) == 0
     numbers = [int(row['orientation_covariance'].split('[')[1].split(',')[0].split('.')[0])
                for row in graph.lines(echo)]
-    assert len(numbers) >= 295 and numbers == sorted(numbers)  # best effort on loopback: none or hardly any lost
+    # heard within the first second after the match (a loaded machine's proxy may match the writer a moment after
+    # the writer matched it: the first messages are lost before it), and from the first heard on, best effort on
+    # loopback loses none or hardly any
+    assert numbers and numbers[0] < 100 and numbers == sorted(numbers), numbers[:5]
+    assert len(numbers) >= (300 - numbers[0]) - 5, (numbers[0], len(numbers))
     assert 'subscription now best_effort' in proxy.err_path.read_text()
     assert decoded(record, ['/sensors/imu_raw'])['/sensors/imu_raw'][-1][1].orientation_covariance[0] == numbers[-1]
 
