@@ -69,7 +69,7 @@ class SystemLink(LiveSink):
                  process: SystemProcess, scenario: Scenario, catalog: TypeCatalog, rate: float, stop: StopFlag,
                  recording: McapSink | None, watch: DomainWatch | None = None, seed: int = 0,
                  clock_check: bool = True) -> None:
-        super().__init__(node, rate=rate, clock=True, stop=stop, recording=recording)
+        super().__init__(node, rate=rate, clock=True, stop=stop, recording=recording, hold_stalls=True)
         self.watch = watch
         self.clock_check = clock_check  # at a rate other than 1: hold the clock before the first record (HOLD)
         self.clocks = ClockCheck(rate)
@@ -351,7 +351,7 @@ class SystemLink(LiveSink):
         while True:
             if self.stop.is_set():
                 raise Stopped(self.stop.reason)
-            now = self.bag_time_now()
+            now = self.looked_now()
             assert now is not None
             if now >= end:
                 break

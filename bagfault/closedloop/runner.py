@@ -152,6 +152,9 @@ def _run_on(lease: DomainLease, scenario: Scenario, inputs: Sequence[Path], outp
                 run.close(ok=True)
     result = run.result('test', inputs, output, seed)
     result.notes += view_notes + link.notes
+    if link.held:
+        result.notes.append(f'bagfault stood still {link.held:.2f} s of wall time in all (a busy machine): the '
+                            'clock held meanwhile, and the bag went on from there')
     for described in link.watch.listeners.values() if link.watch is not None else ():
         result.notes.append(f'on ROS domain {lease.domain} too, not part of the system: {described}')
     if run.stats.input_messages == 0:

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
 
 CLOCK_PERIOD = 0.01  # ticks (and /clock) at 100 Hz while waiting for the next record
 SLICE = 0.05  # longest sleep between checks of the stop flag
+STALL = 0.1  # seconds between two looks of the pacing thread that are a stall of bagfault, not its pace
 SEEK = 'seek'
 EVENT_PREFIXES = ('/fault_injection/', '/fault_manager/', '/bagfault/')  # bagfault's own: kept by --topics
 CLOCK_TOPIC = '/clock'
@@ -62,8 +63,11 @@ class Pacer:
 
     def __init__(self, *, rate: float, stop: StopFlag, recording: McapSink | None = None,
                  topics: Sequence[str] = (), skip: float = 0.0, clock_hz: float = 1 / CLOCK_PERIOD,
-                 view: View | None = None, settle: float = 0.0) -> None:
+                 view: View | None = None, settle: float = 0.0, hold_stalls: bool = False) -> None:
         self.rate = rate
+        self.hold_stalls = hold_stalls  # a stall of bagfault holds the timeline (the closed loop's sim time)
+        self.held = 0.0  # seconds the timeline held for stalls of bagfault
+        self._looked: float | None = None  # when the pacing thread last looked at the time
         self.stop = stop
         self.recording = recording
         self.view = view
@@ -176,6 +180,7 @@ class Pacer:
                 raise Stopped(SEEK)
             now = time.monotonic()
             with self._lock:
+                self._look(now)
                 first, started = self._origin
                 due = started + (stamp - first) / NS / self.rate
                 paused = self.paused
@@ -201,6 +206,20 @@ class Pacer:
     def delivered(self, timeout: float) -> list[str]:
         """The topics whose subscribers have not acknowledged every message within `timeout` (none here)."""
         return []
+
+    def _look(self, now: float) -> None:
+        """With `hold_stalls`: when the pacing thread looks more than STALL after its last look, bagfault stalled
+        (a busy machine, a long pause of the collector, swapping); the timeline's anchor moves by the stall, so
+        the clock holds where it was instead of jumping ahead and the records due meanwhile do not come in a burst
+        (sim time: the system under test sees bag time go on as recorded; `rate` stays true between stalls).
+        The caller holds the lock."""
+        if self.hold_stalls and self._looked is not None and self._origin is not None and not self.paused:
+            stalled = now - self._looked
+            if stalled > STALL:
+                first, started = self._origin
+                self._origin = (first, started + stalled)
+                self.held += stalled
+        self._looked = now
 
     def _tick(self, bag_time: int) -> None:
         """While waiting: every clock period the timeline's time goes out; the recording's chunk when due."""
@@ -231,6 +250,12 @@ class Pacer:
                 return self.clock_value
             return first + round((time.monotonic() - started) * self.rate * NS)
 
+    def looked_now(self) -> int | None:
+        """The pacing thread's bag time now, after a look (a stall since the last one held the timeline)."""
+        with self._lock:
+            self._look(time.monotonic())
+        return self.bag_time_now()
+
     # -- playback controls (any thread) ---------------------------------------------------------------
     def pause(self) -> None:
         """Hold the timeline where it is."""
@@ -238,6 +263,7 @@ class Pacer:
             if not self.paused:
                 self.paused = True
                 self._paused_at = time.monotonic()
+                self._looked = None  # a pause is no stall (resume moves the anchor by it)
 
     def resume(self) -> None:
         """Go on from where it was held."""
@@ -255,6 +281,7 @@ class Pacer:
         with self._lock:
             if self._origin is not None and current is not None:
                 self._origin = (current, self._paused_at if self.paused else time.monotonic())
+                self._looked = None
             self.rate = rate
 
     def seek(self, bag_time: int) -> None:
@@ -272,4 +299,5 @@ class Pacer:
         self.skip = max(0, target - first)
         self._first = None
         self._origin = None
+        self._looked = None
         self.clock_value = -1

@@ -42,9 +42,9 @@ class LiveSink(Pacer):
     def __init__(self, node: Any, *, rate: float, clock: bool, stop: StopFlag,
                  recording: McapSink | None = None, settle: float = 0.0, wait_for: Sequence[str] = (),
                  wait_timeout: float = 30.0, clock_hz: float = 1 / CLOCK_PERIOD, topics: Sequence[str] = (),
-                 skip: float = 0.0, view: View | None = None) -> None:
+                 skip: float = 0.0, view: View | None = None, hold_stalls: bool = False) -> None:
         super().__init__(rate=rate, stop=stop, recording=recording, topics=topics, skip=skip, clock_hz=clock_hz,
-                         view=view, settle=settle)
+                         view=view, settle=settle, hold_stalls=hold_stalls)
         self.node = node
         self.wait_for = list(wait_for)  # topics whose publishers must first have a subscriber ('all': every one)
         self.wait_timeout = wait_timeout

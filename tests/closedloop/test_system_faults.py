@@ -9,9 +9,11 @@ comes every 20 ms of bag time: a pause of P seconds leaves a gap of about P on i
 from __future__ import annotations
 
 import itertools
+import os
 import signal
 import statistics
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -339,3 +341,28 @@ def test_a_link_into_a_composable_node_container_is_refused_before_the_bag_plays
     assert line.startswith("bagfault: error: link 'cmd_link': the subscriber runs in a composable node container")
     assert 'Traceback' not in result.stderr
     assert running_with(token) == []
+
+
+def test_a_stall_of_bagfault_holds_the_sim_clock(tester: LoopRunner, short_bag: Path, tmp_path: Path) -> None:
+    """bagfault stopped (SIGSTOP) for 1.5 s while it plays, as a busy machine may stall it: the sim clock holds
+    where it was and goes on from there, so the controller's 10 Hz sim-time timer ticks every 0.1 s of bag time
+    throughout (measured on the recording: no gap in its ticks above 0.5 s). On the wall schedule, the clock
+    would run 1.5 s ahead in a burst when bagfault resumes, and the timer (which skips the periods it missed)
+    would leave a gap of about that in its ticks. The report says how long bagfault stood still."""
+    token = tester.token()
+    out = tmp_path / 'stalled.mcap'
+    process, report = tester.start(str(scenario(tmp_path, token, '  []', '  []')), str(short_bag), '-o', str(out))
+    deadline = time.monotonic() + 90
+    while not any(p.stat().st_size for p in tmp_path.glob('.stalled.mcap.*.partial')):  # a chunk: it plays
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.05)
+    time.sleep(1.0)
+    os.kill(process.pid, signal.SIGSTOP)
+    time.sleep(1.5)
+    os.kill(process.pid, signal.SIGCONT)
+    result = tester.finish(process, report)
+    assert result.code == 0, result.stdout + result.stderr
+    ticks = seconds(decoded(out), '/controller/tick')
+    assert longest_gap(ticks, ticks[0], ticks[-1]) < 0.5, ticks
+    [held] = [n for n in result.report['notes'] if n.startswith('bagfault stood still ')]
+    assert 1.4 <= float(held.split()[3]) < 4.0, held
