@@ -32,6 +32,8 @@ if TYPE_CHECKING:
     from multiprocessing.connection import Connection
     from multiprocessing.process import BaseProcess
 
+    from bagfault.campaign.placement import Placement
+
     Spec = dict[str, Any]
     Done = Callable[[int, dict[str, Any]], None]
     Job = Callable[[Spec], dict[str, Any]]  # a job spec to its result row, in the job's process (`bagfault.api.job`)
@@ -259,20 +261,7 @@ class RayEngine:
         # a local instance's processes are this process's descendants; Ray kills its workers at shutdown, and
         # their fork servers, orphaned, would stay zombies where PID 1 reaps none: adopted and reaped here
         self._adopting = None if address else _Adoption()
-        try:
-            if address:
-                _join_cluster(ray, address, options)
-            else:
-                # 'local': an instance of its own even when a cluster runs here (`ray start`, another suite's),
-                # which Ray would otherwise join (RAY_ADDRESS, /tmp/ray/ray_current_cluster) and refuse num_cpus
-                ray.init(address='local', num_cpus=workers or os.cpu_count() or 1, **options)
-        except CampaignError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; all mean "no cluster"
-            if self._adopting is not None:
-                self._adopting.reap(timeout=1.0)  # and this process is no subreaper any more
-            where = f'the Ray cluster at {address}' if address else 'a local Ray instance'
-            raise CampaignError(f'--ray: cannot start or reach {where}: {" ".join(str(exc).split())}') from None
+        self._connect(address, workers, options)
         cpus = int(self.ray.cluster_resources().get('CPU', 1))
         if address == 'auto':  # the running cluster Ray found (RAY_ADDRESS, else the last `ray start` here)
             address = f'{self.ray.get_runtime_context().gcs_address} (auto)'
@@ -281,6 +270,24 @@ class RayEngine:
         self.task = ray.remote(num_cpus=1, max_retries=TASK_RETRIES)(execute)
         warm = ray.remote(num_cpus=1)(warm_up)
         ray.get([warm.remote(job.__module__) for _ in range(min(cpus, workers or cpus))])  # each one's fork server
+
+    def _connect(self, address: str | None, workers: int | None, options: dict[str, Any]) -> None:
+        """Join the cluster at `address`, or start a local instance of `workers` CPUs; CampaignError when neither
+        works (a local instance's adoption of its processes undone)."""
+        try:
+            if address:
+                _join_cluster(self.ray, address, options)
+            else:
+                # 'local': an instance of its own even when a cluster runs here (`ray start`, another suite's),
+                # which Ray would otherwise join (RAY_ADDRESS, /tmp/ray/ray_current_cluster) and refuse num_cpus
+                self.ray.init(address='local', num_cpus=workers or os.cpu_count() or 1, **options)
+        except CampaignError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - Ray raises many kinds; all mean "no cluster"
+            if self._adopting is not None:
+                self._adopting.reap(timeout=1.0)  # and this process is no subreaper any more
+            where = f'the Ray cluster at {address}' if address else 'a local Ray instance'
+            raise CampaignError(f'--ray: cannot start or reach {where}: {" ".join(str(exc).split())}') from None
 
     def run(self, specs: Sequence[Spec], done: Done) -> None:
         """All specs as tasks (at most `workers` at a time when given), each on the node `Placement` chooses for
@@ -300,23 +307,11 @@ class RayEngine:
                     where = NodeAffinitySchedulingStrategy(node_id=node, soft=True)
                     running[self.task.options(scheduling_strategy=where).remote(self.job, specs[i])] = (i, node)
                 if not running:  # no node with a CPU (one lost a moment ago): wait for one, not for ever
-                    stranded = stranded or time.monotonic()
-                    if time.monotonic() - stranded > RAY_CONNECT_TIMEOUT:
-                        raise CampaignError(f'Ray: no node with a CPU for {RAY_CONNECT_TIMEOUT:g} s, '
-                                            f'{placement.pending} jobs not run')
-                    time.sleep(0.2)
-                    placement.nodes(self._nodes())
+                    stranded = self._stranded(stranded, placement)
                     continue
                 stranded = 0.0
                 finished, _ = ray.wait(list(running), num_returns=1, timeout=0.2)
-                for ref in finished:
-                    i, node = running.pop(ref)
-                    placement.finished(node)
-                    try:
-                        result = ray.get(ref)
-                    except Exception as exc:  # noqa: BLE001 - a lost worker or node is this job's error
-                        result = _error(f'the Ray task failed: {" ".join(str(exc).split())[:500]}')
-                    done(i, result)
+                self._collect(finished, running, placement, done)
                 if finished and time.monotonic() - looked >= NODES_EVERY:  # a node lost or added since
                     looked = time.monotonic()
                     placement.nodes(self._nodes())
@@ -325,6 +320,33 @@ class RayEngine:
                 with contextlib.suppress(Exception):
                     ray.cancel(ref, force=True)
             raise
+
+    def _stranded(self, since: float, placement: Placement) -> float:
+        """No node with a CPU since `since` (0: from now): a look at the nodes a moment later; CampaignError after
+        RAY_CONNECT_TIMEOUT. When it began."""
+        since = since or time.monotonic()
+        if time.monotonic() - since > RAY_CONNECT_TIMEOUT:
+            raise CampaignError(f'Ray: no node with a CPU for {RAY_CONNECT_TIMEOUT:g} s, {placement.pending} jobs '
+                                'not run')
+        time.sleep(0.2)
+        placement.nodes(self._nodes())
+        return since
+
+    def _collect(self, finished: list[Any], running: dict[Any, tuple[int, str]], placement: Placement,
+                 done: Done) -> None:
+        """The finished tasks' results handed on, their nodes free again."""
+        for ref in finished:
+            i, node = running.pop(ref)
+            placement.finished(node)
+            done(i, self._result(ref))
+
+    def _result(self, ref: Any) -> dict[str, Any]:
+        """A finished task's result; a lost worker or node is the job's error."""
+        try:
+            result: dict[str, Any] = self.ray.get(ref)
+        except Exception as exc:  # noqa: BLE001 - a lost worker or node is this job's error
+            return _error(f'the Ray task failed: {" ".join(str(exc).split())[:500]}')
+        return result
 
     def _nodes(self) -> dict[str, int]:
         """The cluster's live nodes and their whole CPUs (a node without one runs no job)."""

@@ -41,35 +41,50 @@ def _local(spec: dict[str, Any]) -> Iterator[str]:
         yield str(bag.path)
 
 
-def run_job(spec: dict[str, Any], run: Callable[..., RunResult], test: Callable[..., RunResult]) -> dict[str, Any]:
-    """Run a job spec (see Job.spec) with the API's `run` or `test`; the result row's job-specific part."""
+def _run(spec: dict[str, Any], output: Path | None, run: Callable[..., RunResult],
+         test: Callable[..., RunResult]) -> RunResult:
+    """The job's scenario run on its bag (staged here from a bucket, if it is in one) by `run` or `test`."""
     from bagfault.scenario import parse_scenario  # noqa: PLC0415
 
-    started = time.monotonic()
-    output = Path(spec['output']) if spec.get('output') else None
-    try:
-        scenario = parse_scenario(spec['scenario_text'], source=Path(spec['scenario_source']))
-        with _local(spec) as bag:
-            bags = spec.get('bags') or [bag]  # an exploration's run plays every bag given, as `run` and `test` do
-            if spec['mode'] == 'test':
-                result = test(scenario, bags, output, seed=spec['seed'], rate=spec.get('rate', 1.0),
-                              clock_check=spec.get('clock_check', True))
-            else:
-                assert output is not None
-                result = run(scenario, bags, output, seed=spec['seed'])
-    except Exception as exc:  # noqa: BLE001 - any failure of a job is its row, never the campaign's end
-        message = ' '.join(str(exc).split()) or type(exc).__name__
-        return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {}, 'warnings': [],
-                'seconds': round(time.monotonic() - started, 3), 'output': None}
+    scenario = parse_scenario(spec['scenario_text'], source=Path(spec['scenario_source']))
+    with _local(spec) as bag:
+        bags = spec.get('bags') or [bag]  # an exploration's run plays every bag given, as `run` and `test` do
+        if spec['mode'] == 'test':
+            return test(scenario, bags, output, seed=spec['seed'], rate=spec.get('rate', 1.0),
+                        clock_check=spec.get('clock_check', True))
+        assert output is not None
+        return run(scenario, bags, output, seed=spec['seed'])
+
+
+def _assertions(result: RunResult) -> dict[str, dict[str, Any]]:
+    """Each assertion's state, message, value and margin, and when it was decided (seconds from time zero)."""
     origin = result.stats.origin
-    assertions = {a.id: {'state': a.state, 'message': a.message, 'value': a.value, 'unit': a.unit,
-                         'margin': a.margin, 'margin_unit': a.margin_unit,
-                         't_s': None if a.time is None or origin is None else round((a.time - origin) / NS, 9)}
-                  for a in result.assertions}
+    return {a.id: {'state': a.state, 'message': a.message, 'value': a.value, 'unit': a.unit,
+                   'margin': a.margin, 'margin_unit': a.margin_unit,
+                   't_s': None if a.time is None or origin is None else round((a.time - origin) / NS, 9)}
+            for a in result.assertions}
+
+
+def _detections(result: RunResult) -> dict[str, float]:
+    """Each fault code the fault manager confirmed, with the time of its first confirmation."""
     detections: dict[str, float] = {}
     for event in (result.fault_manager or {}).get('events', []):
         if event.get('status') == 'CONFIRMED' and event.get('fault_code') not in detections:
             detections[event['fault_code']] = event.get('t_s')
+    return detections
+
+
+def run_job(spec: dict[str, Any], run: Callable[..., RunResult], test: Callable[..., RunResult]) -> dict[str, Any]:
+    """Run a job spec (see Job.spec) with the API's `run` or `test`; the result row's job-specific part."""
+    started = time.monotonic()
+    output = Path(spec['output']) if spec.get('output') else None
+    try:
+        result = _run(spec, output, run, test)
+    except Exception as exc:  # noqa: BLE001 - any failure of a job is its row, never the campaign's end
+        message = ' '.join(str(exc).split()) or type(exc).__name__
+        return {'status': 'error', 'message': message[:2000], 'assertions': {}, 'detections': {}, 'warnings': [],
+                'seconds': round(time.monotonic() - started, 3), 'output': None}
+    assertions, detections = _assertions(result), _detections(result)
     failed = [a for a in result.assertions if a.state != 'passed']
     return {'status': 'failed' if failed else 'passed',
             'message': '; '.join(f'{a.id}: {a.message}' for a in failed)[:2000],

@@ -74,17 +74,27 @@ class Placement:
         if self.busy.get(node, 0) > 0:
             self.busy[node] -= 1
 
-    def _next(self, node: str) -> int | None:
-        """The job `node` takes next (it then holds that job's bag), or None."""
+    def _held_or_free(self, node: str) -> str | None:
+        """A bag with waiting jobs that the node holds, else one nobody holds yet; None when there is neither."""
         own = [bag for bag, jobs in self.waiting.items() if jobs and node in self.holders.get(bag, ())]
         free = [bag for bag, jobs in self.waiting.items() if jobs and not self.holders.get(bag)]
-        if own or free:
-            bag = (own or free)[0]
-        else:
-            rounds = {b: len(jobs) / max(1, sum(self.slots.get(n, 0) for n in self.holders[b]))
-                      for b, jobs in self.waiting.items() if jobs}
-            if not rounds or max(rounds.values()) <= STEAL_ROUNDS:
-                return None
-            bag = max(rounds, key=rounds.__getitem__)
+        return (own or free)[0] if own or free else None
+
+    def _stolen(self) -> str | None:
+        """The bag whose waiting jobs would take its holders the most rounds, when that is more than STEAL_ROUNDS
+        (a node then takes it too and downloads it); None otherwise."""
+        rounds = {b: len(jobs) / max(1, sum(self.slots.get(n, 0) for n in self.holders[b]))
+                  for b, jobs in self.waiting.items() if jobs}
+        if not rounds or max(rounds.values()) <= STEAL_ROUNDS:
+            return None
+        return max(rounds, key=rounds.__getitem__)
+
+    def _next(self, node: str) -> int | None:
+        """The job `node` takes next (it then holds that job's bag), or None."""
+        bag = self._held_or_free(node)
+        if bag is None:
+            bag = self._stolen()
+        if bag is None:
+            return None
         self.holders.setdefault(bag, set()).add(node)
         return self.waiting[bag].popleft()

@@ -121,19 +121,7 @@ class FaultManager:
     def _failed(self, fault: Fault | None, report: Report, thresholds: Thresholds, muted: bool) -> None:
         time = report.time
         if fault is None or fault.status == CLEARED:
-            if fault is None:
-                fault = Fault(report.fault_code, report.severity, report.description, time, time, 1, '',
-                              [report.source_id], counter=-1)
-                self.faults[report.fault_code] = fault
-            else:
-                fault.counter, fault.first_occurred, fault.last_occurred = -1, time, time
-                fault.occurrence_count += 1
-                fault.severity = max(fault.severity, report.severity)
-                if report.description:
-                    fault.description = report.description
-                if report.source_id not in fault.reporting_sources:
-                    fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])
-                fault.status = PREFAILED
+            fault = self._occurred(fault, report)
             self._set(fault, CONFIRMED if report.severity == CRITICAL else self._status(fault, thresholds), time)
             if fault.status == CONFIRMED:
                 self._confirmed(fault, time, muted)
@@ -142,17 +130,31 @@ class FaultManager:
         before = fault.status
         fault.counter = _clamp(_clamp(fault.counter, thresholds) - 1, thresholds)
         fault.last_occurred = time
-        if report.source_id not in fault.reporting_sources:
-            fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])  # medkit's std::set
-        fault.severity = max(fault.severity, report.severity)
-        if report.description:
-            fault.description = report.description
+        _reported(fault, report)
         self._set(fault, CONFIRMED if report.severity == CRITICAL else self._status(fault, thresholds), time)
         if fault.status == CONFIRMED and before != CONFIRMED:
             self._confirmed(fault, time, muted)
         elif fault.status == CONFIRMED and not muted:
             self._emit(time, EVENT_UPDATED, fault)
         self._arm(fault, thresholds)
+
+    def _occurred(self, fault: Fault | None, report: Report) -> Fault:
+        """A fault's first occurrence, or a cleared one's new occurrence: PREFAILED, its counter at -1."""
+        time = report.time
+        if fault is None:
+            fault = Fault(report.fault_code, report.severity, report.description, time, time, 1, '',
+                          [report.source_id], counter=-1)
+            self.faults[report.fault_code] = fault
+            return fault
+        fault.counter, fault.first_occurred, fault.last_occurred = -1, time, time
+        fault.occurrence_count += 1
+        fault.severity = max(fault.severity, report.severity)
+        if report.description:
+            fault.description = report.description
+        if report.source_id not in fault.reporting_sources:
+            fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])
+        fault.status = PREFAILED
+        return fault
 
     def _confirmed(self, fault: Fault, time: int, muted: bool) -> None:
         """A report confirmed the fault: the event unless this report was muted, the capture either way (medkit)."""
@@ -208,6 +210,11 @@ class FaultManager:
             listener(event)
 
     # -- queries ------------------------------------------------------------------
+    def _listed(self, wanted: set[str], hidden: set[str], severity: int | None) -> list[Fault]:
+        """Copies of the faults in a wanted status, not hidden, of the severity (any when None), by code."""
+        return [f.copy() for _, f in sorted(self.faults.items())
+                if f.status in wanted and f.fault_code not in hidden and severity in (None, f.severity)]
+
     def list_faults(
         self,
         statuses: Sequence[str] = (),
@@ -219,17 +226,26 @@ class FaultManager:
     ) -> ListFaultsResult:
         """ListFaults: empty statuses (or only unknown names) means CONFIRMED only; muted symptoms hidden unless
         asked for (cluster members never are); in fault code order (medkit keeps faults in a std::map)."""
-        wanted = {s for s in statuses if s in STATUSES} or {CONFIRMED}
         muted = self.correlation.muted_faults() if self.correlation else []
-        muted_codes = {m.fault_code for m in muted}
-        faults = [
-            f.copy() for _, f in sorted(self.faults.items())
-            if f.status in wanted and (not filter_by_severity or f.severity == severity)
-            and (include_muted or f.fault_code not in muted_codes)
-        ]
+        hidden = set() if include_muted else {m.fault_code for m in muted}
+        faults = self._listed(_wanted(statuses), hidden, severity if filter_by_severity else None)
         clusters = self.correlation.clusters() if self.correlation else []
         return ListFaultsResult(faults, len(muted), muted if include_muted else [], len(clusters),
                                 clusters if include_clusters else [])
+
+
+def _wanted(statuses: Sequence[str]) -> set[str]:
+    """The statuses asked for (unknown names left out); CONFIRMED when none is left."""
+    return {s for s in statuses if s in STATUSES} or {CONFIRMED}
+
+
+def _reported(fault: Fault, report: Report) -> None:
+    """A report's source, severity and description into the fault (sources as medkit's std::set keeps them)."""
+    if report.source_id not in fault.reporting_sources:
+        fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])
+    fault.severity = max(fault.severity, report.severity)
+    if report.description:
+        fault.description = report.description
 
 
 def _clamp(counter: int, thresholds: Thresholds) -> int:

@@ -37,9 +37,14 @@ def to_plain(value: Any) -> Any:
         return [to_plain(v) for v in value[:ARRAY_LIMIT]]
     if hasattr(value, '__dataclass_fields__'):
         return {k: to_plain(getattr(value, k)) for k in value.__dataclass_fields__ if k != '__msgtype__'}
-    if isinstance(value, float) and value != value:
+    return _plain_float(value) if isinstance(value, float) else value
+
+
+def _plain_float(value: float) -> float | str:
+    """nan and infinities as text (JSON has no such numbers), other floats as they are."""
+    if value != value:
         return 'nan'
-    if isinstance(value, float) and value in (float('inf'), float('-inf')):
+    if value in (float('inf'), float('-inf')):
         return str(value)
     return value
 
@@ -109,17 +114,22 @@ class SnapshotRecorder:
         if last is not None and time - last < round(self.config.recapture_cooldown_sec * NS):
             return
         self._last_capture[code] = time
+        capture = Capture(code, time, topics, self._freeze_frame(topics),
+                          end=time + round(self.config.duration_after_sec * NS))
+        for topic in topics:
+            capture.messages += [(topic, t, p, d) for t, p, d in self.buffers[topic] if t >= time - self.window]
+        self.captures.append(capture)
+        self.open.append(capture)
+
+    def _freeze_frame(self, topics: tuple[str, ...]) -> dict[str, Any]:
+        """The latest message of each topic that has one, decoded to plain data (None where no type decodes it)."""
         frame = {}
         for topic in topics:
             if topic in self.latest:
                 stamp, raw = self.latest[topic]
                 codec = self.catalog.codec(self.channels[topic][0])
                 frame[topic] = {'log_time_ns': stamp, 'message': to_plain(codec.decode(raw)) if codec else None}
-        capture = Capture(code, time, topics, frame, end=time + round(self.config.duration_after_sec * NS))
-        for topic in topics:
-            capture.messages += [(topic, t, p, d) for t, p, d in self.buffers[topic] if t >= time - self.window]
-        self.captures.append(capture)
-        self.open.append(capture)
+        return frame
 
     def forget(self, codes: tuple[str, ...]) -> None:
         """ClearFault: these codes may be captured again at once (medkit evicts their cooldown)."""
