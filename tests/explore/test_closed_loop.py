@@ -53,7 +53,9 @@ def test_only_the_baseline_holds_the_clock_to_look_for_wall_time(tmp_path):
     """At a rate other than 1 a closed-loop run holds the sim clock still for HOLD (1 s) before the first record
     to see what the system publishes on wall time; an exploration looks in its baseline run only. By
     construction, a system on a 10 Hz wall-clock timer at rate 2: the baseline's warning names its topic (on
-    the result and in explore.json), and the runs after it are shorter by about that second."""
+    the result, in explore.json and the report). That the later runs do not look is shown by the jobs they are
+    given (test_explore.py): their wall time, a second shorter on a quiet machine, was longer than the
+    baseline's beside a second suite."""
     if not rclpy_available():
         pytest.skip("rclpy not installed (pip install '.[live]')")
     make_bag(tmp_path / 'rover.mcap', [('/imu', 'sensor_msgs/msg/Imu', 50.0)], 2.0)
@@ -76,5 +78,3 @@ def test_only_the_baseline_holds_the_clock_to_look_for_wall_time(tmp_path):
     document = json.loads((tmp_path / 'out' / 'explore.json').read_text())
     assert document['baseline_warnings'] == result.warnings
     assert held[0] in html.unescape((tmp_path / 'out' / 'report.html').read_text())  # the report says it too
-    baseline, *later = [r.seconds for r in result.runs]
-    assert min(later) < baseline - 0.5, (baseline, later)  # the hold is 1 s of the baseline's time

@@ -293,3 +293,28 @@ def test_a_resume_runs_only_what_the_log_lacks_even_past_a_gap(tmp_path, monkeyp
     resumed = api.explore(space, directory=stopped, budget=24, workers=2, seed=3, resume=True)
     assert resumed.ran == 1 + (total - last)  # the missing run, then every later round
     assert comparable(stopped) == comparable(tmp_path / 'whole')
+
+
+def test_only_the_baseline_run_looks_for_wall_time(tmp_path, monkeypatch):
+    """The job of every run says whether it holds the clock to look for wall time (in closed loop, at a rate
+    other than 1): the baseline does, every run after it does not (the looking costs a second of each run).
+    The engine here records the jobs it is given and passes each."""
+    from bagfault.explore import explorer
+
+    jobs: list[dict] = []
+
+    class Recording:
+        description = 'recording'
+
+        def run(self, specs, done):
+            for number, spec in enumerate(specs):
+                jobs.append(spec)
+                done(number, {'status': 'passed', 'message': '', 'assertions': {}, 'warnings': [], 'seconds': 0.0})
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(explorer, 'make_engine', lambda *_: Recording())
+    result = api.explore(space_in(tmp_path / 'space'), directory=tmp_path / 'out', budget=6, workers=1)
+    assert result.runs[0].purpose == 'baseline' and len(jobs) == 6
+    assert [job['clock_check'] for job in jobs] == [True] + [False] * 5
