@@ -4,6 +4,7 @@ exit 2, runs are isolated, nothing is left running. Expected numbers come from t
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -75,7 +76,10 @@ def test_the_example_passes_and_its_recording_holds_the_whole_loop(tester: LoopR
     diagnostics = topics['/diagnostics']
     assert {s.hardware_id for _, m in diagnostics for s in m.status} == {token}
     assert origin <= diagnostics[0][0] and diagnostics[-1][0] <= origin + 13 * NS
-    assert len(diagnostics) >= 5 * 12  # 5 Hz of sim time over 12 s and the tail
+    # heard throughout: 5 Hz of sim time over 12 s and the tail, less the periods a starved system's timer skips
+    # (59 of 62 beside a second suite), and never silent for a second of bag time
+    assert len(diagnostics) >= 5 * 11, len(diagnostics)
+    assert max(b - a for (a, _), (b, _) in itertools.pairwise(diagnostics)) < NS
     offsets = [t - (m.header.stamp.sec * NS + m.header.stamp.nanosec) for t, m in diagnostics]
     # the system's sim clock is the bag's clock: its stamps are where its messages were heard (a wall clock would
     # be years off, a clock at another rate seconds off by the end); a starved system's message arrives a few
