@@ -28,6 +28,7 @@ from bagfault.io.outputs import PUBLISHED, PartialFile, Protected, check_derived
 from bagfault.report.files import ReportPaths
 from bagfault.scenario import Scenario, load_scenario
 from bagfault.scenario.loader import build_scenario, read_scenario
+from bagfault.spec.names import absolute_topic
 from bagfault.spec.system import SystemUnderTest, ready_spec, system_from
 from bagfault.spec.yamlnodes import format_path
 
@@ -354,8 +355,8 @@ def play(
         raise UsageError(f'--clock {clock_hz:g}: must be a rate in Hz above 0, at most 10000')
     result = run_play(loaded, paths, seed=seed_of(loaded, seed), rate=rate, clock=clock, loop=loop, record=out,
                       delay=_seconds('--delay', delay), stop=stop if stop is not None else StopFlag(),
-                      wait_for=[t if t == 'all' else _absolute(t) for t in wait_for],
-                      topics=[_absolute(t) for t in topics],
+                      wait_for=[t if t == 'all' else absolute_topic(t) for t in wait_for],
+                      topics=[absolute_topic(t) for t in topics],
                       start_offset=_seconds('--start-offset', start_offset), clock_hz=clock_hz,
                       ros_args=[*_remap_args(remap), *ros_args], view=_view(foxglove), ros=ros)
     return _reported(result, reports, collectors)
@@ -364,11 +365,6 @@ def play(
 def _check_rate(rate: float) -> None:
     if not (math.isfinite(rate) and rate > 0):
         raise UsageError(f'--rate {rate:g}: must be above 0')
-
-
-def _absolute(topic: str) -> str:
-    """A topic name as given on the command line, made absolute."""
-    return topic if topic.startswith('/') else '/' + topic
 
 
 def _remap_args(remap: Sequence[str]) -> list[str]:

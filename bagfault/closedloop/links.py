@@ -30,6 +30,7 @@ from bagfault.injectors.base import RawMessage
 from bagfault.injectors.link import LINK_PREFIX
 from bagfault.injectors.topic import TopicInjector
 from bagfault.spec.model import InjectorSpec
+from bagfault.spec.names import absolute_topic
 
 if TYPE_CHECKING:
     from bagfault.closedloop.process import SystemProcess
@@ -69,8 +70,7 @@ class Links:
         for spec in scenario.injectors:
             if spec.type != 'link':
                 continue
-            topic = str(spec.options['link_topic'])
-            topic = topic if topic.startswith('/') else '/' + topic
+            topic = absolute_topic(str(spec.options['link_topic']))
             faults = [f for f in scenario.faults if f.injector_id == spec.id]
             injector = TopicInjector(InjectorSpec(spec.id, 'topic', topic, LINK_PREFIX + topic), None, faults)
             self.links[topic] = Link(spec.id, topic, spec.options['subscriber'], faults, injector)

@@ -21,6 +21,7 @@ from bagfault.errors import EngineError
 from bagfault.injectors.base import Injector, SystemInjector
 from bagfault.injectors.registry import get_injector_type
 from bagfault.io.channel import bag_name
+from bagfault.spec.names import absolute_topic
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -89,10 +90,6 @@ def build_routing(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, si
     return routing
 
 
-def _slashed(topic: str) -> str:
-    return topic if topic.startswith('/') else f'/{topic}'
-
-
 def _check_encodings(inputs: InputSet) -> None:
     for channel in inputs.channels:
         if channel.message_encoding != 'cdr' and channel.schema_encoding in ROS_SCHEMA_ENCODINGS:
@@ -159,21 +156,21 @@ def _register(inputs: InputSet, scenario: Scenario, catalog: TypeCatalog, sink: 
               withheld: frozenset[str] = frozenset()) -> None:
     """Output channels in input order: copies of untouched topics, then each injector output of the topic."""
     rank = COPY_RANK
-    held = sorted({c.topic for c in inputs.channels if _slashed(c.topic) in withheld} |
-                  {w.output_topic for w in wired if _slashed(w.output_topic) in withheld})
+    held = sorted({c.topic for c in inputs.channels if absolute_topic(c.topic) in withheld} |
+                  {w.output_topic for w in wired if absolute_topic(w.output_topic) in withheld})
     for topic in held:
         routing.notes.append(f'topic {topic} is not played: the system under test publishes it '
                              "(system_under_test.publishes); what is judged on it is the system's")
     for w in wired:
-        if _slashed(w.output_topic) in withheld:
+        if absolute_topic(w.output_topic) in withheld:
             routing.warnings.append(f'{scenario.name}: injector {w.spec.id!r} writes {w.output_topic}, which the '
                                     'system under test publishes (system_under_test.publishes): its faults have '
                                     'no effect')
-    wired = [w for w in wired if _slashed(w.output_topic) not in withheld]
+    wired = [w for w in wired if absolute_topic(w.output_topic) not in withheld]
     in_place = {w.input_topic for w in wired if w.input_topic == w.output_topic}
     written = {w.output_topic for w in wired}
     for number, channel in enumerate(inputs.channels):
-        hold = _slashed(channel.topic) in withheld  # read by an injector perhaps, but not played as it is
+        hold = absolute_topic(channel.topic) in withheld  # read by an injector perhaps, but not played as it is
         kept = keep(number) if keep is not None and not hold and \
             (channel.topic not in written or channel.topic in in_place) else None
         if channel.topic in written and channel.topic not in in_place:

@@ -22,6 +22,7 @@ from bagfault.live.losses import LossCount
 from bagfault.live.recording import start_recording
 from bagfault.live.ros import adapted_qos, has_interface, interface_class, make_node, offered_metadata
 from bagfault.live.runtime import ros_context
+from bagfault.spec.names import absolute_topic
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Collection
@@ -146,7 +147,7 @@ def run_record(
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
     from rclpy.parameter import Parameter  # noqa: PLC0415
 
-    names = [t if t.startswith('/') else '/' + t for t in topics]
+    names = [absolute_topic(t) for t in topics]
     with ros_context(stop) as context:
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] if use_sim_time else []
         node = make_node('bagfault_recorder', context, ros_args, parameter_overrides=overrides)

@@ -4,6 +4,7 @@ and validates files into these records."""
 
 __all__ = [  # its public modules (imported when used, not here)
     'model',
+    'names',
     'reader',
     'sections',
     'system',

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from bagfault.spec import sections
+from bagfault.spec.names import absolute_topic
 from bagfault.spec.reader import Read, Reader
 
 if TYPE_CHECKING:
@@ -120,7 +121,7 @@ def _publishes(publishes: object, path: PathKey, problem: Callable[[PathKey, str
     """The topics the system publishes, made absolute (a problem and none for anything but topics)."""
     publishes = [publishes] if isinstance(publishes, str) else publishes
     if isinstance(publishes, list) and all(isinstance(t, str) and t.strip() for t in publishes):
-        return [t if t.startswith('/') else f'/{t}' for t in publishes]
+        return [absolute_topic(t) for t in publishes]
     problem((*path, 'publishes'), 'must be a topic or a list of topics')
     return []
 
