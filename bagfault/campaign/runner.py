@@ -81,19 +81,13 @@ class _Store:
         if stored and not resume:
             raise CampaignError(f'{self.directory}: holds {len(stored)} results of a campaign already; '
                                 f'--resume continues it (reruns only what is missing or changed), or choose another -o')
-        read = self._read()
-        protected = Protected.of(read)
-        self._check_outside(read)
+        protected = Protected.of(self._read())
+        holder = protected.holding(self.directory)
+        if holder is not None:
+            raise CampaignError(f'{self.directory}: the campaign folder would be inside {holder[0]} {holder[1]}; '
+                                'choose another -o')
         for name in TABLES if self.directory.is_dir() else ():
             check_output(self.directory / name, 'a campaign file', protected, force=force)
-
-    def _check_outside(self, read: list[tuple[str, Path]]) -> None:
-        """CampaignError when the folder would be inside a folder the campaign reads."""
-        where = self.directory.resolve()
-        for name, path in read:
-            if path.is_dir() and (where == path.resolve() or path.resolve() in where.parents):
-                raise CampaignError(f'{self.directory}: the campaign folder would be inside {name} {path}; '
-                                    'choose another -o')
 
     def _read(self) -> list[tuple[str, Path]]:
         """What the campaign reads, named: its file, the scenario, the bags on this machine."""

@@ -118,11 +118,10 @@ class _Folder:
     def _check_files(self, force: bool) -> None:
         """The folder is inside no input folder, and its files replace no input nor (unless forced) a file
         bagfault did not write."""
-        protected = Protected.of([(name, path) for name, path in self.read])
-        where = self.directory.resolve()
-        for name, path in self.read:
-            if path.is_dir() and (where == path.resolve() or path.resolve() in where.parents):
-                raise ExploreError(f'{self.directory}: would be inside {name} {path}; choose another -o')
+        protected = Protected.of(self.read)
+        holder = protected.holding(self.directory)
+        if holder is not None:
+            raise ExploreError(f'{self.directory}: would be inside {holder[0]} {holder[1]}; choose another -o')
         if self.directory.is_dir():
             for name in FILES:
                 check_output(self.directory / name, 'an exploration file', protected, force=force)

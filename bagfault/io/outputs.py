@@ -60,6 +60,17 @@ class Protected:
                         out._add(f"{name}'s SQLite sidecar", path, base.with_name(base.name + suffix))
         return out
 
+    def holding(self, folder: Path) -> tuple[str, Path] | None:
+        """The named folder that `folder` is or lies inside (where an output folder must not be), or None."""
+        with contextlib.suppress(OSError, RuntimeError):
+            where = folder.resolve()
+            for name, path in self.named:
+                with contextlib.suppress(OSError, RuntimeError):
+                    target = path.resolve()
+                    if path.is_dir() and (where == target or target in where.parents):
+                        return name, path
+        return None
+
     def _add(self, name: str, top: Path, path: Path) -> None:
         with contextlib.suppress(OSError, RuntimeError):
             self.names.setdefault(path.resolve(), (name, path))

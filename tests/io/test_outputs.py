@@ -278,3 +278,24 @@ def test_a_mark_is_never_found_by_chance_and_any_changed_byte_loses_it(data, kin
     at = flip % len(stamped)
     changed = stamped[:at] + bytes([stamped[at] ^ (seed_bytes[0] or 1)]) + stamped[at + 1:]
     assert not is_marked(changed)
+
+
+def test_a_campaign_or_exploration_folder_inside_a_bag_folder_is_refused(tmp_path, capsys):
+    """A rosbag2 bag is a folder: a campaign's or an exploration's -o may be neither it nor inside it (their files
+    would land among the bag's); one line, exit 2, nothing made, the bag as it was."""
+    from support.helpers import FIXTURES
+
+    rover = shutil.copytree(FIXTURES / 'rover_3s_sqlite3', tmp_path / 'rover')
+    before = {p.name: p.read_bytes() for p in rover.iterdir()}
+    scenario = tmp_path / 'odom.yaml'
+    scenario.write_text('injector: {id: odom, type: odom, input_topic: /odom_raw, output_topic: /odom}\n'
+                        'faults:\n  - {id: bias, injector_id: odom, start: 0.5, duration: 1.0, config: {x_bias: 1.0}}\n'
+                        'explore:\n  faults:\n    - {id: push, injector_id: odom, start: [0, 1], duration: 0.5, '
+                        'config: {x_bias: [0.0, 1.0]}}\n')
+    campaign = tmp_path / 'campaign.yaml'
+    campaign.write_text('campaign: inside\nscenario: plain.yaml\nbags: [rover]\nsweep: {faults.bias.start: [0.5]}\n')
+    (tmp_path / 'plain.yaml').write_text(scenario.read_text().split('explore:')[0])
+    for out in (rover, rover / 'results'):
+        _refused(capsys, ['campaign', str(campaign), '-o', str(out)], 'would be inside the bag', str(rover))
+        _refused(capsys, ['explore', str(scenario), str(rover), '-o', str(out)], 'would be inside the bag')
+    assert {p.name: p.read_bytes() for p in rover.iterdir()} == before
