@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import re2  # type: ignore[import-untyped]
 
@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from bagfault.spec.model import Scenario
 
 Problem = Callable[[tuple[Any, ...], str], None]
+T = TypeVar('T')
 PREFIX = ('fault_manager',)
 
 
@@ -227,33 +228,24 @@ def parse_fault_manager(section: dict[str, Any] | None, problem: Problem,
         if override is not None:
             config.overrides.append(override)
     _diagnostics(config, read.get('diagnostics'), reader)
-    config.conditions = _conditions(read.get('conditions', []), reader)
+    config.conditions = _entries(read.get('conditions', []), 'conditions', _condition, reader)
     if 'correlation' in read.given:
         config.correlation = parse_correlation(section['correlation'], (*PREFIX, 'correlation'), problem,
                                                warn or no_warning)
     if 'snapshots' in read:
         config.snapshots = _snapshots(read.get('snapshots'), (*PREFIX, 'snapshots'), reader)
-    config.clears = _clears(read.get('clear', []), reader)
+    config.clears = _entries(read.get('clear', []), 'clear', _clear, reader)
     return config
 
 
-def _conditions(nodes: list[Any], reader: Reader) -> list[Condition]:
-    """The conditions on topics that report to the fault manager (those refused left out)."""
+def _entries(nodes: list[Any], key: str, parse: Callable[[object, tuple[Any, ...], Reader], T | None],
+             reader: Reader) -> list[T]:
+    """Each entry of the section's list `key`, read by `parse` (an entry it refuses left out)."""
     out = []
     for number, node in enumerate(nodes):
-        condition = _condition(node, (*PREFIX, 'conditions', number), reader)
-        if condition:
-            out.append(condition)
-    return out
-
-
-def _clears(nodes: list[Any], reader: Reader) -> list[Clear]:
-    """The scheduled clears (those refused left out)."""
-    out = []
-    for number, node in enumerate(nodes):
-        clear = _clear(node, (*PREFIX, 'clear', number), reader)
-        if clear is not None:
-            out.append(clear)
+        entry = parse(node, (*PREFIX, key, number), reader)
+        if entry is not None:
+            out.append(entry)
     return out
 
 
