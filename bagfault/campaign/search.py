@@ -70,6 +70,11 @@ class _Bracket:
     samples: list[Sample] = field(default_factory=list)
     jobs: int = 0  # run for this bag so far
 
+    @property
+    def middle(self) -> float:
+        """The value a bisection runs next (to 12 decimals, so a value and its job key repeat exactly)."""
+        return round((self.low + self.high) / 2, 12)
+
 
 def held(search: Search, results: list[dict[str, Any]]) -> int:
     """How many of the runs brought the assertion to the wanted state."""
@@ -111,7 +116,7 @@ def _wanted(brackets: dict[Bag, _Bracket]) -> list[tuple[Bag, float]]:
         if bracket.phase == 'ends':
             wanted += [(bag, bracket.low), (bag, bracket.high)]
         elif bracket.phase == 'bisect':
-            wanted.append((bag, round((bracket.low + bracket.high) / 2, 12)))
+            wanted.append((bag, bracket.middle))
     return wanted
 
 
@@ -151,7 +156,7 @@ def _advance(bag: Bag, bracket: _Bracket, outcome: dict[tuple[Bag, float], Sampl
     if bracket.phase == 'ends':
         _ends(bag, bracket, outcome, search)
     elif bracket.phase == 'bisect':
-        mid = round((bracket.low + bracket.high) / 2, 12)
+        mid = bracket.middle
         at = outcome[(bag, mid)]
         if at.held == at.runs:
             bracket.high = mid
