@@ -5,7 +5,8 @@
 Each bag is a synthetic rover log (/imu 200 Hz, /odom 50 Hz, /scan 10 Hz
 with 720 beams); the sweep is 3 IMU biases x 2 seeds per bag, each job a
 full `run` with the fault manager and one assertion. Reported: wall time,
-jobs per second, a job's CPU seconds (median), the 2-worker speed-up and
+jobs per second, a job's CPU seconds (median), the cores the jobs kept busy
+(their CPU seconds over the jobs phase), the 2-worker speed-up and
 Ray's time against the local pool's. Not a test: numbers depend on the
 machine.
 """
@@ -102,10 +103,14 @@ def main() -> int:
             runs[name] = {'seconds': round(seconds, 2), 'jobs_seconds': round(jobs_phase, 2), 'jobs': jobs,
                           'jobs_per_s': round(jobs / jobs_phase, 3),
                           'job_seconds_mean': round(sum(r['seconds'] for r in result.table.rows) / jobs, 3),
-                          'job_cpu_seconds_median': statistics.median(r['cpu_s'] for r in result.table.rows)}
+                          'job_cpu_seconds_median': statistics.median(r['cpu_s'] for r in result.table.rows),
+                          # the jobs' own CPU over the jobs phase: how many cores the jobs kept busy (the driver's
+                          # and the engine's own work not counted)
+                          'cores_busy': round(sum(r['cpu_s'] for r in result.table.rows) / jobs_phase, 2)}
             print(f'{name:18} {jobs} jobs in {seconds:6.1f} s, of which jobs {jobs_phase:6.1f} s: '
                   f'{jobs / jobs_phase:5.2f} jobs/s  (a job {runs[name]["job_seconds_mean"]:.2f} s, '
-                  f'{runs[name]["job_cpu_seconds_median"]:.2f} s of CPU)', flush=True)
+                  f'{runs[name]["job_cpu_seconds_median"]:.2f} s of CPU; {runs[name]["cores_busy"]:.2f} cores busy)',
+                  flush=True)
     one, two, ray = (runs[k]['jobs_seconds'] for k in runs)
     summary = {'speedup_2_workers': round(one / two, 2), 'ray_vs_local_2': round(ray / two, 3),
                'ray_vs_local_2_with_start': round(runs['Ray, 2 CPUs']['seconds'] / runs['local, 2 workers']['seconds'],

@@ -40,15 +40,25 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 
-def explore(space: Path, out: Path, args: argparse.Namespace, **options: Any) -> tuple[Any, float]:
+def explore(space: Path, out: Path, args: argparse.Namespace, **options: Any) -> tuple[Any, float, float]:
+    """The exploration's result, its wall seconds and the cores the machine kept busy meanwhile (every process:
+    bagfault's and the systems under test; on an otherwise quiet machine, the exploration's)."""
     from bagfault import api
     from bagfault.progress import ExploreProgress
 
+    busy = busy_seconds()
     began = time.monotonic()
     result = api.explore(space, directory=out, budget=args.budget, workers=args.workers, rate=args.rate,
                          seed=args.seed, force=True, progress=ExploreProgress(enabled=sys.stderr.isatty()),
                          resume=args.resume and (out / 'runs.jsonl').exists(), **options)
-    return result, time.monotonic() - began
+    seconds = time.monotonic() - began
+    return result, seconds, (busy_seconds() - busy) / seconds
+
+
+def busy_seconds() -> float:
+    """CPU seconds the machine has spent on anything but idling (/proc/stat, every core)."""
+    fields = [int(x) for x in Path('/proc/stat').read_text().split('\n', 1)[0].split()[1:]]
+    return (sum(fields[:8]) - fields[3] - fields[4]) / os.sysconf('SC_CLK_TCK')  # idle and iowait left out
 
 
 def dimension_ranges(space: Path) -> dict[tuple[str, str], tuple[float, float]]:
@@ -133,7 +143,7 @@ def replay(result: Any, rows: list[dict[str, Any]], times: int, args: argparse.N
         row['replays_failed'] += failing.get(index) == set(row['fails'])
 
 
-def summary(name: str, rows: list[dict[str, Any]], result: Any, seconds: float) -> dict[str, Any]:
+def summary(name: str, rows: list[dict[str, Any]], result: Any, seconds: float, cores: float) -> dict[str, Any]:
     found = [r for r in rows if r['found']]
     shrinks = [r['shrink_runs'] for r in found]
     known = [r for r in found if r.get('shrunk_to_known')]
@@ -141,10 +151,12 @@ def summary(name: str, rows: list[dict[str, Any]], result: Any, seconds: float) 
            'max_search_runs_to_find': max((r['search_runs'] for r in found), default=None),
            'median_shrink_runs': statistics.median(shrinks) if shrinks else None,
            'runs': len(result.runs), 'failures': len(result.failures), 'seconds': round(seconds, 1),
+           'cores_busy': round(cores, 2),
            'load_after': round(os.getloadavg()[0], 2), 'rows': rows}
     print(f'\n== {name}: {out["found"]}/{out["bugs"]} bugs found (the last after {out["max_search_runs_to_find"]} '
           f'search runs), {out["shrunk_to_known"]} shrunk to the known minimum, median {out["median_shrink_runs"]} '
-          f'runs per shrink; {out["runs"]} runs, {out["failures"]} failures, {seconds:.0f} s, load {out["load_after"]}')
+          f'runs per shrink; {out["runs"]} runs, {out["failures"]} failures, {seconds:.0f} s, {cores:.2f} cores busy, '
+          f'load {out["load_after"]}')
     for r in rows:
         if not r['found']:
             print(f'   {r["bug"]:24} NOT FOUND')
@@ -190,11 +202,11 @@ def main() -> int:
     for number, (name, options) in enumerate(strategies):
         if number not in chosen:
             continue
-        result, seconds = explore(args.space, args.out / f'run{number}', args, **options)
+        result, seconds, cores = explore(args.space, args.out / f'run{number}', args, **options)
         rows = judge(result, bugs, ranges, resolution)
         if number == 0 and args.replays:
             replay(result, rows, args.replays, args)
-        report['strategies'].append(summary(name, rows, result, seconds))
+        report['strategies'].append(summary(name, rows, result, seconds, cores))
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=1) + '\n')
     print(f'\nwritten {args.json}')
