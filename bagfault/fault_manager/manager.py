@@ -148,11 +148,7 @@ class FaultManager:
             return fault
         fault.counter, fault.first_occurred, fault.last_occurred = -1, time, time
         fault.occurrence_count += 1
-        fault.severity = max(fault.severity, report.severity)
-        if report.description:
-            fault.description = report.description
-        if report.source_id not in fault.reporting_sources:
-            fault.reporting_sources = sorted([*fault.reporting_sources, report.source_id])
+        _reported(fault, report)
         fault.status = PREFAILED
         return fault
 
