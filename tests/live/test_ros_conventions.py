@@ -239,10 +239,11 @@ def test_a_killed_recording_is_recovered_up_to_its_last_second(graph, scenarios:
     # every message of every chunk completed before the kill, as an independent reader finds them in the partial
     assert sorted(t for t, _ in raw) == sorted(flushed) and len(raw) >= 100
     numbers = [int(m.orientation_covariance[0]) for _, m in raw]
-    # in order, and no chunk missing in between: a chunk holds up to a second (500 messages); the few a busy
-    # machine's DDS may drop between publisher and proxy leave gaps of a handful
+    # in order, and no chunk missing in between: a chunk is completed every second (LIVE_FLUSH; 1 MB would hold
+    # more than 2000 of these), so a missing one leaves a gap of about 500; what a busy machine's DDS drops between
+    # publisher and proxy leaves shorter ones (55 in a row beside a second suite, 2026-12-07)
     gaps = [b - a for a, b in itertools.pairwise(numbers)]
-    assert min(gaps) >= 1 and max(gaps) < 50, max(gaps)
+    assert min(gaps) >= 1 and max(gaps) < 250, max(gaps)
     # up to its last second: a chunk is completed at least every second (LIVE_FLUSH), so what was heard more than a
     # second before the kill is in the file (two seconds more for a loaded machine's compression thread and disk)
     assert killed_at - raw[-1][0] < 3_000_000_000, (killed_at - raw[-1][0]) / 1e9
