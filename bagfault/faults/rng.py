@@ -10,8 +10,10 @@ produce the same bytes.
 from __future__ import annotations
 
 import hashlib
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def _words(text: str) -> list[int]:
@@ -31,6 +33,8 @@ class FaultRandom:
         """The generator for one purpose, created on first use."""
         gen = self._streams.get(purpose)
         if gen is None:
+            import numpy as np  # noqa: PLC0415 (a run whose faults never act does not pay numpy's import)
+
             entropy = [self.seed & 0xFFFFFFFF, self.seed >> 32, *_words(self.fault_id), *_words(purpose)]
             gen = np.random.Generator(np.random.PCG64(np.random.SeedSequence(entropy)))
             self._streams[purpose] = gen
