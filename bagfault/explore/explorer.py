@@ -2,13 +2,20 @@
 
 The run loop works in rounds: each active shrink asks for its next run, each
 shrunk failure for its replay, and the search fills the round up to the
-space's `batch`; the round runs on the campaign engines (a local pool or
-Ray, one process and, in closed loop, one leased ROS domain per run) and its
-outcomes are taken in the order of the round. So what is run depends on the
-outcomes alone, never on how many workers ran them: offline, where runs are
-byte-identical, the same seed gives the same runs and the same files for
-any `--workers`. Run 0 is the baseline (no fault). The search stops
-proposing when the budget left is what the shrinks in progress may need.
+space's `batch`. A round that holds one shrink step alone (a failure
+shrinking while the search waits for it: every other worker would wait too)
+also holds a run ahead: the step that shrink asks for next were the step's
+run to fail the failure's way, or to pass. The run ahead is kept until the
+shrink asks for its candidate, and its outcome is then taken as that step's
+run; runs ahead never taken (`unused_runs`) are not counted in the budget,
+so runs ahead change how soon a shrink ends, not where. The round runs on
+the campaign engines (a local pool or Ray, one process and, in closed loop,
+one leased ROS domain per run) and its outcomes are taken in the order of
+the round. So what is run depends on the outcomes alone, never on how many
+workers ran them: offline, where runs are byte-identical, the same seed
+gives the same runs and the same files for any `--workers`. Run 0 is the
+baseline (no fault). The search stops proposing when the budget left is
+what the shrinks in progress may need.
 
 DIR/runs.jsonl gets each run's record as it finishes; `--resume` takes the
 records whose scenario is still the one the loop asks for, so a stopped
@@ -92,6 +99,7 @@ class _Request:
     candidate: Candidate
     purpose: Purpose
     failure: Failure | None = None
+    ahead: bool = False  # run ahead of its failure's shrink: kept until the shrink asks for its candidate
 
 
 class _Folder:
@@ -191,6 +199,9 @@ class Explorer:
         self.failures: list[Failure] = []
         self.shrinks: dict[int, tuple[Generator[Candidate, tuple[int, Outcome], None], Shrinker]] = {}
         self.waiting: dict[int, Candidate] = {}  # failure number -> the candidate its shrink asks to run
+        self.sent: dict[int, list[tuple[int, Outcome]]] = {}  # failure number -> what its shrink was told, in order
+        self.ahead: dict[int, list[RunRecord]] = {}  # failure number -> its runs ahead not taken yet
+        self.unused = 0  # runs ahead that no shrink took (not counted in the budget)
         self.replays: list[Failure] = []
         self.search_runs = 0
         self.ran = 0
@@ -218,7 +229,7 @@ class Explorer:
 
     def _round(self) -> list[_Request]:
         """The next round's runs: the baseline first; then shrink steps, replays, and fresh search."""
-        left = self.budget - len(self.runs)
+        left = self.budget - self.spent
         if not self.runs:
             return [_Request(Candidate(()), 'baseline')]
         if self.waiting and left <= len(self.waiting):  # what is left replays what each shrink has so far
@@ -229,10 +240,58 @@ class Explorer:
         del self.replays[:left]
         requests += self._shrink_requests(left - len(self.waiting) - len(requests))
         reserve = RESERVE * len(self.waiting)
-        while len(requests) < self.space.batch and len(self.runs) + len(requests) < self.budget - reserve:
+        while len(requests) < self.space.batch and self.spent + len(requests) < self.budget - reserve:
             candidate, purpose = self.search.propose()
             requests.append(_Request(candidate, purpose))
+        lone = requests[0] if len(requests) == 1 else None
+        if lone is not None and lone.failure is not None and lone.purpose != 'replay' and self.space.batch > 1 \
+                and left - len(self.waiting) > 1:
+            requests += self._ahead(lone.failure)
         return requests
+
+    def _ahead(self, failure: Failure) -> list[_Request]:
+        """A run ahead of a shrink step that is alone in its round (every other worker would wait): the step the
+        shrink asks for next were the step's run to fail the failure's way, else were it to pass, whichever does
+        not depend on the run's margins and has not run ahead already."""
+        for branch in ('fails', 'passes'):
+            following = self._following(failure, branch)
+            if following is not None and not any(r.candidate == following[0]
+                                                  for r in self.ahead.get(failure.number, [])):
+                return [_Request(following[0], following[1], failure, ahead=True)]
+        return []
+
+    def _following(self, failure: Failure, branch: Literal['fails', 'passes']) -> tuple[Candidate, Purpose] | None:
+        """The candidate (and purpose) a failure's shrink asks for after its waiting one were that run to fail the
+        failure's way or to pass, when that is the same whatever the run's margins (guessed with two sets: the
+        failure's last failing run's and none, the baseline's and none); None when it is not, or the shrink
+        would end."""
+        if branch == 'fails':
+            kept = self.shrinks[failure.number][1].kept
+            outcomes = [Outcome('failed', failure.assertions, kept.margins if kept is not None else {}),
+                        Outcome('failed', failure.assertions, {})]
+        else:
+            outcomes = [Outcome('passed', frozenset(), self.runs[0].outcome.margins),
+                        Outcome('passed', frozenset(), {})]
+        guesses = {self._twin_asks(failure, outcome) for outcome in outcomes}
+        return guesses.pop() if len(guesses) == 1 else None
+
+    def _twin_asks(self, failure: Failure, outcome: Outcome) -> tuple[Candidate, Purpose] | None:
+        """What a twin of a failure's shrink, told what the shrink was told and then `outcome`, asks for next (None
+        when it ends). The twin sees the failures found now; where the shrink saw others, the guess may miss, and
+        its run ahead goes unused."""
+        twin = Failure(failure.number, failure.assertions, failure.found_at_run, failure.search_runs,
+                       failure.original)
+        composite = self._composite(failure)
+        shrinker = Shrinker(self.space, twin, self.runs[failure.found_at_run].outcome, confirm=self.confirm,
+                            mode=self.options.shrink, composite=lambda: composite)
+        steps = shrinker.steps()
+        try:
+            next(steps)
+            for told in self.sent.get(failure.number, []):
+                steps.send(told)
+            return steps.send((-1, outcome)), shrinker.purpose
+        except StopIteration:
+            return None
 
     def _shrink_requests(self, room: int) -> list[_Request]:
         """The shrink steps waiting, those of the smallest failures first: at most half a round of them and
@@ -309,17 +368,25 @@ class Explorer:
     # -- what a run tells ------------------------------------------------------------------------------------
     def _take(self, record: RunRecord, request: _Request) -> None:
         self.runs.append(record)
-        outcome = record.outcome
-        if outcome.status == 'error':
+        if record.outcome.status == 'error':
             self._could_not_run(record)
+        if request.ahead:  # told to no one until its shrink asks for it: unused, it changes nothing
+            assert request.failure is not None
+            self.ahead.setdefault(request.failure.number, []).append(record)
+            self._take_ahead(request.failure)
+        else:
+            self._taken(record, request)
+        self.progress.update(self.spent, self.budget, sum(f.state != 'unconfirmed' for f in self.failures),
+                             self.search.best())
+
+    def _taken(self, record: RunRecord, request: _Request) -> None:
+        """A run on the exploration's path, told to the search and to the shrink or replay it was for."""
         if request.purpose in ('search', 'refine'):
             self.search_runs += 1
         self._tell(record, request)
+        self.search.observe(record, [f.assertions for f in self.failures])
         if request.failure is not None and request.purpose != 'replay':
             self._step(request.failure, record)
-        self.search.observe(record, [f.assertions for f in self.failures])
-        self.progress.update(len(self.runs), self.budget, sum(f.state != 'unconfirmed' for f in self.failures),
-                             self.search.best())
 
     def _tell(self, record: RunRecord, request: _Request) -> None:
         """A replay's outcome to its failure; a new failure found; one found again by the search counted."""
@@ -366,14 +433,43 @@ class Explorer:
 
     def _step(self, failure: Failure, record: RunRecord) -> None:
         steps, _ = self.shrinks[failure.number]
-        self._advance(failure, lambda: steps.send((record.index, record.outcome)))
+        told = (record.index, record.outcome)
+        self.sent.setdefault(failure.number, []).append(told)
+        self._advance(failure, lambda: steps.send(told))
 
     def _advance(self, failure: Failure, step: Any) -> None:
         try:
             self.waiting[failure.number] = step()
         except StopIteration:
             self.waiting.pop(failure.number, None)
+            self._unused(failure)
             self._shrunk(failure)
+            return
+        self._take_ahead(failure)
+
+    def _take_ahead(self, failure: Failure) -> None:
+        """The shrink's waiting candidate taken from a run ahead of it, when one ran it; the runs ahead counted
+        unused once the shrink ended."""
+        waiting = self.waiting.get(failure.number)
+        if waiting is None:
+            self._unused(failure)
+            return
+        kept = self.ahead.get(failure.number, [])
+        for position, record in enumerate(kept):
+            if record.candidate == waiting:
+                del kept[position]
+                self._taken(record, _Request(record.candidate, record.purpose, failure))
+                return
+
+    def _unused(self, failure: Failure) -> None:
+        unused = len(self.ahead.pop(failure.number, []))
+        failure.unused_runs += unused
+        self.unused += unused
+
+    @property
+    def spent(self) -> int:
+        """Runs counted in the budget: every run made but the runs ahead not taken (yet, or ever)."""
+        return len(self.runs) - self.unused - sum(len(kept) for kept in self.ahead.values())
 
     def _shrunk(self, failure: Failure) -> None:
         if failure.state != 'shrunk' or failure.minimal is None:
@@ -391,6 +487,7 @@ class Explorer:
             failure.minimal = self.shrinks[number][1].current
             failure.state = 'shrunk'
             failure.note = 'the budget was spent before the shrink ended: the smallest candidate confirmed so far'
+            self._unused(failure)
             self._write_scenario(f'{failure.name}.min.yaml', failure.minimal,
                                  f'bagfault explore: {failure.name}, its smallest cause when the budget was spent\n'
                                  f'faults: {failure.minimal.describe()}')
@@ -465,6 +562,7 @@ class Explorer:
             'tool': {'name': 'bagfault', 'version': __version__}, 'command': 'explore',
             'scenario': str(self.scenario.source or self.scenario.name), 'mode': self.mode,
             'bags': [str(b) for b in self.bags], 'seed': self.seed, 'budget': self.budget, 'runs_used': len(self.runs),
+            'unused_runs': self.unused,
             'confirm': self.confirm, 'batch': space.batch, 'resolution': space.resolution,
             'max_faults': space.max_faults, 'search': self.options.search, 'shrink': self.options.shrink,
             'rate': self.options.rate if self.mode == 'test' else None, 'engine': engine,

@@ -99,6 +99,7 @@ class Failure:
     state: Literal['shrinking', 'unconfirmed', 'shrunk'] = 'shrinking'
     steps: list[ShrinkStep] = field(default_factory=list)
     shrink_runs: int = 0  # runs spent on it after it was found: confirmations, shrink steps, the replay
+    unused_runs: int = 0  # runs made ahead of its shrink (a step for either outcome) that its path did not take
     confirmations: int = 0  # runs that repeated a candidate that had failed once (the original's, each step's)
     hits: int = 1  # search runs that failed this way
     replay: Outcome | None = None
@@ -117,6 +118,6 @@ class Failure:
                 'minimal': f'failures/{self.name}.min.yaml' if self.minimal is not None else None,
                 'minimal_faults': self.minimal.to_json() if self.minimal is not None else None,
                 'faulty_bag': f'failures/{self.name}.mcap' if self.replay is not None else None,
-                'shrink_runs': self.shrink_runs, 'confirmations': self.confirmations,
+                'shrink_runs': self.shrink_runs, 'unused_runs': self.unused_runs, 'confirmations': self.confirmations,
                 'replay': self.replay.to_json() if self.replay is not None else None,
                 'steps': [s.to_json() for s in self.steps], 'note': self.note}

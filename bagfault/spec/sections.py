@@ -283,7 +283,8 @@ EXPLORE = Section('explore', 'explore', 'The fault space of `bagfault explore`: 
         section='explore_fault', what='a list of candidate faults'),
     Key('max_faults', 'integer', 'Most candidates drawn into one run (default: 3, or fewer when there are fewer).',
         minimum=1, maximum=16),
-    Key('budget', 'integer', 'Runs in all, confirmations, shrinking and replays included (`--budget` overrides).',
+    Key('budget', 'integer', 'Runs in all, confirmations, shrinking and replays included, runs ahead of a shrink '
+        'that it did not take left out (`--budget` overrides).',
         default=300, minimum=1, maximum=100_000),
     Key('confirm', 'integer', 'A run counts as failing when it fails this many runs in a row (default: 1 offline, '
         'where runs are byte-identical; 2 in closed loop).', minimum=1, maximum=20),

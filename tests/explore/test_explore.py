@@ -19,6 +19,7 @@ from support.html_check import rendered
 
 from bagfault import api
 from bagfault.cli import main
+from bagfault.explore.explorer import Explorer
 
 SPACE = FIXTURES / 'scenarios' / 'explore_space.yaml'
 RESOLUTION = 0.01
@@ -53,7 +54,7 @@ def values(failure, fault):
 def test_each_planted_failure_is_found_and_shrunk_to_its_known_minimal_cause(explored):
     result, _ = explored
     found = by_assertions(result)
-    assert result.failed and len(result.runs) <= 100
+    assert result.failed and len(result.runs) - sum(f.unused_runs for f in result.failures) <= 100
     yaw = found[frozenset({'yaw_rate_ok'})]
     assert yaw.state == 'shrunk' and yaw.minimal.ids == ('yaw',)
     v = values(yaw, 'yaw')
@@ -318,3 +319,42 @@ def test_only_the_baseline_run_looks_for_wall_time(tmp_path, monkeypatch):
     result = api.explore(space_in(tmp_path / 'space'), directory=tmp_path / 'out', budget=6, workers=1)
     assert result.runs[0].purpose == 'baseline' and len(jobs) == 6
     assert [job['clock_check'] for job in jobs] == [True] + [False] * 5
+
+
+def test_runs_ahead_change_how_soon_a_shrink_ends_not_where(tmp_path, monkeypatch):
+    """The same exploration with and without runs ahead (the reference: none): the same failures, the same shrink
+    paths and minimal causes, the same runs counted; with them, a round where a shrink step stood alone holds a
+    run ahead too, and each run ahead taken saves the reference's round for that step (at most one)."""
+    space = space_in(tmp_path / 'space')
+    rounds, made = [0], []  # rounds of each exploration; runs ahead made
+    counted, aheads = Explorer._run_round, Explorer._ahead
+
+    def count(self, *args):
+        rounds[-1] += 1
+        return counted(self, *args)
+
+    def ahead_counted(self, failure):
+        requests = aheads(self, failure)
+        made.extend(requests)
+        return requests
+
+    monkeypatch.setattr(Explorer, '_run_round', count)
+    monkeypatch.setattr(Explorer, '_ahead', ahead_counted)
+    ahead = api.explore(space, directory=tmp_path / 'ahead', budget=60, workers=2, seed=3)
+    monkeypatch.setattr(Explorer, '_ahead', lambda self, failure: [])
+    rounds.append(0)
+    reference = api.explore(space, directory=tmp_path / 'reference', budget=60, workers=2, seed=3)
+
+    def paths(result):
+        return [(f.assertions, f.state, f.minimal, [(s.change, s.candidate, s.kept, s.runs) for s in f.steps],
+                 f.shrink_runs) for f in result.failures]
+
+    assert reference.failures and paths(ahead) == paths(reference)
+    unused = sum(f.unused_runs for f in ahead.failures)
+    assert sum(f.unused_runs for f in reference.failures) == 0
+    assert len(ahead.runs) - unused == len(reference.runs) <= 60  # unused runs are the only extra ones
+    taken = len(made) - unused
+    assert taken > 0
+    assert rounds[1] - taken <= rounds[0] < rounds[1], (rounds, taken)
+    document = json.loads((tmp_path / 'ahead' / 'explore.json').read_text())
+    assert document['unused_runs'] == unused == sum(f['unused_runs'] for f in document['failures'])
