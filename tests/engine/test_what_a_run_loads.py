@@ -97,3 +97,49 @@ def test_a_type_referring_to_an_unknown_one_has_no_codec_and_the_reason_names_it
     codec = TypeCatalog([known], None).codec('my_pkg/msg/Thing')
     assert codec is not None
     assert codec.decode(bytes([0, 1, 0, 0]) + bytes(range(32))).x == struct.unpack('<d', bytes(range(24, 32)))[0]
+
+
+@st.composite
+def packages(draw: st.DrawFn) -> tuple[str, dict[str, str], set[str]]:
+    """A type `gen_pkg/msg/T0` and the definitions a bag stores with it: types T1.. (each referring only to later
+    ones, base types, arrays and sequences), some of them left out. Returns (schema text, bodies, left out)."""
+    count = draw(st.integers(1, 5))
+    bodies = {}
+    for number in range(count):
+        fields = []
+        for field in range(draw(st.integers(1, 4))):
+            target = draw(st.one_of(st.sampled_from(['float64', 'uint8', 'string', 'int32']),
+                                    st.integers(number + 1, count).map(lambda n: f'gen_pkg/T{n}')))
+            suffix = draw(st.sampled_from(['', '[]', '[3]']))
+            fields.append(f'{target}{suffix} f{field}')
+        bodies[f'gen_pkg/msg/T{number}'] = '\n'.join(fields) + '\n'
+    bodies[f'gen_pkg/msg/T{count}'] = 'float32 leaf\n'
+    left_out = set(draw(st.lists(st.sampled_from(sorted(bodies)[1:]), unique=True))) if count else set()
+    separator = '=' * 80 + '\n'
+    text = bodies['gen_pkg/msg/T0'] + ''.join(f'{separator}MSG: {name.replace("/msg/", "/")}\n{body}'
+                                             for name, body in sorted(bodies.items())[1:] if name not in left_out)
+    return text, bodies, left_out
+
+
+@given(packages())
+def test_a_codec_is_given_exactly_when_every_type_it_refers_to_is_known_and_then_compiles(
+        package: tuple[str, dict[str, str], set[str]]) -> None:
+    """Whether the codec is given is decided without compiling; a codec given compiles at its first use, and
+    None comes with the first unknown type named (the reachable types worked out here from the bodies)."""
+    text, bodies, left_out = package
+    reachable, todo = set(), ['gen_pkg/msg/T0']
+    while todo:
+        name = todo.pop()
+        if name not in reachable:
+            reachable.add(name)
+            if name not in left_out:
+                todo += [f'gen_pkg/msg/{word.split("/")[1].split("[")[0]}'
+                         for word in bodies[name].split() if word.startswith('gen_pkg/')]
+    catalog = TypeCatalog([Channel('/t', 'gen_pkg/msg/T0', 'ros2msg', text, 'cdr')], None)
+    codec = catalog.codec('gen_pkg/msg/T0')
+    missing = reachable & left_out
+    assert (codec is None) == bool(missing)
+    if codec is None:
+        assert any(catalog.why_not('gen_pkg/msg/T0') == f"no usable definition ('{name}')" for name in missing)
+    else:
+        assert codec.store.get_msgdef('gen_pkg/msg/T0').name == 'gen_pkg/msg/T0'
