@@ -367,6 +367,11 @@ def _check_rate(rate: float) -> None:
         raise UsageError(f'--rate {rate:g}: must be above 0')
 
 
+def _check_workers(workers: int | None) -> None:
+    if workers is not None and workers < 1:
+        raise UsageError(f'--workers {workers}: must be 1 or more')
+
+
 def _remap_args(remap: Sequence[str]) -> list[str]:
     """`--remap /FROM:=/TO` options as the node's ROS arguments (`-r FROM:=TO`)."""
     mapped = []
@@ -525,8 +530,7 @@ def campaign(file: str | Path | Campaign, directory: str | Path, *, workers: int
     from bagfault.campaign.runner import TABLES, run_campaign  # noqa: PLC0415
     from bagfault.io.objects import is_remote, staged_folder  # noqa: PLC0415
 
-    if workers is not None and workers < 1:
-        raise UsageError(f'--workers {workers}: must be 1 or more')
+    _check_workers(workers)
     loaded = file if not isinstance(file, (str, Path)) else load_campaign(file)
     if is_remote(str(directory)):  # a bucket prefix: written here, uploaded at the end (and on a stop)
         with staged_folder(str(directory), resume=resume, guarded=TABLES) as staged:
@@ -557,8 +561,7 @@ def explore(space: Scenario | str | Path, inputs: Sequence[str | Path] = (), dir
     if loaded.explore is None:
         raise UsageError(f'{loaded.source or loaded.name}: no explore: section (the fault space to search)')
     paths = [Path(p) for p in inputs] or list(loaded.bags)
-    if workers is not None and workers < 1:
-        raise UsageError(f'--workers {workers}: must be 1 or more')
+    _check_workers(workers)
     if budget is not None and (isinstance(budget, bool) or not 1 <= budget <= 100_000):
         raise UsageError(f'--budget {budget}: must be a whole number from 1 to 100000')
     _check_rate(rate)
