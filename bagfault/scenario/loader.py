@@ -302,10 +302,10 @@ def _service_endpoints(spec: InjectorSpec, read: Read, node: dict[str, Any], pat
     kind of injector."""
     if 'trigger_service' in read.given:
         service = out.reader().read(sections.TRIGGER_SERVICE, read.get('trigger_service'),
-                                    (*path, 'trigger_service'))
-        if service is not None:
-            spec.proxy_service = service.get('proxy_service', '')
-            spec.target_service = service.get('target_service', '')
+                                    (*path, 'trigger_service')) if 'trigger_service' in read else None
+        # None: not a mapping, told once (not again as its missing keys or services)
+        spec.proxy_service = service.get('proxy_service', '') if service is not None else ''
+        spec.target_service = service.get('target_service', '') if service is not None else ''
         return True
     if not (any(k in node for k in SERVICE_KEYS) or spec.type == 'trigger_service'):
         return False
@@ -320,6 +320,8 @@ def _service_endpoints(spec: InjectorSpec, read: Read, node: dict[str, Any], pat
 def _topic_endpoints(spec: InjectorSpec, read: Read, path: PathKey, out: _Collector) -> None:
     """A topic injector's input and output topics and depth (under `topic:`, which wins, or flat), into `spec`."""
     endpoint, endpoint_path = read, path
+    if 'topic' in read.given and 'topic' not in read:  # not a mapping: told once, not again as its missing keys
+        return
     if 'topic' in read.given:
         nested = out.reader().read(sections.TOPIC, read.get('topic'), (*path, 'topic'))
         if nested is None:

@@ -6,6 +6,7 @@ import math
 import textwrap
 
 import pytest
+import yaml
 from support.helpers import third_party
 
 from bagfault.scenario import ScenarioError, load_scenario, parse_scenario
@@ -321,3 +322,44 @@ def test_a_loaded_scenario_is_read_only_and_a_run_time_change_makes_a_new_record
     changed = state.configure(fault.id, key, state.check(fault.id, key, 12.5))
     assert state.fault(fault.id) is changed and changed.config[key] == 12.5
     assert scenario.fault(fault.id).config[key] != 12.5
+
+
+NESTED = {  # a key whose value is a mapping of its own, where it goes in a scenario that is otherwise valid
+    'injectors[0].topic': (0, 'topic', {'input_topic': '/imu', 'output_topic': '/imu_out'}),
+    'injectors[1].trigger_service': (1, 'trigger_service', {'proxy_service': '/a', 'target_service': '/b'}),
+    'faults[0].repeat': (None, 'repeat', {'period': 2.0, 'on': 0.5}),
+    'faults[0].after': (None, 'after', {'fault': 'other', 'delay': 0.5}),
+    'faults[0].config': (None, 'config', {'angular_velocity_z_bias': 0.1}),
+}
+
+
+def nested_scenario(where: str, value: object) -> str:
+    injectors = [{'id': 'imu', 'type': 'imu', 'input_topic': '/imu', 'output_topic': '/imu_out'},
+                 {'id': 'svc', 'type': 'trigger_service', 'proxy_service': '/a', 'target_service': '/b'}]
+    faults = [{'id': 'bias', 'injector_id': 'imu', 'start': 1.0, 'config': {'angular_velocity_z_bias': 0.1}},
+              {'id': 'other', 'injector_id': 'imu', 'start': 3.0, 'config': {'angular_velocity_z_bias': 0.2}}]
+    index, key, _ = NESTED[where]
+    if index is not None:
+        injectors[index] = {k: v for k, v in injectors[index].items() if k not in ('input_topic', 'output_topic',
+                                                                                  'proxy_service', 'target_service')}
+        injectors[index][key] = value
+    else:
+        faults[0][key] = value
+        if key == 'after':
+            del faults[0]['start']
+    return yaml.safe_dump({'injectors': injectors, 'faults': faults})
+
+
+@pytest.mark.parametrize('where', sorted(NESTED))
+def test_each_nested_mapping_key_as_a_mapping_is_valid(where):
+    parse_scenario(nested_scenario(where, NESTED[where][2]))
+
+
+@pytest.mark.parametrize('where', sorted(NESTED))
+@pytest.mark.parametrize('value', [5, 2.5, 'text', [1, 2], True, [{'input_topic': '/x'}]])
+def test_a_nested_mapping_key_that_is_no_mapping_is_one_problem(where, value):
+    """Told once where it stands: not again as the keys it lacks, nor as what those lacking keys leave out."""
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(nested_scenario(where, value))
+    [problem] = info.value.problems
+    assert problem.path == where and problem.message.startswith('must be a mapping')
