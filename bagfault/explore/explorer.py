@@ -46,7 +46,7 @@ from bagfault.progress import ExploreProgress
 from bagfault.spec.yamlnodes import load_located
 
 if TYPE_CHECKING:
-    from collections.abc import Generator, Sequence
+    from collections.abc import Callable, Generator, Sequence
 
     from bagfault.campaign.engines import Job
     from bagfault.spec.model import Explore, Scenario
@@ -201,7 +201,6 @@ class Explorer:
         self.waiting: dict[int, Candidate] = {}  # failure number -> the candidate its shrink asks to run
         self.sent: dict[int, list[tuple[int, Outcome]]] = {}  # failure number -> what its shrink was told, in order
         self.ahead: dict[int, list[RunRecord]] = {}  # failure number -> its runs ahead not taken yet
-        self.unused = 0  # runs ahead that no shrink took (not counted in the budget)
         self.replays: list[Failure] = []
         self.search_runs = 0
         self.ran = 0
@@ -282,8 +281,7 @@ class Explorer:
         twin = Failure(failure.number, failure.assertions, failure.found_at_run, failure.search_runs,
                        failure.original)
         composite = self._composite(failure)
-        shrinker = Shrinker(self.space, twin, self.runs[failure.found_at_run].outcome, confirm=self.confirm,
-                            mode=self.options.shrink, composite=lambda: composite)
+        shrinker = self._shrinker(twin, self.runs[failure.found_at_run].outcome, lambda: composite)
         steps = shrinker.steps()
         try:
             next(steps)
@@ -417,11 +415,15 @@ class Explorer:
         self.failures.append(failure)
         self._write_scenario(f'{failure.name}.original.yaml', record.candidate,
                              f'bagfault explore: {failure.name}, as first found (run {record.index})')
-        shrinker = Shrinker(self.space, failure, record.outcome, confirm=self.confirm, mode=self.options.shrink,
-                            composite=lambda: self._composite(failure))
+        shrinker = self._shrinker(failure, record.outcome, lambda: self._composite(failure))
         steps = shrinker.steps()
         self.shrinks[failure.number] = (steps, shrinker)
         self._advance(failure, lambda: next(steps))
+
+    def _shrinker(self, failure: Failure, found: Outcome, composite: Callable[[], str]) -> Shrinker:
+        """The shrink of a failure first seen in `found` (a failure's own, or a twin's)."""
+        return Shrinker(self.space, failure, found, confirm=self.confirm, mode=self.options.shrink,
+                        composite=composite)
 
     def _composite(self, failure: Failure) -> str:
         """'F3 and F4' when the failure's assertions are the union of those of smaller failures found, each
@@ -462,14 +464,17 @@ class Explorer:
                 return
 
     def _unused(self, failure: Failure) -> None:
-        unused = len(self.ahead.pop(failure.number, []))
-        failure.unused_runs += unused
-        self.unused += unused
+        failure.unused_runs += len(self.ahead.pop(failure.number, []))
 
     @property
     def spent(self) -> int:
         """Runs counted in the budget: every run made but the runs ahead not taken (yet, or ever)."""
         return len(self.runs) - self.unused - sum(len(kept) for kept in self.ahead.values())
+
+    @property
+    def unused(self) -> int:
+        """Runs ahead that no shrink took (not counted in the budget)."""
+        return sum(f.unused_runs for f in self.failures)
 
     def _shrunk(self, failure: Failure) -> None:
         if failure.state != 'shrunk' or failure.minimal is None:
